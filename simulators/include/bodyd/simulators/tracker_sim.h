@@ -1,0 +1,97 @@
+// Tracker simulator: the three tracker streams a headset and two controllers would
+// report while a person performs a motion-capture clip (spec: docs/simulator.md).
+//
+// The true pose of a role at time t is the global pose of its skeleton joint (Head,
+// Hand_L, Hand_R) from forward kinematics of the clip, interpolated between frames
+// (positions linearly, rotations by slerp). Frame k of the clip is at t = k * frame_time,
+// starting at 0, in the log's time base. On top of that the simulator models Gaussian
+// position and rotation noise, a constant latency, timestamp jitter and tracking-loss
+// episodes of the hands. Everything random comes from std::mt19937_64 streams seeded
+// from SimOptions::seed (one stream per role and effect) with this library's own
+// uniform/normal/exponential transforms, so a seed gives bit-identical output on every
+// platform and changing one role's rate does not change another role's noise.
+#pragma once
+
+#include "bodyd/motion/bvh.h"
+#include "bodyd/motion/tracker.h"
+
+#include <array>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace bodyd {
+
+class SimError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct SimOptions {
+  // Sample rate of every role, Hz; role_rate_hz[r] > 0 overrides it for role r
+  // (indexed by Role: head, left_hand, right_hand).
+  double rate_hz = 90.0;
+  std::array<double, kRoleCount> role_rate_hz{0.0, 0.0, 0.0};
+
+  // White Gaussian noise per sample: position noise is N(0, s^2) on each axis (mm);
+  // rotation noise is a rotation exp(w) applied in the world frame (q' = exp(w) * q)
+  // with each component of w drawn from N(0, s^2) (degrees).
+  double position_noise_mm = 0.0;
+  double rotation_noise_deg = 0.0;
+
+  // Each sample's timestamp = true time + latency + jitter. Jitter is N(0, jitter_ms^2)
+  // clamped to less than half the role's sample period, so time still increases within
+  // each role. Latency may not be negative.
+  double latency_ms = 0.0;
+  double jitter_ms = 0.0;
+
+  // Tracking loss of the hands (the head is never lost): episodes start as a Poisson
+  // process at `dropout_rate_hz` expected episodes per hand per second of tracked
+  // time; each lasts an exponentially distributed time with mean `dropout_mean_ms`.
+  // Samples whose true time falls in an episode are invalid. The expected fraction of
+  // invalid hand samples is rate*mean / (1 + rate*mean) (see dropout_fraction()).
+  double dropout_rate_hz = 0.0;
+  double dropout_mean_ms = 300.0;
+
+  std::uint64_t seed = 1;
+
+  // The rate of one role (the override, or rate_hz).
+  [[nodiscard]] double rate_of(Role role) const;
+  // Expected long-run fraction of hand samples that are invalid.
+  [[nodiscard]] double dropout_fraction() const;
+  // Empty when the options are usable, otherwise what is wrong (names the field).
+  [[nodiscard]] std::string validate() const;
+};
+
+// The true (noise-free, undelayed) trajectories of the three tracked joints of a clip.
+// Immutable after construction; pose_at() is thread-safe and does not allocate.
+class TrackerTrajectory {
+ public:
+  // Throws SimError if the clip has no frames or lacks a tracked joint.
+  explicit TrackerTrajectory(const Motion& motion);
+
+  // Valid sample with the interpolated pose of `role` at `t_ns` (clamped to the clip).
+  [[nodiscard]] TrackerSample pose_at(Role role, std::int64_t t_ns) const;
+  // Time of the last frame: (frames - 1) * frame_time, ns.
+  [[nodiscard]] std::int64_t duration_ns() const { return duration_ns_; }
+  [[nodiscard]] int frame_count() const { return frames_; }
+  [[nodiscard]] double frame_time_s() const { return frame_time_s_; }
+
+ private:
+  int frames_ = 0;
+  double frame_time_s_ = 0.0;
+  std::int64_t duration_ns_ = 0;
+  // [role][frame]
+  std::array<std::vector<Vec3>, kRoleCount> positions_m_;
+  std::array<std::vector<Quat>, kRoleCount> rotations_;
+};
+
+// All samples of the three roles over the clip, sorted by t_ns (ties in role order).
+// Role r is sampled at true times k / rate_of(r), k = 0, 1, ... up to the last frame.
+// Throws SimError for bad options or a clip without frames or tracked joints.
+[[nodiscard]] std::vector<TrackerSample> simulate_trackers(const Motion& motion, const SimOptions& options);
+[[nodiscard]] std::vector<TrackerSample> simulate_trackers(const TrackerTrajectory& trajectory,
+                                                           const SimOptions& options);
+
+}  // namespace bodyd

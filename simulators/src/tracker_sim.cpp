@@ -1,0 +1,225 @@
+#include "bodyd/simulators/tracker_sim.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <random>
+
+namespace bodyd {
+namespace {
+
+constexpr double kMaxRateHz = 10'000.0;
+
+std::uint64_t splitmix64(std::uint64_t x) {
+  x += 0x9e3779b97f4a7c15ULL;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+  return x ^ (x >> 31);
+}
+
+// The random effects; each (role, effect) pair has its own stream so that turning one
+// effect on or changing one role's rate leaves the other streams' numbers unchanged.
+enum class Effect : std::uint64_t { PositionNoise = 1, RotationNoise = 2, Jitter = 3, Dropout = 4 };
+
+// std::mt19937_64's output sequence is specified by the standard; the transforms
+// below are ours (std distributions differ between standard libraries).
+class Rng {
+ public:
+  Rng(std::uint64_t seed, Role role, Effect effect)
+      : engine_(splitmix64(seed ^ splitmix64((static_cast<std::uint64_t>(role) << 8) |
+                                             static_cast<std::uint64_t>(effect)))) {}
+
+  double uniform01() { return static_cast<double>(engine_() >> 11) * 0x1.0p-53; }  // [0, 1)
+  // Box-Muller; 1 - u is in (0, 1], so the log is finite.
+  double normal() {
+    if (have_spare_) {
+      have_spare_ = false;
+      return spare_;
+    }
+    const double r = std::sqrt(-2.0 * std::log(1.0 - uniform01()));
+    const double theta = 2.0 * M_PI * uniform01();
+    spare_ = r * std::sin(theta);
+    have_spare_ = true;
+    return r * std::cos(theta);
+  }
+  double exponential(double mean) { return -mean * std::log(1.0 - uniform01()); }
+
+ private:
+  std::mt19937_64 engine_;
+  double spare_ = 0.0;
+  bool have_spare_ = false;
+};
+
+bool finite_in(double v, double lo, double hi) { return std::isfinite(v) && v >= lo && v <= hi; }
+
+}  // namespace
+
+double SimOptions::rate_of(Role role) const {
+  const double r = role_rate_hz[static_cast<size_t>(role)];
+  return r > 0.0 ? r : rate_hz;
+}
+
+double SimOptions::dropout_fraction() const {
+  const double x = dropout_rate_hz * dropout_mean_ms * 1e-3;
+  return x / (1.0 + x);
+}
+
+std::string SimOptions::validate() const {
+  if (!finite_in(rate_hz, 1e-3, kMaxRateHz))
+    return fmt::format("rate_hz {} must be between 0.001 and {} Hz", rate_hz, kMaxRateHz);
+  for (Role r : kRoles) {
+    const double v = role_rate_hz[static_cast<size_t>(r)];
+    if (!(v == 0.0 || finite_in(v, 1e-3, kMaxRateHz)))
+      return fmt::format("role_rate_hz[{}] {} must be 0 (use rate_hz) or between 0.001 and {} Hz", role_name(r), v,
+                         kMaxRateHz);
+  }
+  if (!finite_in(position_noise_mm, 0.0, 1e4))
+    return fmt::format("position_noise_mm {} must be between 0 and 10000", position_noise_mm);
+  if (!finite_in(rotation_noise_deg, 0.0, 180.0))
+    return fmt::format("rotation_noise_deg {} must be between 0 and 180", rotation_noise_deg);
+  if (!finite_in(latency_ms, 0.0, 1e4)) return fmt::format("latency_ms {} must be between 0 and 10000", latency_ms);
+  if (!finite_in(jitter_ms, 0.0, 1e3)) return fmt::format("jitter_ms {} must be between 0 and 1000", jitter_ms);
+  if (!finite_in(dropout_rate_hz, 0.0, 1e3))
+    return fmt::format("dropout_rate_hz {} must be between 0 and 1000 episodes per second", dropout_rate_hz);
+  if (!finite_in(dropout_mean_ms, 1e-3, 1e6))
+    return fmt::format("dropout_mean_ms {} must be between 0.001 and 1000000", dropout_mean_ms);
+  return {};
+}
+
+// ---------------------------------------------------------------------------------------------
+
+TrackerTrajectory::TrackerTrajectory(const Motion& motion) {
+  const Skeleton& sk = motion.skeleton;
+  if (std::string err = sk.validate(); !err.empty()) throw SimError("cannot simulate trackers: " + err);
+  if (motion.frames.empty()) throw SimError("cannot simulate trackers: the clip has no frames");
+  if (!finite_in(motion.frame_time_s, 1e-6, 10.0))
+    throw SimError(fmt::format("cannot simulate trackers: frame time {} s is not usable", motion.frame_time_s));
+  std::array<int, kRoleCount> joint{};
+  for (Role r : kRoles) {
+    joint[static_cast<size_t>(r)] = sk.find(role_joint_name(r));
+    if (joint[static_cast<size_t>(r)] < 0)
+      throw SimError(fmt::format("cannot simulate trackers: the skeleton has no joint '{}' (tracked by role {})",
+                                 role_joint_name(r), role_name(r)));
+  }
+  frames_ = motion.frame_count();
+  frame_time_s_ = motion.frame_time_s;
+  duration_ns_ = std::llround(static_cast<double>(frames_ - 1) * frame_time_s_ * 1e9);
+  for (auto& v : positions_m_) v.reserve(static_cast<size_t>(frames_));
+  for (auto& v : rotations_) v.reserve(static_cast<size_t>(frames_));
+  GlobalPose global;
+  const auto nj = static_cast<size_t>(sk.size());
+  for (int f = 0; f < frames_; ++f) {
+    const Pose& pose = motion.frames[static_cast<size_t>(f)];
+    if (pose.local_rotations.size() != nj || pose.local_translations.size() != nj)
+      throw SimError(fmt::format("cannot simulate trackers: frame {} has {} rotations and {} translations for {} "
+                                 "joints",
+                                 f, pose.local_rotations.size(), pose.local_translations.size(), nj));
+    forward_kinematics(sk, pose, global);
+    for (Role r : kRoles) {
+      const auto ri = static_cast<size_t>(r);
+      const auto j = static_cast<size_t>(joint[ri]);
+      if (!global.positions[j].allFinite() || !global.rotations[j].coeffs().allFinite())
+        throw SimError(fmt::format("cannot simulate trackers: joint '{}' is not finite in frame {}",
+                                   role_joint_name(r), f));
+      positions_m_[ri].push_back(global.positions[j]);
+      rotations_[ri].push_back(global.rotations[j].normalized());
+    }
+  }
+}
+
+TrackerSample TrackerTrajectory::pose_at(Role role, std::int64_t t_ns) const {
+  const auto ri = static_cast<size_t>(role);
+  TrackerSample s;
+  s.t_ns = t_ns;
+  s.role = role;
+  s.valid = true;
+  const double f = static_cast<double>(t_ns) * 1e-9 / frame_time_s_;
+  const double last = static_cast<double>(frames_ - 1);
+  if (!(f > 0.0)) {
+    s.position_m = positions_m_[ri].front();
+    s.rotation = rotations_[ri].front();
+  } else if (f >= last) {
+    s.position_m = positions_m_[ri].back();
+    s.rotation = rotations_[ri].back();
+  } else {
+    const auto i = static_cast<size_t>(std::floor(f));
+    const double a = f - static_cast<double>(i);
+    s.position_m = (1.0 - a) * positions_m_[ri][i] + a * positions_m_[ri][i + 1];
+    s.rotation = slerp(rotations_[ri][i], rotations_[ri][i + 1], a);
+  }
+  return s;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+std::vector<TrackerSample> simulate_trackers(const Motion& motion, const SimOptions& options) {
+  if (std::string err = options.validate(); !err.empty()) throw SimError("bad simulator options: " + err);
+  return simulate_trackers(TrackerTrajectory(motion), options);
+}
+
+std::vector<TrackerSample> simulate_trackers(const TrackerTrajectory& traj, const SimOptions& opt) {
+  if (std::string err = opt.validate(); !err.empty()) throw SimError("bad simulator options: " + err);
+  const double duration_s = static_cast<double>(traj.duration_ns()) * 1e-9;
+  const std::int64_t latency_ns = std::llround(opt.latency_ms * 1e6);
+  const double pos_sigma_m = opt.position_noise_mm * 1e-3;
+  const double rot_sigma_rad = opt.rotation_noise_deg * M_PI / 180.0;
+  const double dropout_mean_s = opt.dropout_mean_ms * 1e-3;
+
+  std::vector<TrackerSample> out;
+  for (Role role : kRoles) {
+    const double rate = opt.rate_of(role);
+    const double period_ns = 1e9 / rate;
+    // Largest |jitter| that keeps consecutive timestamps of this role increasing.
+    const double jitter_bound_ns = std::max(0.0, std::floor(period_ns / 2.0) - 1.0);
+    const auto count = static_cast<std::int64_t>(std::floor(duration_s * rate + 1e-9)) + 1;
+    Rng pos_rng(opt.seed, role, Effect::PositionNoise);
+    Rng rot_rng(opt.seed, role, Effect::RotationNoise);
+    Rng jitter_rng(opt.seed, role, Effect::Jitter);
+    Rng dropout_rng(opt.seed, role, Effect::Dropout);
+    const bool can_drop = role != Role::Head && opt.dropout_rate_hz > 0.0;
+    // The current or next tracking-loss episode [lost_from_s, lost_until_s).
+    double lost_from_s = std::numeric_limits<double>::infinity(), lost_until_s = 0.0;
+    if (can_drop) {
+      lost_from_s = dropout_rng.exponential(1.0 / opt.dropout_rate_hz);
+      lost_until_s = lost_from_s + dropout_rng.exponential(dropout_mean_s);
+    }
+    out.reserve(out.size() + static_cast<size_t>(count));
+    for (std::int64_t k = 0; k < count; ++k) {
+      const std::int64_t t_true_ns = std::llround(static_cast<double>(k) * period_ns);
+      const double t_s = static_cast<double>(t_true_ns) * 1e-9;
+      TrackerSample s = traj.pose_at(role, std::min(t_true_ns, traj.duration_ns()));
+      // Every stream draws for every sample, valid or not, so that one effect's
+      // setting does not shift another's random numbers.
+      const Vec3 dp(pos_rng.normal(), pos_rng.normal(), pos_rng.normal());
+      const Vec3 dr(rot_rng.normal(), rot_rng.normal(), rot_rng.normal());
+      const double jitter = jitter_rng.normal();
+      if (pos_sigma_m > 0.0) s.position_m += pos_sigma_m * dp;
+      if (rot_sigma_rad > 0.0) s.rotation = (quat_from_axis_angle(rot_sigma_rad * dr) * s.rotation).normalized();
+      std::int64_t jitter_ns = 0;
+      if (opt.jitter_ms > 0.0)
+        jitter_ns = std::llround(std::clamp(jitter * opt.jitter_ms * 1e6, -jitter_bound_ns, jitter_bound_ns));
+      s.t_ns = t_true_ns + latency_ns + jitter_ns;
+      if (can_drop) {
+        while (t_s >= lost_until_s) {
+          lost_from_s = lost_until_s + dropout_rng.exponential(1.0 / opt.dropout_rate_hz);
+          lost_until_s = lost_from_s + dropout_rng.exponential(dropout_mean_s);
+        }
+        if (t_s >= lost_from_s) {
+          s.valid = false;
+          s.position_m = Vec3::Zero();
+          s.rotation = Quat::Identity();
+        }
+      }
+      out.push_back(s);
+    }
+  }
+  std::stable_sort(out.begin(), out.end(), [](const TrackerSample& a, const TrackerSample& b) {
+    if (a.t_ns != b.t_ns) return a.t_ns < b.t_ns;
+    return a.role < b.role;
+  });
+  return out;
+}
+
+}  // namespace bodyd
