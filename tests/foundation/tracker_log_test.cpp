@@ -1,5 +1,7 @@
 #include "bodyd/motion/tracker_log.h"
 
+#include "../test_paths.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -304,4 +306,26 @@ TEST(TrackerLog, FuzzPrefixesAndGarbageNeverCrash) {
   }
   EXPECT_GT(parsed, 100);  // the prefixes that end at a line break
   EXPECT_GT(rejected, 1000);
+}
+
+// The example in the specification is a valid log (keeps docs/tracker-log.md honest).
+TEST(TrackerLog, SpecificationExampleParses) {
+  std::ifstream in(test::source_dir() / "docs" / "tracker-log.md");
+  ASSERT_TRUE(in) << "docs/tracker-log.md";
+  std::string line, example;
+  bool inside = false;
+  while (std::getline(in, line)) {
+    if (line.rfind("```", 0) == 0) {
+      if (inside) break;
+      inside = true;
+      continue;
+    }
+    if (inside) example += line + "\n";
+  }
+  const TrackerLog log = parse_tracker_log(example, "docs/tracker-log.md example");
+  ASSERT_EQ(log.samples.size(), 4u);
+  EXPECT_FALSE(log.samples[2].valid);
+  EXPECT_EQ(log.samples[3].t_ns, 11111111);
+  ASSERT_EQ(log.metadata.size(), 2u);
+  EXPECT_EQ(log.metadata[1], std::make_pair(std::string("source"), std::string("walk_60.bvh")));
 }

@@ -231,6 +231,9 @@ TEST(TrackerSim, NoiseHasTheRequestedStandardDeviation) {
     }
   }
   EXPECT_GT(pos[0].n, 15000);
+  std::cout << "position noise std (mm, requested 4): " << pos[0].std() << " " << pos[1].std() << " "
+            << pos[2].std() << "; rotation (deg, requested 1.5): " << rot[0].std() << " " << rot[1].std() << " "
+            << rot[2].std() << "\n";
   for (int k = 0; k < 3; ++k) {
     SCOPED_TRACE(k);
     // ~18000 draws per axis: the standard error of the std is about 0.5%.
