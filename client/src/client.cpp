@@ -5,6 +5,8 @@
 #include <zmq.hpp>
 
 #include <algorithm>
+#include <charconv>
+#include <cstdlib>
 
 namespace bodyd::client {
 
@@ -246,10 +248,31 @@ Status skeleton_from_json(const nlohmann::json& j, SkeletonMessage& out) {
   return {};
 }
 
-nlohmann::json pose_to_json(const PoseMessage& pose, const SkeletonMessage* skeleton, bool with_rotations) {
+namespace {
+
+// The float as the double with the shortest decimal form that still reads back as that float
+// (0.031f prints as 0.031, not 0.03099999949336052).
+double shortest(float v) {
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  *r.ptr = '\0';
+  return std::strtod(buf, nullptr);
+}
+
+template <std::size_t N>
+nlohmann::ordered_json shortest(const std::array<float, N>& v) {
+  nlohmann::ordered_json a = nlohmann::ordered_json::array();
+  for (float x : v) a.push_back(shortest(x));
+  return a;
+}
+
+}  // namespace
+
+nlohmann::ordered_json pose_to_json(const PoseMessage& pose, const SkeletonMessage* skeleton, bool with_rotations) {
+  using Json = nlohmann::ordered_json;
   const bool named = skeleton != nullptr && skeleton->skeleton_id == pose.skeleton_id &&
                      skeleton->names.size() == pose.joints.size();
-  nlohmann::json j;
+  Json j;
   j["seq"] = pose.seq;
   j["t_ns"] = pose.t_ns;
   j["publish_t_ns"] = pose.publish_t_ns;
@@ -257,21 +280,20 @@ nlohmann::json pose_to_json(const PoseMessage& pose, const SkeletonMessage* skel
   j["skeleton_id"] = pose.skeleton_id;
   j["foot_contact"] = {(pose.foot_contact & protocol::kFootContactLeft) != 0,
                        (pose.foot_contact & protocol::kFootContactRight) != 0};
-  j["root"] = {{"joint", pose.root_joint == protocol::kNoRootJoint ? nlohmann::json(nullptr)
-                                                                   : nlohmann::json(pose.root_joint)},
-               {"position_m", pose.root_position_m},
-               {"heading_rad", pose.root_heading_rad}};
-  nlohmann::json positions = named ? nlohmann::json::object() : nlohmann::json::array();
-  nlohmann::json rotations = named ? nlohmann::json::object() : nlohmann::json::array();
+  Json root;
+  root["joint"] = pose.root_joint == protocol::kNoRootJoint ? Json(nullptr) : Json(pose.root_joint);
+  root["position_m"] = shortest(pose.root_position_m);
+  root["heading_rad"] = shortest(pose.root_heading_rad);
+  j["root"] = std::move(root);
+  Json positions = named ? Json::object() : Json::array();
+  Json rotations = named ? Json::object() : Json::array();
   for (std::size_t i = 0; i < pose.joints.size(); ++i) {
-    const auto& p = pose.joints[i].position_m;
-    const auto& q = pose.joints[i].rotation_xyzw;
     if (named) {
-      positions[skeleton->names[i]] = p;
-      if (with_rotations) rotations[skeleton->names[i]] = q;
+      positions[skeleton->names[i]] = shortest(pose.joints[i].position_m);
+      if (with_rotations) rotations[skeleton->names[i]] = shortest(pose.joints[i].rotation_xyzw);
     } else {
-      positions.push_back(p);
-      if (with_rotations) rotations.push_back(q);
+      positions.push_back(shortest(pose.joints[i].position_m));
+      if (with_rotations) rotations.push_back(shortest(pose.joints[i].rotation_xyzw));
     }
   }
   j["joints"] = std::move(positions);

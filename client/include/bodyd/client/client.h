@@ -102,8 +102,9 @@ class Client {
 // The pose as one line of JSON, as bodyd-sub --json prints it: seq, t_ns, publish_t_ns, flags,
 // skeleton_id, foot_contact, root {joint, position_m, heading_rad}, joints (an object keyed by
 // joint name when `skeleton` matches the pose's skeleton_id, else an array) of [x, y, z] metres,
-// and rotations likewise as [x, y, z, w] when with_rotations.
-[[nodiscard]] nlohmann::json pose_to_json(const protocol::PoseMessage& pose, const protocol::SkeletonMessage* skeleton,
+// and rotations likewise as [x, y, z, w] when with_rotations. Keys in that order; each float is
+// written with the fewest digits that read back as the same float.
+[[nodiscard]] nlohmann::ordered_json pose_to_json(const protocol::PoseMessage& pose, const protocol::SkeletonMessage* skeleton,
                                           bool with_rotations);
 
 }  // namespace bodyd::client
