@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdio>
+#include <filesystem>
 
 int main(int argc, char** argv) {
   CLI::App app{
@@ -20,12 +21,19 @@ int main(int argc, char** argv) {
   bool json = false;
   app.add_option("files", paths, "BVH files")->required();
   app.add_flag("--json", json, "print a JSON array instead of one line per file");
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // --help exits 0; every usage error exits 2 (CLI11's own codes vary by error).
+    return app.exit(e) == 0 ? 0 : 2;
+  }
 
   nlohmann::json out = nlohmann::json::array();
   int bad = 0;
   for (const std::string& path : paths) {
     try {
+      std::error_code ec;
+      if (std::filesystem::is_directory(path, ec)) throw bodyd::BvhError(path + ": is a directory, not a BVH file");
       const bodyd::Motion m = bodyd::read_bvh(path);
       if (json) {
         out.push_back({{"path", path}, {"frames", m.frame_count()}, {"fps", m.fps()}, {"joints", m.skeleton.size()}});

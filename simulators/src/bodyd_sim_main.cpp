@@ -45,7 +45,12 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--seed", opt.seed, "random seed")->capture_default_str();
   app.add_flag("--quiet,-q", quiet, "print no summary");
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // --help exits 0; every usage error exits 2 (CLI11's own codes vary by error).
+    return app.exit(e) == 0 ? 0 : 2;
+  }
 
   opt.role_rate_hz[static_cast<size_t>(bodyd::Role::Head)] = head_rate_hz;
   opt.role_rate_hz[static_cast<size_t>(bodyd::Role::LeftHand)] = hands_rate_hz;

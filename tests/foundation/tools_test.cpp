@@ -132,7 +132,10 @@ TEST_F(ToolsTest, BvhReportsADamagedFileWithItsLineAndStillTheGoodOnes) {
   const ProcessResult missing = run("bodyd-bvh", {(dir_ / "nope.bvh").string()});
   EXPECT_EQ(missing.exit_code, 1);
   EXPECT_NE(missing.err.find("cannot open"), std::string::npos) << missing.err;
-  EXPECT_NE(run("bodyd-bvh", {}).exit_code, 0);  // no files: usage error
+  EXPECT_EQ(run("bodyd-bvh", {}).exit_code, 2);  // no files: usage error
+  const ProcessResult dir = run("bodyd-bvh", {dir_.string()});
+  EXPECT_EQ(dir.exit_code, 1);
+  EXPECT_NE(dir.err.find("is a directory"), std::string::npos) << dir.err;
 }
 
 // Every file of the shared data set: frames agree with each file's own "Frames:" line.
@@ -215,6 +218,7 @@ TEST_F(ToolsTest, SimReportsBadInput) {
   EXPECT_FALSE(fs::exists(dir_ / "x.csv"));
 
   const ProcessResult missing = run("bodyd-sim", {"--out", (dir_ / "x.csv").string()});
-  EXPECT_NE(missing.exit_code, 0);
+  EXPECT_EQ(missing.exit_code, 2);
+  EXPECT_EQ(run("bodyd-sim", {"--bvh", kWalk, "--out", "-", "--noise-mm", "abc"}).exit_code, 2);
   EXPECT_NE(missing.err.find("--bvh"), std::string::npos) << missing.err;
 }
