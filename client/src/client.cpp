@@ -209,7 +209,8 @@ Status skeleton_from_json(const nlohmann::json& j, SkeletonMessage& out) {
   const auto& names = j["names"];
   const auto& parents = j["parents"];
   const auto& offsets = j["offsets_m"];
-  if (!j["skeleton_id"].is_number_unsigned() || j["skeleton_id"].get<std::uint64_t>() > 0xFFFFFFFFu) {
+  const auto& json_id = j["skeleton_id"];
+  if (!json_id.is_number_integer() || json_id.get<std::int64_t>() < 0 || json_id.get<std::int64_t>() > 0xFFFFFFFFll) {
     return Status{"\"skeleton_id\" is not a 32-bit unsigned integer"};
   }
   if (!names.is_array() || !parents.is_array() || !offsets.is_array()) {
