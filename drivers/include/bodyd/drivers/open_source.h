@@ -1,0 +1,41 @@
+// Opening a tracker source from its spec string (the daemon's --source values):
+//
+//   replay:FILE      a tracker log (docs/tracker-log.md)
+//   sim:FILE.bvh     simulated head and hand trackers from a BVH clip (docs/simulator.md)
+//   hid:VID:PID      hidapi device (issue 5; not built yet: open_source says so)
+//   usb:VID:PID      libusb device (issue 5; not built yet)
+//
+// A spec without a known "kind:" prefix is an error (so "C:\x" or a typo is never guessed).
+#pragma once
+
+#include "bodyd/drivers/replay_source.h"
+#include "bodyd/drivers/source.h"
+#include "bodyd/simulators/tracker_sim.h"
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+
+namespace bodyd::drivers {
+
+enum class SourceKind { Replay, Sim, Hid, Usb };
+
+struct SourceSpec {
+  SourceKind kind = SourceKind::Replay;
+  std::string argument;   // the file, or "VID:PID"
+};
+
+// Parses a spec; on failure returns nullopt and says what is wrong in `error`.
+[[nodiscard]] std::optional<SourceSpec> parse_source_spec(std::string_view text, std::string& error);
+
+struct SourceOptions {
+  ReplayOptions replay;  // replay: and sim:
+  SimOptions sim;        // sim:
+};
+
+// Opens (does not start) the source a spec names. nullptr and `error` on failure.
+[[nodiscard]] std::unique_ptr<TrackerSource> open_source(std::string_view spec, const SourceOptions& options,
+                                                         std::string& error);
+
+}  // namespace bodyd::drivers

@@ -1,0 +1,100 @@
+// Model files (docs/model-file.md): the safetensors container layout holding a bodyd model.
+//
+//   [8 bytes]  N, little-endian uint64: length of the JSON header
+//   [N bytes]  JSON: {tensor name: {"dtype": "F32", "shape": [...], "data_offsets": [begin, end]},
+//                     "__metadata__": {string: string}}
+//   [rest]     the tensors' raw little-endian bytes; offsets are relative to the end of the header
+//
+// Two layers: a generic container decoder (parse_tensor_file: any tensor names, F32 only) and the
+// model loader (parse_model / load_model), which checks everything a "bodyd-model" file must hold
+// for the "mlpwin-v1" architecture and names what is wrong. Loading allocates and may throw
+// ModelFileError; it happens once at start-up, never in the real-time loop. The loaded Model is
+// immutable and meant to be shared (std::shared_ptr<const Model>) by every session.
+#pragma once
+
+#include "bodyd/motion/skeleton.h"
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+namespace bodyd::inference {
+
+// Every problem with a model file: the message names the file, the field or tensor, what is
+// wrong and, where it helps, what to do.
+class ModelFileError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+inline constexpr std::string_view kModelFormat = "bodyd-model";
+inline constexpr std::string_view kModelFormatVersion = "1";
+inline constexpr std::string_view kArchitectureMlpWin = "mlpwin-v1";
+inline constexpr int kModelSkeletonJoints = 22;
+
+// One tensor of the container, row-major, float32.
+struct TensorF32 {
+  std::vector<std::int64_t> shape;
+  std::vector<float> data;
+};
+
+// The decoded container: no checks beyond the container's own layout.
+struct TensorFile {
+  std::map<std::string, TensorF32, std::less<>> tensors;
+  std::map<std::string, std::string, std::less<>> metadata;
+};
+
+// Pure decoder. Checks: header length, JSON syntax, each entry's dtype ("F32" only), shape,
+// offsets (inside the data, length = 4 * product(shape), no two tensors overlapping), metadata
+// being string -> string. `source_name` is used in messages. Throws ModelFileError.
+[[nodiscard]] TensorFile parse_tensor_file(std::span<const std::byte> bytes, const std::string& source_name);
+[[nodiscard]] TensorFile read_tensor_file(const std::filesystem::path& path);
+
+// Network hyper-parameters (metadata "config"); the names are those of docs/model-file.md.
+struct NetConfig {
+  int W = 0;   // frames per window
+  int D = 0;   // features per frame (features::kDim)
+  int E = 0;   // per-frame embedding width
+  int H = 0;   // trunk width
+  int L = 0;   // residual blocks
+  int TE = 0;  // time-embedding sinusoid dimension (even)
+  int T = 0;   // diffusion steps
+};
+
+// The tensors mlpwin-v1 expects for `config`, with their shapes, in file order (network
+// parameters under their PyTorch state-dict names, then norm.mean, norm.std, diffusion.alpha_bar).
+[[nodiscard]] std::vector<std::pair<std::string, std::vector<std::int64_t>>> expected_tensors(const NetConfig& config);
+
+// A loaded, fully checked model. Immutable after loading.
+struct Model {
+  std::string source;                // where it was loaded from (for messages)
+  NetConfig config;
+  int feature_version = 0;           // == features::kVersion
+  double fps = 0.0;                  // frame rate of the windows
+  Skeleton skeleton;                 // 22 joints, metres (the training data's skeleton)
+  std::string provenance_json;       // free-form JSON object: data, split, steps, hardware, commit...
+  std::vector<float> norm_mean;      // D: features are normalised as (f - mean) / std
+  std::vector<float> norm_std;       // D, every entry finite and > 0
+  std::vector<float> alpha_bar;      // T, diffusion.alpha_bar: in (0, 1), non-increasing in t
+  std::map<std::string, std::string, std::less<>> metadata;  // every metadata entry, as stored
+  std::map<std::string, TensorF32, std::less<>> tensors;     // every tensor, by name
+
+  // The tensor `name`; throws ModelFileError when absent (cannot happen for expected_tensors()).
+  [[nodiscard]] const TensorF32& tensor(std::string_view name) const;
+};
+
+// Decodes and checks a model file (see docs/model-file.md, "What the loader checks"). Throws
+// ModelFileError naming `source_name` and the first problem found.
+[[nodiscard]] Model parse_model(std::span<const std::byte> bytes, const std::string& source_name);
+// Reads `path` and parses it; a missing or unreadable file is a ModelFileError too.
+[[nodiscard]] std::shared_ptr<const Model> load_model(const std::filesystem::path& path);
+
+}  // namespace bodyd::inference

@@ -1,0 +1,105 @@
+// The "mlpwin-v1" denoising network (docs/model-file.md, "Network"), evaluated with Eigen in float.
+//
+// x0_hat = f(x, m, t): x (W x D) the noisy window with observed entries already replaced by the
+// observations, m (W x D) the mask (1 = observed), t the diffusion step in [0, T). Identical to
+// training/model_net.py's MlpWin; tests/inference_engine checks both against each other and against
+// a plain double-precision reference.
+//
+// Model apart from state: a Network holds only weights (immutable after construction, share it
+// between sessions as std::shared_ptr<const Network>); every buffer a forward pass needs lives in a
+// NetworkScratch owned by one session and sized when it is constructed. forward() does not
+// allocate. Windows are frame-major: element (w, d) of a window is at index w * D + d.
+#pragma once
+
+#include "bodyd/inference/model_file.h"
+
+#include <Eigen/Core>
+
+#include <span>
+#include <vector>
+
+namespace bodyd::inference {
+
+class NetworkScratch;
+
+class Network {
+ public:
+  // Copies the weights out of a checked model and precomputes the time embedding of every step.
+  explicit Network(const Model& model);
+
+  [[nodiscard]] const NetConfig& config() const { return config_; }
+  [[nodiscard]] int frames() const { return config_.W; }
+  [[nodiscard]] int dim() const { return config_.D; }
+  [[nodiscard]] int steps() const { return config_.T; }
+  // Floats in one window: W * D.
+  [[nodiscard]] int window_size() const { return config_.W * config_.D; }
+  // diffusion.alpha_bar[t], t in [0, T).
+  [[nodiscard]] std::span<const float> alpha_bar() const { return alpha_bar_; }
+  // Feature normalisation (D each): the network works on (f - mean) / std.
+  [[nodiscard]] std::span<const float> norm_mean() const { return norm_mean_; }
+  [[nodiscard]] std::span<const float> norm_std() const { return norm_std_; }
+
+  // Evaluates `batch` windows at the same step t. x, m: batch * W * D floats (window after
+  // window, each frame-major); out: the same size (may not alias x or m). Requirements (a bug
+  // if broken; checked in every build type, abort with a message): 1 <= batch <=
+  // scratch.max_batch(), spans of exactly batch * W * D, 0 <= t < T, scratch made for this
+  // network's config. Does not allocate.
+  void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+               NetworkScratch& scratch) const;
+
+ private:
+  using RowMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  struct Linear {
+    RowMatrix weight;         // out x in, as in PyTorch
+    Eigen::VectorXf bias;     // out
+  };
+  struct LayerNorm {
+    Eigen::VectorXf weight;
+    Eigen::VectorXf bias;
+  };
+  struct Block {
+    LayerNorm norm;
+    Linear fc1, fc2;
+  };
+
+  NetConfig config_;
+  std::vector<float> alpha_bar_, norm_mean_, norm_std_;
+  // enc.weight split into the columns that multiply x and those that multiply m, so the
+  // concatenation [x_w; m_w] never has to be built.
+  RowMatrix enc_x_, enc_m_;
+  Eigen::VectorXf enc_b_;
+  Linear inp_;
+  // Column t: time2(SiLU(time1(sinusoid(t)))) + inp.bias (depends on t only), H x T.
+  Eigen::MatrixXf time_table_;
+  std::vector<Block> blocks_;
+  LayerNorm out_norm_;
+  Linear out_;
+  // dec1.weight split into the columns for z_w and for e_w.
+  RowMatrix dec1_z_, dec1_e_;
+  Eigen::VectorXf dec1_b_;
+  Linear dec2_;
+};
+
+// Per-session buffers for Network::forward, for up to max_batch windows per call.
+class NetworkScratch {
+ public:
+  explicit NetworkScratch(const Network& network, int max_batch = 1);
+  [[nodiscard]] int max_batch() const { return max_batch_; }
+
+ private:
+  friend class Network;
+  NetConfig config_;
+  int max_batch_;
+  Eigen::MatrixXf e_;      // E x (W * batch): per-frame embeddings, frame after frame
+  Eigen::MatrixXf h_;      // H x batch: trunk state
+  Eigen::MatrixXf n_;      // H x batch: normalised / activated trunk state
+  Eigen::MatrixXf a_;      // H x batch: block hidden activation
+  Eigen::MatrixXf z_;      // (W * E) x batch: trunk output, frame-major per window
+  Eigen::MatrixXf d_;      // E x (W * batch): decoder hidden activation
+};
+
+// The sinusoidal time embedding of docs/model-file.md in double precision (dim even):
+// out[i] = sin(t * f_i), out[half + i] = cos(t * f_i), f_i = exp(-ln(10000) * i / half).
+void timestep_embedding(int t, std::span<double> out);
+
+}  // namespace bodyd::inference

@@ -1,0 +1,400 @@
+// Model-file loader: the valid fixture loads with the expected content; every kind of broken
+// file (written to a temp dir from the valid fixture) fails with a ModelFileError naming the problem.
+#include "bodyd/inference/features.h"
+#include "bodyd/inference/model_file.h"
+#include "bodyd/motion/bvh.h"
+#include "test_util.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cstring>
+#include <fstream>
+#include <functional>
+#include <limits>
+#include <unistd.h>
+
+namespace bodyd::test {
+namespace {
+
+using inference::ModelFileError;
+using Json = nlohmann::json;
+
+std::vector<std::byte> read_bytes(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::vector<char> c((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::vector<std::byte> b(c.size());
+  std::memcpy(b.data(), c.data(), c.size());
+  return b;
+}
+
+// The fixture split into its header JSON and data bytes, edited, and put back together.
+struct Parts {
+  Json header;
+  std::vector<std::byte> data;
+
+  static Parts of(const std::vector<std::byte>& bytes) {
+    std::uint64_t n = 0;
+    std::memcpy(&n, bytes.data(), 8);
+    Parts p;
+    p.header = Json::parse(reinterpret_cast<const char*>(bytes.data()) + 8, reinterpret_cast<const char*>(bytes.data()) + 8 + n);
+    p.data.assign(bytes.begin() + 8 + static_cast<std::ptrdiff_t>(n), bytes.end());
+    return p;
+  }
+  [[nodiscard]] std::vector<std::byte> bytes() const {
+    const std::string h = header.dump();
+    std::vector<std::byte> out(8 + h.size() + data.size());
+    const std::uint64_t n = h.size();
+    std::memcpy(out.data(), &n, 8);
+    std::memcpy(out.data() + 8, h.data(), h.size());
+    std::memcpy(out.data() + 8 + h.size(), data.data(), data.size());
+    return out;
+  }
+  Json& meta() { return header["__metadata__"]; }
+  // Metadata value that is itself JSON, edited in place.
+  void edit_meta_json(const std::string& key, const std::function<void(Json&)>& f) {
+    Json j = Json::parse(meta()[key].get<std::string>());
+    f(j);
+    meta()[key] = j.dump();
+  }
+  float* floats(const std::string& tensor) {
+    return reinterpret_cast<float*>(data.data() + header[tensor]["data_offsets"][0].get<std::size_t>());
+  }
+};
+
+class ModelFileTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    valid_ = read_bytes(tiny_model_path());
+    ASSERT_GT(valid_.size(), 1000u) << tiny_model_path();
+    dir_ = std::filesystem::temp_directory_path() / ("bodyd_model_file_test_" + std::to_string(::getpid()));
+    std::filesystem::create_directories(dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+
+  std::filesystem::path write(const std::vector<std::byte>& bytes, const std::string& name = "broken.safetensors") {
+    const auto p = dir_ / name;
+    std::ofstream out(p, std::ios::binary | std::ios::trunc);
+    out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+    return p;
+  }
+
+  // Loading `bytes` from a file must throw a ModelFileError mentioning the file and every `needles`.
+  void expect_error(const std::vector<std::byte>& bytes, std::initializer_list<std::string> needles) {
+    const auto p = write(bytes);
+    try {
+      auto m = inference::load_model(p);
+      ADD_FAILURE() << "loaded a broken file; expected an error mentioning " << *needles.begin();
+    } catch (const ModelFileError& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(p.string()), std::string::npos) << msg;
+      for (const auto& n : needles) EXPECT_NE(msg.find(n), std::string::npos) << "'" << n << "' not in: " << msg;
+    }
+  }
+  void expect_error(const Parts& p, std::initializer_list<std::string> needles) { expect_error(p.bytes(), needles); }
+
+  Parts parts() const { return Parts::of(valid_); }
+
+  std::vector<std::byte> valid_;
+  std::filesystem::path dir_;
+};
+
+TEST_F(ModelFileTest, ValidFixtureLoads) {
+  const auto m = inference::load_model(tiny_model_path());
+  EXPECT_EQ(m->config.W, 4);
+  EXPECT_EQ(m->config.D, features::kDim);
+  EXPECT_EQ(m->config.E, 8);
+  EXPECT_EQ(m->config.H, 16);
+  EXPECT_EQ(m->config.L, 1);
+  EXPECT_EQ(m->config.TE, 64);
+  EXPECT_EQ(m->config.T, 10);
+  EXPECT_EQ(m->feature_version, features::kVersion);
+  EXPECT_DOUBLE_EQ(m->fps, 30.0);
+  ASSERT_EQ(m->skeleton.size(), 22);
+  EXPECT_EQ(m->skeleton.names[5], "Head");
+  EXPECT_EQ(m->skeleton.parents[0], -1);
+  EXPECT_EQ(m->skeleton.names[9], "Hand_L");
+  // Hips' rest offset from tests/data/walk_60.bvh (centimetres there): (-0.726466, 93.3139, -2.00062).
+  EXPECT_NEAR(m->skeleton.offsets[1].y(), 0.933139, 1e-6);
+  // The whole skeleton equals the one the C++ BVH reader gives for the same file.
+  const Motion bvh = read_bvh(fixtures() / "walk_60.bvh");
+  ASSERT_EQ(bvh.skeleton.size(), 22);
+  for (int j = 0; j < 22; ++j) {
+    const auto u = static_cast<std::size_t>(j);
+    EXPECT_EQ(m->skeleton.names[u], bvh.skeleton.names[u]);
+    EXPECT_EQ(m->skeleton.parents[u], bvh.skeleton.parents[u]);
+    EXPECT_LT((m->skeleton.offsets[u] - bvh.skeleton.offsets[u]).norm(), 1e-9) << bvh.skeleton.names[u];
+  }
+  EXPECT_EQ(m->norm_mean.size(), 191u);
+  EXPECT_EQ(m->norm_std.size(), 191u);
+  ASSERT_EQ(m->alpha_bar.size(), 10u);
+  // cosine schedule, T = 10: alpha_bar[9] is clipped to 1e-5; alpha_bar[0] = f(0.1) / f(0).
+  EXPECT_FLOAT_EQ(m->alpha_bar[9], 1e-5f);
+  const double f0 = std::pow(std::cos(0.008 / 1.008 * M_PI / 2), 2);
+  EXPECT_NEAR(m->alpha_bar[0], std::pow(std::cos(0.108 / 1.008 * M_PI / 2), 2) / f0, 1e-6);
+  EXPECT_TRUE(Json::parse(m->provenance_json).is_object());
+  EXPECT_EQ(m->tensor("blocks.0.fc1.weight").shape, (std::vector<std::int64_t>{16, 16}));
+  EXPECT_THROW((void)m->tensor("blocks.1.fc1.weight"), ModelFileError);
+}
+
+TEST_F(ModelFileTest, ReencodedFixtureStillLoads) {
+  // Guards the editing helpers: an unedited round trip through Parts must load.
+  const auto p = write(parts().bytes());
+  EXPECT_NO_THROW((void)inference::load_model(p));
+}
+
+TEST_F(ModelFileTest, ExpectedTensorsMatchTheFile) {
+  const auto m = inference::load_model(tiny_model_path());
+  const auto expected = inference::expected_tensors(m->config);
+  EXPECT_EQ(expected.size(), m->tensors.size());
+  // 4 + 4 + 2*2 linears + 1 block * (norm + 2 linears) + out_norm + 3 linears = 17 pairs + 3 = ... count by hand:
+  // enc, inp, time1, time2 (8) + blocks.0.{norm,fc1,fc2} (6) + out_norm, out, dec1, dec2 (8) + norm.mean/std, alpha_bar (3).
+  EXPECT_EQ(expected.size(), 25u);
+}
+
+TEST_F(ModelFileTest, MissingFile) {
+  try {
+    (void)inference::load_model(dir_ / "nope.safetensors");
+    FAIL();
+  } catch (const ModelFileError& e) {
+    EXPECT_NE(std::string(e.what()).find("does not exist"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(ModelFileTest, EmptyAndShortFiles) {
+  expect_error(std::vector<std::byte>{}, {"truncated"});
+  expect_error(std::vector<std::byte>(valid_.begin(), valid_.begin() + 5), {"truncated"});
+}
+
+TEST_F(ModelFileTest, TruncatedInHeader) {
+  expect_error(std::vector<std::byte>(valid_.begin(), valid_.begin() + 100), {"truncated", "header length"});
+}
+
+TEST_F(ModelFileTest, TruncatedInData) {
+  expect_error(std::vector<std::byte>(valid_.begin(), valid_.end() - 4), {"truncated", "diffusion.alpha_bar"});
+}
+
+TEST_F(ModelFileTest, AbsurdHeaderLength) {
+  auto b = valid_;
+  const std::uint64_t huge = std::uint64_t{1} << 40;
+  std::memcpy(b.data(), &huge, 8);
+  expect_error(b, {"header length", "absurd"});
+  const std::uint64_t tiny = 0;
+  std::memcpy(b.data(), &tiny, 8);
+  expect_error(b, {"header length", "absurd"});
+}
+
+TEST_F(ModelFileTest, MalformedJson) {
+  auto b = valid_;
+  b[8] = std::byte{'['};  // the header's opening brace
+  b[9] = std::byte{','};
+  expect_error(b, {"malformed"});
+  Parts p = parts();
+  p.header = Json::array({1, 2});
+  expect_error(p, {"must be an object"});
+}
+
+TEST_F(ModelFileTest, WrongFormat) {
+  Parts p = parts();
+  p.meta()["format"] = "gguf";
+  expect_error(p, {"\"format\"", "gguf"});
+  p = parts();
+  p.meta().erase("format");
+  expect_error(p, {"\"format\" is missing"});
+}
+
+TEST_F(ModelFileTest, WrongFormatVersion) {
+  Parts p = parts();
+  p.meta()["format_version"] = "2";
+  expect_error(p, {"format_version", "\"2\""});
+}
+
+TEST_F(ModelFileTest, UnknownArchitecture) {
+  Parts p = parts();
+  p.meta()["architecture"] = "transformer-v9";
+  expect_error(p, {"architecture", "transformer-v9"});
+}
+
+TEST_F(ModelFileTest, FeatureVersionMismatch) {
+  Parts p = parts();
+  p.meta()["feature_version"] = std::to_string(features::kVersion + 1);
+  expect_error(p, {"feature_version", std::to_string(features::kVersion + 1)});
+  p.meta()["feature_version"] = "one";
+  expect_error(p, {"feature_version", "integer"});
+}
+
+TEST_F(ModelFileTest, ConfigProblems) {
+  Parts p = parts();
+  p.edit_meta_json("config", [](Json& j) { j.erase("H"); });
+  expect_error(p, {"config key \"H\" is missing"});
+  p = parts();
+  p.edit_meta_json("config", [](Json& j) { j["D"] = 190; });
+  expect_error(p, {"\"D\" is 190", "kDim"});
+  p = parts();
+  p.edit_meta_json("config", [](Json& j) { j["W"] = -4; });
+  expect_error(p, {"\"W\" must be an integer"});
+  p = parts();
+  p.edit_meta_json("config", [](Json& j) { j["TE"] = 63; });
+  expect_error(p, {"\"TE\" must be even"});
+  p = parts();
+  p.meta()["config"] = "{W: 4";
+  expect_error(p, {"\"config\" is not valid JSON"});
+  p = parts();
+  // A config that disagrees with the tensors: the first tensor whose shape follows H is named.
+  p.edit_meta_json("config", [](Json& j) { j["H"] = 32; });
+  expect_error(p, {"inp.weight", "[16,32]", "expected [32,32]"});
+}
+
+TEST_F(ModelFileTest, TensorShapeChanged) {
+  Parts p = parts();
+  p.header["blocks.0.fc1.weight"]["shape"] = Json::array({256});  // same byte count, wrong shape
+  expect_error(p, {"blocks.0.fc1.weight", "[256]", "expected [16,16]"});
+  p = parts();
+  p.header["blocks.0.fc1.weight"]["shape"] = Json::array({16, 15});  // byte count no longer matches
+  expect_error(p, {"blocks.0.fc1.weight", "needs 960"});
+}
+
+TEST_F(ModelFileTest, WrongDtype) {
+  Parts p = parts();
+  p.header["dec2.bias"]["dtype"] = "F16";
+  expect_error(p, {"dec2.bias", "F16", "not supported"});
+}
+
+TEST_F(ModelFileTest, MissingTensor) {
+  Parts p = parts();
+  p.header.erase("time2.weight");
+  expect_error(p, {"\"time2.weight\"", "missing"});
+  p = parts();
+  p.header.erase("norm.std");
+  expect_error(p, {"\"norm.std\"", "missing"});
+}
+
+TEST_F(ModelFileTest, UnexpectedTensor) {
+  Parts p = parts();
+  const std::size_t end = p.data.size();
+  p.data.resize(end + 16);
+  p.header["blocks.1.fc1.bias"] = {{"dtype", "F32"}, {"shape", {4}}, {"data_offsets", {end, end + 16}}};
+  expect_error(p, {"unexpected tensor", "blocks.1.fc1.bias"});
+}
+
+TEST_F(ModelFileTest, OffsetsOutsideOrOverlapping) {
+  Parts p = parts();
+  const auto size = p.data.size();
+  p.header["dec2.bias"]["data_offsets"] = {size - 4, size + 760};
+  expect_error(p, {"dec2.bias", "past the end"});
+  p = parts();
+  p.header["norm.std"]["data_offsets"] = p.header["norm.mean"]["data_offsets"];
+  expect_error(p, {"overlap", "norm.mean", "norm.std"});
+  p = parts();
+  p.header["enc.bias"]["data_offsets"] = {8, 0};
+  expect_error(p, {"enc.bias", "data_offsets"});
+  p = parts();
+  p.header["enc.bias"]["data_offsets"] = {-8, 24};
+  expect_error(p, {"enc.bias", "data_offsets"});
+}
+
+TEST_F(ModelFileTest, OverlapBehindAnEmptyOrSmallTensorIsFound) {
+  // A large tensor followed (in offset order) by an unrelated one and then one inside the first.
+  Parts p = parts();
+  const auto inp = p.header["inp.weight"]["data_offsets"];
+  const std::size_t b = inp[0].get<std::size_t>();
+  p.header["dec1.bias"]["data_offsets"] = {b + 4, b + 4 + 32};   // inside inp.weight
+  p.header["enc.bias"]["data_offsets"] = {b + 100, b + 100 + 32};  // also inside
+  expect_error(p, {"overlap", "inp.weight"});
+}
+
+TEST_F(ModelFileTest, MetadataNotStrings) {
+  Parts p = parts();
+  p.meta()["fps"] = 30;
+  expect_error(p, {"\"fps\" must be a string"});
+  p = parts();
+  p.meta()["fps"] = "-30";
+  expect_error(p, {"fps", "> 0"});
+  p = parts();
+  p.meta().erase("provenance");
+  expect_error(p, {"\"provenance\" is missing"});
+}
+
+TEST_F(ModelFileTest, BadSkeleton) {
+  Parts p = parts();
+  p.meta()["skeleton"] = "{\"names\": [";
+  expect_error(p, {"\"skeleton\" is not valid JSON"});
+  p = parts();
+  p.edit_meta_json("skeleton", [](Json& j) {
+    for (const char* k : {"names", "parents", "offsets_m"}) j[k].erase(j[k].size() - 1);
+  });
+  expect_error(p, {"skeleton", "21 entries", "22 joints"});
+  p = parts();
+  p.edit_meta_json("skeleton", [](Json& j) { j["parents"][3] = 5; });
+  expect_error(p, {"skeleton", "parents[3] = 5"});
+  p = parts();
+  p.edit_meta_json("skeleton", [](Json& j) { j["parents"][0] = 0; });
+  expect_error(p, {"skeleton", "parents[0]"});
+  p = parts();
+  p.edit_meta_json("skeleton", [](Json& j) { j["offsets_m"][4] = Json::array({0.0, "x", 0.0}); });
+  expect_error(p, {"skeleton", "offsets_m[4][1]"});
+  p = parts();
+  p.edit_meta_json("skeleton", [](Json& j) { j["names"][5] = "Noggin"; });
+  expect_error(p, {"skeleton", "Noggin"});
+  p = parts();
+  p.edit_meta_json("skeleton", [](Json& j) { j["names"][6] = "Head"; });
+  expect_error(p, {"skeleton", "\"Head\" appears twice"});
+  p = parts();
+  p.edit_meta_json("skeleton", [](Json& j) { j.erase("offsets_m"); });
+  expect_error(p, {"skeleton", "\"offsets_m\" must be an array"});
+}
+
+TEST_F(ModelFileTest, BadValues) {
+  Parts p = parts();
+  p.floats("norm.std")[7] = 0.0f;
+  expect_error(p, {"norm.std[7]", "> 0"});
+  p = parts();
+  p.floats("norm.std")[3] = -1.0f;
+  expect_error(p, {"norm.std[3]"});
+  p = parts();
+  p.floats("blocks.0.fc2.weight")[11] = std::numeric_limits<float>::quiet_NaN();
+  expect_error(p, {"blocks.0.fc2.weight", "non-finite", "11"});
+  p = parts();
+  p.floats("norm.mean")[0] = std::numeric_limits<float>::infinity();
+  expect_error(p, {"norm.mean", "non-finite"});
+  p = parts();
+  p.floats("diffusion.alpha_bar")[2] = 1.5f;
+  expect_error(p, {"alpha_bar[2]", "(0, 1)"});
+  p = parts();
+  std::swap(p.floats("diffusion.alpha_bar")[2], p.floats("diffusion.alpha_bar")[3]);
+  expect_error(p, {"alpha_bar", "increase"});
+}
+
+TEST_F(ModelFileTest, ContainerDecoderReadsAnyNames) {
+  // The io fixture uses the same container with other tensor names; only the model layer rejects it.
+  const auto io = inference::read_tensor_file(tiny_io_path());
+  EXPECT_TRUE(io.metadata.contains("cases"));
+  EXPECT_EQ(io.tensors.at("forward.0.x").shape, (std::vector<std::int64_t>{4, 191}));
+  try {
+    (void)inference::load_model(tiny_io_path());
+    FAIL();
+  } catch (const ModelFileError& e) {
+    EXPECT_NE(std::string(e.what()).find("\"format\" is missing"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(ModelFileTest, RandomCorruptionNeverCrashes) {
+  // Flip bytes all over the file: every outcome is a clean load or a ModelFileError.
+  std::mt19937 rng(3);
+  for (int trial = 0; trial < 300; ++trial) {
+    auto b = valid_;
+    const int flips = 1 + static_cast<int>(rng() % 4);
+    for (int f = 0; f < flips; ++f) {
+      const std::size_t at = trial % 2 == 0 ? rng() % std::min<std::size_t>(b.size(), 4096) : rng() % b.size();
+      b[at] = static_cast<std::byte>(rng() & 0xff);
+    }
+    if (trial % 7 == 0) b.resize(rng() % b.size());
+    try {
+      (void)inference::parse_model(b, "corrupt");
+    } catch (const ModelFileError&) {
+    }
+  }
+}
+
+}  // namespace
+}  // namespace bodyd::test

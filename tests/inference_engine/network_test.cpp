@@ -1,0 +1,146 @@
+// Eigen forward pass: against PyTorch's outputs (the parity fixture written by
+// training/export_fixture.py) and against the plain double-precision reference.
+#include "bodyd/inference/network.h"
+#include "reference_network.h"
+#include "test_util.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cstdio>
+#include <random>
+
+namespace bodyd::test {
+namespace {
+
+using inference::Network;
+using inference::NetworkScratch;
+
+// Parity with PyTorch: relative_error (max |a - b| / max |b|) at most this.
+constexpr double kParityTolerance = 1e-4;
+// Float forward against the double reference.
+constexpr double kReferenceTolerance = 5e-6;
+
+std::vector<float> random_window(std::mt19937& rng, std::size_t n, bool mask) {
+  std::normal_distribution<float> normal(0.0f, 1.0f);
+  std::vector<float> v(n);
+  for (float& x : v) x = mask ? static_cast<float>(rng() % 3 == 0) : normal(rng);
+  return v;
+}
+
+TEST(Network, MatchesPyTorchOnTheFixture) {
+  const auto model = inference::load_model(tiny_model_path());
+  const auto io = inference::read_tensor_file(tiny_io_path());
+  const auto cases = nlohmann::json::parse(io.metadata.at("cases"));
+  const Network net(*model);
+  NetworkScratch scratch(net);
+  ASSERT_EQ(cases["forward"].size(), 3u);
+  for (std::size_t i = 0; i < cases["forward"].size(); ++i) {
+    const std::string p = "forward." + std::to_string(i) + ".";
+    const int t = cases["forward"][i]["t"];
+    const auto& x = io.tensors.at(p + "x").data;
+    const auto& m = io.tensors.at(p + "m").data;
+    const auto& expected = io.tensors.at(p + "out").data;
+    std::vector<float> out(expected.size());
+    net.forward(x, m, t, out, scratch);
+    const double err = relative_error(out, expected);
+    std::printf("forward case %zu (t=%d): relative error vs PyTorch %.3g\n", i, t, err);
+    EXPECT_LE(err, kParityTolerance) << "case " << i << " t=" << t;
+    // The reference agrees with PyTorch too (so the two checks test the same thing).
+    EXPECT_LE(relative_error(reference_forward(*model, x, m, t), expected), kParityTolerance) << "case " << i;
+    // And the check can fail: the output at another step differs by far more than the tolerance.
+    std::vector<float> other(expected.size());
+    net.forward(x, m, (t + 3) % model->config.T, other, scratch);
+    EXPECT_GT(relative_error(other, expected), 100 * kParityTolerance);
+  }
+}
+
+TEST(Network, MatchesReferenceOnLargerConfig) {
+  const auto tiny = inference::load_model(tiny_model_path());
+  // Default-like shape (E, W, D as deployed) with a smaller trunk to keep the naive reference fast.
+  const inference::NetConfig config{20, 191, 64, 128, 2, 64, 100};
+  const auto model = random_model(config, 11, *tiny);
+  const Network net(model);
+  NetworkScratch scratch(net, 2);
+  std::mt19937 rng(5);
+  const std::size_t n = static_cast<std::size_t>(net.window_size());
+  for (int t : {0, 37, 99}) {
+    const auto x = random_window(rng, n, false);
+    const auto m = random_window(rng, n, true);
+    std::vector<float> out(n);
+    net.forward(x, m, t, out, scratch);
+    const auto ref = reference_forward(model, x, m, t);
+    const double err = relative_error(out, ref);
+    std::printf("t=%d: relative error vs double reference %.3g\n", t, err);
+    EXPECT_LE(err, kReferenceTolerance) << "t=" << t;
+  }
+}
+
+TEST(Network, BatchOfTwoEqualsTwoSingles) {
+  const auto model = inference::load_model(tiny_model_path());
+  const Network net(*model);
+  NetworkScratch single(net, 1);
+  NetworkScratch pair(net, 2);
+  std::mt19937 rng(9);
+  const std::size_t n = static_cast<std::size_t>(net.window_size());
+  auto x = random_window(rng, 2 * n, false);
+  auto m = random_window(rng, 2 * n, true);
+  std::vector<float> out2(2 * n), a(n), b(n);
+  net.forward(x, m, 4, out2, pair);
+  net.forward(std::span(x).first(n), std::span(m).first(n), 4, a, single);
+  net.forward(std::span(x).subspan(n), std::span(m).subspan(n), 4, b, single);
+  EXPECT_LE(relative_error(std::span(out2).first(n), a), 1e-6);
+  EXPECT_LE(relative_error(std::span(out2).subspan(n), b), 1e-6);
+  // A batch-of-two scratch also runs a single window.
+  std::vector<float> a2(n);
+  net.forward(std::span(x).first(n), std::span(m).first(n), 4, a2, pair);
+  EXPECT_LE(relative_error(a2, a), 1e-6);
+}
+
+TEST(Network, OutputDependsOnMaskAndStep) {
+  const auto model = inference::load_model(tiny_model_path());
+  const Network net(*model);
+  NetworkScratch s(net);
+  std::mt19937 rng(2);
+  const std::size_t n = static_cast<std::size_t>(net.window_size());
+  const auto x = random_window(rng, n, false);
+  auto m = random_window(rng, n, true);
+  std::vector<float> a(n), b(n), c(n);
+  net.forward(x, m, 3, a, s);
+  net.forward(x, m, 3, b, s);
+  EXPECT_EQ(a, b);  // deterministic
+  m[17] = 1.0f - m[17];
+  net.forward(x, m, 3, c, s);
+  EXPECT_NE(a, c);
+}
+
+TEST(Network, TimestepEmbedding) {
+  std::vector<double> e(8);
+  inference::timestep_embedding(0, e);
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_EQ(e[static_cast<std::size_t>(i)], 0.0);
+    EXPECT_EQ(e[static_cast<std::size_t>(4 + i)], 1.0);
+  }
+  inference::timestep_embedding(3, e);
+  // freq_1 = exp(-ln(10000) / 4) = 0.1
+  EXPECT_NEAR(e[1], std::sin(0.3), 1e-12);
+  EXPECT_NEAR(e[5], std::cos(0.3), 1e-12);
+  EXPECT_NEAR(e[0], std::sin(3.0), 1e-12);
+}
+
+TEST(NetworkDeathTest, BrokenPreconditionsAbort) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  const auto model = inference::load_model(tiny_model_path());
+  const Network net(*model);
+  NetworkScratch s(net);
+  const std::size_t n = static_cast<std::size_t>(net.window_size());
+  std::vector<float> x(n, 0.0f), m(n, 0.0f), out(n);
+  EXPECT_DEATH(net.forward(x, m, model->config.T, out, s), "t must be in");
+  EXPECT_DEATH(net.forward(x, m, -1, out, s), "t must be in");
+  std::vector<float> x2(2 * n), m2(2 * n), out2(2 * n);
+  EXPECT_DEATH(net.forward(x2, m2, 0, out2, s), "batch");
+  EXPECT_DEATH(net.forward(std::span(x).first(n - 1), m, 0, out, s), "whole windows");
+}
+
+}  // namespace
+}  // namespace bodyd::test

@@ -1,0 +1,393 @@
+#!/usr/bin/env python3
+"""The bodyd diffusion network "mlpwin-v1", its noise schedule, DDIM sampler and model-file writer.
+
+The C++ runtime (inference/src/network.cpp, sampler.cpp, model_file.cpp) implements exactly the
+same network and sampler; tests/inference_engine checks the two against a fixture written by
+training/export_fixture.py. The model file layout is specified in docs/model-file.md.
+
+Method: CondMDI-style masked conditional diffusion (Cohan et al., "Flexible Motion In-betweening
+with Diffusion Models", Sec. 4 and Algorithm 2): a window of W frames x D features, x0 prediction,
+the observed entries replace the noisy sample under the mask and the mask is an input.
+
+Only this module's public API is used by train.py:
+  MlpWin(W, D, E=64, H=512, L=2, TE=64, T=100); forward(x, m, t) with x, m (B, W, D), t (B,) long
+  cosine_alpha_bars(T)
+  ddim_timesteps(T, K)
+  ddim_sample(net, obs, mask, alpha_bars, K, generator, guidance=1.0, eta=0.0, noise=None)
+  write_model(path, net, mean, std, alpha_bars, skeleton, metadata)
+
+Command line (a random-initialised model for benchmarks, no training):
+  python3 training/model_net.py --random-model OUT.safetensors --W 20 --E 64 --H 512 --L 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import struct
+from typing import Any, Mapping
+
+import torch
+from torch import nn
+import torch.nn.functional as F
+
+ARCHITECTURE = "mlpwin-v1"
+FORMAT = "bodyd-model"
+FORMAT_VERSION = "1"
+# Mirror of bodyd::features::kVersion (inference/include/bodyd/inference/features.h); the C++ loader
+# rejects a model whose feature_version differs. Pass metadata["feature_version"] to override.
+FEATURE_VERSION = 1
+SKELETON_JOINTS = 22
+LAYERNORM_EPS = 1e-5
+# Cosine schedule (Nichol & Dhariwal 2021, Eq. 17) offset s, and the clip range of alpha_bar.
+COSINE_S = 0.008
+ALPHA_BAR_MIN = 1e-5
+ALPHA_BAR_MAX = 0.9999
+
+
+def timestep_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
+    """Sinusoidal embedding of integer steps t (B,) -> (B, dim), float32.
+
+    half = dim / 2, freq_i = exp(-ln(10000) * i / half) for i in [0, half),
+    emb = concat(sin(t * freq), cos(t * freq)). Computed in float64 and rounded to float32, so that
+    the C++ table (also float64 -> float32) matches to the last bit or so.
+    """
+    half = dim // 2
+    i = torch.arange(half, dtype=torch.float64, device=t.device)
+    freq = torch.exp(-math.log(10000.0) * i / half)
+    args = t.to(torch.float64)[:, None] * freq[None, :]
+    return torch.cat([torch.sin(args), torch.cos(args)], dim=1).to(torch.float32)
+
+
+class ResBlock(nn.Module):
+    def __init__(self, H: int):
+        super().__init__()
+        self.norm = nn.LayerNorm(H, eps=LAYERNORM_EPS)
+        self.fc1 = nn.Linear(H, H)
+        self.fc2 = nn.Linear(H, H)
+
+    def forward(self, h: torch.Tensor) -> torch.Tensor:
+        return h + self.fc2(F.silu(self.fc1(self.norm(h))))
+
+
+class MlpWin(nn.Module):
+    """mlpwin-v1: per-frame encoder, MLP trunk over the whole window, per-frame decoder.
+
+    forward(x, m, t): x (B, W, D) noisy sample with observed entries already replaced by the
+    observations, m (B, W, D) mask (1 = observed), t (B,) long in [0, T). Returns x0_hat (B, W, D).
+    State-dict names (stable, they are the model file's tensor names): enc.*, inp.*, time1.*,
+    time2.*, blocks.<b>.norm.*, blocks.<b>.fc1.*, blocks.<b>.fc2.*, out_norm.*, out.*, dec1.*, dec2.*
+    """
+
+    def __init__(self, W: int, D: int, E: int = 64, H: int = 512, L: int = 2, TE: int = 64, T: int = 100):
+        super().__init__()
+        if TE % 2 != 0:
+            raise ValueError(f"TE must be even, got {TE}")
+        self.W, self.D, self.E, self.H, self.L, self.TE, self.T = W, D, E, H, L, TE, T
+        self.enc = nn.Linear(2 * D, E)
+        self.inp = nn.Linear(W * E, H)
+        self.time1 = nn.Linear(TE, H)
+        self.time2 = nn.Linear(H, H)
+        self.blocks = nn.ModuleList([ResBlock(H) for _ in range(L)])
+        self.out_norm = nn.LayerNorm(H, eps=LAYERNORM_EPS)
+        self.out = nn.Linear(H, W * E)
+        self.dec1 = nn.Linear(2 * E, E)
+        self.dec2 = nn.Linear(E, D)
+
+    def config(self) -> dict:
+        return {"W": self.W, "D": self.D, "E": self.E, "H": self.H, "L": self.L, "TE": self.TE, "T": self.T}
+
+    def forward(self, x: torch.Tensor, m: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        B = x.shape[0]
+        e = F.silu(self.enc(torch.cat([x, m], dim=-1)))                      # (B, W, E)
+        h = self.inp(e.reshape(B, self.W * self.E))                           # (B, H)
+        h = h + self.time2(F.silu(self.time1(timestep_embedding(t, self.TE))))
+        for blk in self.blocks:
+            h = blk(h)
+        z = self.out(F.silu(self.out_norm(h))).reshape(B, self.W, self.E)    # frame-major
+        return self.dec2(F.silu(self.dec1(torch.cat([z, e], dim=-1))))      # (B, W, D)
+
+
+def cosine_alpha_bars(T: int) -> torch.Tensor:
+    """alpha_bar[t] for t = 0..T-1 (float32), the cosine schedule of Nichol & Dhariwal (2021).
+
+    f(u) = cos(((u + s) / (1 + s)) * pi / 2)^2 with s = 0.008;
+    alpha_bar[t] = clip(f((t + 1) / T) / f(0), 1e-5, 0.9999), computed in float64.
+    Step t = 0 is the least noisy, t = T-1 the noisiest (alpha_bar ~ 0, clipped to 1e-5).
+    (Clipping alpha_bar directly replaces the paper's clipping of beta to 0.999.)
+    """
+    u = (torch.arange(T, dtype=torch.float64) + 1.0) / T
+    f = torch.cos((u + COSINE_S) / (1.0 + COSINE_S) * math.pi / 2) ** 2
+    f0 = math.cos(COSINE_S / (1.0 + COSINE_S) * math.pi / 2) ** 2
+    return (f / f0).clamp(ALPHA_BAR_MIN, ALPHA_BAR_MAX).to(torch.float32)
+
+
+def ddim_timesteps(T: int, K: int) -> list[int]:
+    """The K DDIM steps, from T-1 down to 0: tau_k = floor((T-1) * (K-1-k) / (K-1)), k = 0..K-1.
+
+    K = 1 gives [T-1]. Requires 1 <= K <= T (then the steps are distinct). T=100, K=4: [99, 66, 33, 0].
+    """
+    if not 1 <= K <= T:
+        raise ValueError(f"K must be in [1, T={T}], got {K}")
+    if K == 1:
+        return [T - 1]
+    return [((T - 1) * (K - 1 - k)) // (K - 1) for k in range(K)]
+
+
+@torch.no_grad()
+def ddim_sample(net: MlpWin, obs: torch.Tensor, mask: torch.Tensor, alpha_bars: torch.Tensor, K: int,
+                generator: torch.Generator | None, guidance: float = 1.0, eta: float = 0.0,
+                noise: torch.Tensor | None = None) -> torch.Tensor:
+    """DDIM imputation sampling (CondMDI Algorithm 2 with DDIM steps), in normalised feature space.
+
+    obs, mask: (B, W, D) (mask 0/1). alpha_bars: (T,). K steps at ddim_timesteps(T, K).
+    noise: the initial x_{T-1} (B, W, D); drawn from `generator` when None.
+    At step tau with ab = alpha_bar[tau]:
+      inp   = mask * obs + (1 - mask) * x                     (x := inp, Alg. 2 line 4)
+      x0    = net(inp, mask, tau); with guidance s != 1:
+              x0 = x0_u + s * (x0_c - x0_u), x0_u = net(x, 0, tau) (obs and mask all zero)
+      x0    = mask * obs + (1 - mask) * x0
+      last step: return x0. Otherwise, with ab' = alpha_bar[next tau]:
+      eps   = (x - sqrt(ab) * x0) / sqrt(1 - ab)
+      sigma = eta * sqrt((1 - ab') / (1 - ab)) * sqrt(1 - ab / ab')
+      x     = sqrt(ab') * x0 + sqrt(1 - ab' - sigma^2) * eps + sigma * z,  z ~ N(0, I) from generator
+    """
+    T = alpha_bars.shape[0]
+    taus = ddim_timesteps(T, K)
+    device = obs.device
+    mask = mask.to(obs.dtype)
+    # Noise is drawn on the generator's device (CPU or CUDA generators both work), then moved.
+    gen_device = generator.device if generator is not None else device
+
+    if noise is None:
+        x = torch.randn(obs.shape, generator=generator, dtype=obs.dtype, device=gen_device).to(device)
+    else:
+        x = noise.to(device=device, dtype=obs.dtype).clone()
+    B = obs.shape[0]
+    x0 = x
+    for k, tau in enumerate(taus):
+        x = mask * obs + (1.0 - mask) * x
+        t = torch.full((B,), tau, dtype=torch.long, device=device)
+        if guidance == 1.0:
+            x0 = net(x, mask, t)
+        else:
+            both = net(torch.cat([x, x]), torch.cat([mask, torch.zeros_like(mask)]), torch.cat([t, t]))
+            x0_c, x0_u = both[:B], both[B:]
+            x0 = x0_u + guidance * (x0_c - x0_u)
+        x0 = mask * obs + (1.0 - mask) * x0
+        if k == K - 1:
+            break
+        ab = float(alpha_bars[tau])
+        ab_next = float(alpha_bars[taus[k + 1]])
+        eps = (x - math.sqrt(ab) * x0) / math.sqrt(1.0 - ab)
+        sigma = eta * math.sqrt((1.0 - ab_next) / (1.0 - ab)) * math.sqrt(max(0.0, 1.0 - ab / ab_next))
+        x = math.sqrt(ab_next) * x0 + math.sqrt(max(0.0, 1.0 - ab_next - sigma * sigma)) * eps
+        if sigma > 0.0:
+            z = torch.randn(obs.shape, generator=generator, dtype=obs.dtype, device=gen_device).to(device)
+            x = x + sigma * z
+    return x0
+
+
+# ---- model file (docs/model-file.md): the safetensors container layout, written by hand ----
+
+def _tensor_bytes(t: torch.Tensor) -> bytes:
+    a = t.detach().to("cpu", torch.float32).contiguous().numpy()
+    return a.astype("<f4", copy=False).tobytes()
+
+
+def write_tensor_file(path: str, tensors: Mapping[str, torch.Tensor], metadata: Mapping[str, str]) -> None:
+    """Writes tensors (all as F32) and string metadata in the safetensors layout.
+
+    8-byte little-endian header length N, N bytes of JSON header (padded with spaces to a multiple of
+    8 so the data starts aligned), then the tensors' raw little-endian bytes, back to back in the
+    order given.
+    """
+    header: dict[str, Any] = {"__metadata__": {str(k): str(v) for k, v in metadata.items()}}
+    blobs = []
+    offset = 0
+    for name, t in tensors.items():
+        b = _tensor_bytes(t)
+        header[name] = {"dtype": "F32", "shape": [int(s) for s in t.shape], "data_offsets": [offset, offset + len(b)]}
+        blobs.append(b)
+        offset += len(b)
+    hjson = json.dumps(header, separators=(",", ":")).encode("utf-8")
+    hjson += b" " * ((-len(hjson)) % 8)
+    tmp = path + ".tmp"
+    with open(tmp, "wb") as f:
+        f.write(struct.pack("<Q", len(hjson)))
+        f.write(hjson)
+        for b in blobs:
+            f.write(b)
+    os.replace(tmp, path)
+
+
+def read_tensor_file(path: str) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
+    """Reads a file written by write_tensor_file (F32 only). For tests and tools."""
+    import numpy as np
+    with open(path, "rb") as f:
+        raw = f.read()
+    (n,) = struct.unpack("<Q", raw[:8])
+    header = json.loads(raw[8:8 + n].decode("utf-8"))
+    meta = header.pop("__metadata__", {})
+    data = raw[8 + n:]
+    out = {}
+    for name, info in header.items():
+        if info["dtype"] != "F32":
+            raise ValueError(f"{path}: tensor {name}: dtype {info['dtype']} not supported")
+        b, e = info["data_offsets"]
+        arr = np.frombuffer(data[b:e], dtype="<f4").reshape(info["shape"]).copy()
+        out[name] = torch.from_numpy(arr)
+    return out, meta
+
+
+def _skeleton_json(skeleton: Any) -> str:
+    """skeleton: dict {"names", "parents", "offsets_m"} or its JSON string; checked here too."""
+    sk = json.loads(skeleton) if isinstance(skeleton, str) else dict(skeleton)
+    names, parents, offsets = list(sk["names"]), [int(p) for p in sk["parents"]], sk["offsets_m"]
+    if not (len(names) == len(parents) == len(offsets) == SKELETON_JOINTS):
+        raise ValueError(f"skeleton must have {SKELETON_JOINTS} joints (names, parents, offsets_m)")
+    for i, p in enumerate(parents):
+        if (i == 0 and p != -1) or (i > 0 and not 0 <= p < i):
+            raise ValueError(f"skeleton joint {i} ({names[i]}): parent {p} invalid")
+    offs = [[float(v) for v in o] for o in offsets]
+    if any(len(o) != 3 for o in offs):
+        raise ValueError("skeleton offsets_m must be [x, y, z] per joint")
+    return json.dumps({"names": names, "parents": parents, "offsets_m": offs}, separators=(",", ":"))
+
+
+def write_model(path: str, net: MlpWin, mean: torch.Tensor, std: torch.Tensor, alpha_bars: torch.Tensor,
+                skeleton: Any, metadata: dict) -> None:
+    """Writes a bodyd model file (docs/model-file.md).
+
+    mean, std: (D,) feature normalisation (the network sees (f - mean) / std).
+    alpha_bars: (T,), e.g. cosine_alpha_bars(net.T).
+    skeleton: {"names": [22 str], "parents": [22 int], "offsets_m": [[x, y, z] * 22]} (metres) or its JSON.
+    metadata: "provenance" (dict or str, free form: data, split, steps, wall time, hardware, commit,
+      command) and optionally "feature_version" (default FEATURE_VERSION), "fps" (default "30"); any
+      other key is stored too (non-str values as JSON). The format keys are set here and cannot be overridden.
+    """
+    cfg = net.config()
+    D, T = cfg["D"], cfg["T"]
+    mean = torch.as_tensor(mean, dtype=torch.float32).reshape(-1)
+    std = torch.as_tensor(std, dtype=torch.float32).reshape(-1)
+    alpha_bars = torch.as_tensor(alpha_bars, dtype=torch.float32).reshape(-1)
+    if mean.numel() != D or std.numel() != D:
+        raise ValueError(f"mean/std must have D={D} entries, got {mean.numel()}/{std.numel()}")
+    if not bool((std > 0).all()) or not bool(torch.isfinite(std).all()) or not bool(torch.isfinite(mean).all()):
+        raise ValueError("norm std must be finite and > 0, mean finite")
+    if alpha_bars.numel() != T:
+        raise ValueError(f"alpha_bars must have T={T} entries, got {alpha_bars.numel()}")
+
+    meta: dict[str, str] = {}
+    for k, v in metadata.items():
+        meta[str(k)] = v if isinstance(v, str) else json.dumps(v, sort_keys=True)
+    meta.setdefault("feature_version", str(FEATURE_VERSION))
+    meta.setdefault("fps", "30")
+    meta.setdefault("provenance", "{}")
+    meta.update({
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "architecture": ARCHITECTURE,
+        "config": json.dumps(cfg, separators=(",", ":")),
+        "skeleton": _skeleton_json(skeleton),
+    })
+    tensors: dict[str, torch.Tensor] = {k: v for k, v in net.state_dict().items()}
+    tensors["norm.mean"] = mean
+    tensors["norm.std"] = std
+    tensors["diffusion.alpha_bar"] = alpha_bars
+    write_tensor_file(path, tensors, meta)
+
+
+def load_model(path: str, device: str = "cpu") -> tuple[MlpWin, dict[str, torch.Tensor], dict[str, str]]:
+    """Reads a model file back: (net in eval mode, {"norm.mean", "norm.std", "diffusion.alpha_bar"}, metadata)."""
+    tensors, meta = read_tensor_file(path)
+    if meta.get("format") != FORMAT or meta.get("architecture") != ARCHITECTURE:
+        raise ValueError(f"{path}: not a {FORMAT} {ARCHITECTURE} file")
+    cfg = json.loads(meta["config"])
+    net = MlpWin(**cfg)
+    extra = {k: tensors.pop(k) for k in ("norm.mean", "norm.std", "diffusion.alpha_bar")}
+    net.load_state_dict(tensors, strict=True)
+    return net.to(device).eval(), extra, meta
+
+
+def skeleton_from_bvh(path: str, unit_to_m: float = 0.01) -> dict:
+    """The joint hierarchy of a BVH file as {"names", "parents", "offsets_m"} (End Sites skipped)."""
+    names: list[str] = []
+    parents: list[int] = []
+    offsets: list[list[float]] = []
+    stack: list[int] = []
+    pending: int | None = None
+    in_end = 0
+    with open(path) as f:
+        for line in f:
+            tok = line.split()
+            if not tok:
+                continue
+            if tok[0] == "MOTION":
+                break
+            if tok[0] in ("ROOT", "JOINT"):
+                names.append(tok[1])
+                parents.append(stack[-1] if stack else -1)
+                offsets.append([0.0, 0.0, 0.0])
+                pending = len(names) - 1
+            elif tok[0] == "End":
+                pending = -1
+            elif tok[0] == "{":
+                if pending == -1:
+                    in_end += 1
+                elif pending is not None:
+                    stack.append(pending)
+                pending = None
+            elif tok[0] == "}":
+                if in_end:
+                    in_end -= 1
+                else:
+                    stack.pop()
+            elif tok[0] == "OFFSET" and not in_end and stack:
+                offsets[stack[-1]] = [float(v) * unit_to_m for v in tok[1:4]]
+    return {"names": names, "parents": parents, "offsets_m": offsets}
+
+
+def _repo_root() -> str:
+    return os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _git_commit() -> str:
+    try:
+        import subprocess
+        return subprocess.run(["git", "-C", _repo_root(), "rev-parse", "HEAD"], capture_output=True,
+                              text=True, check=True).stdout.strip()
+    except Exception:
+        return "unknown"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--random-model", metavar="OUT", required=True,
+                    help="write a random-initialised model (identity normalisation) for benchmarks")
+    ap.add_argument("--W", type=int, default=20)
+    ap.add_argument("--D", type=int, default=191)
+    ap.add_argument("--E", type=int, default=64)
+    ap.add_argument("--H", type=int, default=512)
+    ap.add_argument("--L", type=int, default=2)
+    ap.add_argument("--TE", type=int, default=64)
+    ap.add_argument("--T", type=int, default=100)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--skeleton-bvh", default=os.path.join(_repo_root(), "tests", "data", "walk_60.bvh"))
+    a = ap.parse_args()
+    torch.manual_seed(a.seed)
+    net = MlpWin(a.W, a.D, a.E, a.H, a.L, a.TE, a.T)
+    skeleton = skeleton_from_bvh(a.skeleton_bvh)
+    prov = {"data": "none (random initialisation)", "seed": a.seed, "git_commit": _git_commit(),
+            "command": "python3 training/model_net.py " + " ".join(sys.argv[1:])}
+    write_model(a.random_model, net, torch.zeros(a.D), torch.ones(a.D), cosine_alpha_bars(a.T), skeleton,
+                {"provenance": prov})
+    n = sum(p.numel() for p in net.parameters())
+    print(f"wrote {a.random_model}: {ARCHITECTURE} {net.config()} ({n} parameters)")
+
+
+if __name__ == "__main__":
+    main()
