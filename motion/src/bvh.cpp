@@ -42,13 +42,23 @@ class Tokenizer {
   }
   double to_number(std::string_view t, std::string_view what) {
     double v = 0;
+    if (!try_number(t, v)) fail_number(t, what);
+    return v;
+  }
+  // Parses a finite number; false otherwise (the caller builds the message only then).
+  static bool try_number(std::string_view t, double& v) {
     const char* first = t.data();
     if (!t.empty() && t.front() == '+') ++first;
     auto [ptr, ec] = std::from_chars(first, t.data() + t.size(), v);
-    if (ec != std::errc() || ptr != t.data() + t.size())
-      fail(fmt::format("{}: '{}' is not a number", what, t));
-    if (!std::isfinite(v)) fail(fmt::format("{}: '{}' is not finite", what, t));
-    return v;
+    return ec == std::errc() && ptr == t.data() + t.size() && std::isfinite(v);
+  }
+  [[noreturn]] void fail_number(std::string_view t, std::string_view what) const {
+    double v = 0;
+    const char* first = t.data();
+    if (!t.empty() && t.front() == '+') ++first;
+    auto [ptr, ec] = std::from_chars(first, t.data() + t.size(), v);
+    if (ec != std::errc() || ptr != t.data() + t.size()) fail(fmt::format("{}: '{}' is not a number", what, t));
+    fail(fmt::format("{}: '{}' is not finite", what, t));
   }
   // Rest of the current line (after the last token), trimmed; advances to the next line.
   std::string_view rest_of_line() {
@@ -256,7 +266,9 @@ Motion parse_bvh(std::string_view text, const std::string& source, const BvhRead
       while (q < line.size() && !is_space(line[q])) ++q;
       if (count >= total_channels)
         tok.fail(fmt::format("frame {} has more than the {} values the hierarchy declares", f, total_channels));
-      values[count] = tok.to_number(line.substr(p, q - p), fmt::format("frame {} value {}", f, count + 1));
+      const std::string_view token = line.substr(p, q - p);
+      if (!Tokenizer::try_number(token, values[count]))
+        tok.fail_number(token, fmt::format("frame {} value {}", f, count + 1));
       ++count;
       p = q;
     }
