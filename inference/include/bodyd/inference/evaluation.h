@@ -1,0 +1,118 @@
+// The online evaluation (CONVENTIONS.md "Online evaluation protocol"; docs/evaluation.md):
+// tracker samples of a clip are fed sample by sample to a fresh Reconstructor per method, the
+// pose is requested at every frame time with only the samples up to that time pushed, and
+// every frame is scored against the clip's forward kinematics.
+//
+// This library does not simulate trackers itself: the caller passes a TrackerSource (bodyd-eval
+// uses the simulator of simulators/), so tests can feed any stream.
+#pragma once
+
+#include "bodyd/inference/metrics.h"
+#include "bodyd/inference/reconstructor.h"
+#include "bodyd/motion/bvh.h"
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace bodyd {
+
+// Frame k of a clip is at t = llround(k * (1e9 / fps)) ns, fps = 1 / frame_time_s: the same
+// expression the tracker simulator uses for its sample times, so samples simulated at the
+// clip's frame rate fall exactly on the frame times.
+[[nodiscard]] std::vector<std::int64_t> clip_frame_times_ns(const Motion& clip);
+
+// The outputs of one reconstructor over one stream.
+struct OnlineRun {
+  std::vector<BodyPose> poses;        // one per frame time
+  std::vector<bool> answered;         // reconstruct() returned true for that frame
+  std::vector<double> ms_per_frame;   // wall time of each reconstruct() call, milliseconds
+  int unanswered = 0;                 // frames where reconstruct() returned false
+};
+
+// The online protocol for one reconstructor: for each frame time (increasing), push every
+// sample with t_ns <= frame time + lookahead_ns not pushed yet (in the order given, which must
+// be sorted by time), then reconstruct(frame time). The evaluation uses lookahead 0; a positive
+// lookahead hands the reconstructor samples newer than the requested time, as a live daemon may
+// (the causality check uses it). A frame where reconstruct() returns false gets the previous
+// frame's pose, and frames before the first answer get the first answer (so every frame can be
+// scored; `unanswered` counts them). Does not reset `reconstructor` first.
+[[nodiscard]] OnlineRun run_online(Reconstructor& reconstructor, std::span<const TrackerSample> samples,
+                                   std::span<const std::int64_t> frame_times_ns, std::int64_t lookahead_ns = 0);
+
+// Causality check, reusable for any Reconstructor: runs a fresh reconstructor (from `make`) on
+// `samples`, then another on a copy where every sample later than `t_star_ns` is changed
+// (positions moved by 0.3 m, rotations turned by 60 degrees, validity flipped on every third),
+// and compares the outputs frame by frame. Both runs push samples `lookahead_ns` ahead of each
+// requested time (run_online), so a reconstructor that looks at samples newer than the requested
+// time is caught. Outputs for frames at or before t_star must be bit-identical (rotations,
+// translations, contacts, tracker validity).
+struct CausalityReport {
+  bool causal = true;            // no difference at or before t_star
+  int frames_checked = 0;        // frames at or before t_star
+  int first_violation = -1;      // frame index of the first difference, or -1
+  bool future_changed = false;   // some frame after t_star differs (the perturbation took effect)
+  std::string message;           // what differed, where (empty when causal)
+};
+[[nodiscard]] CausalityReport check_causality(const std::function<std::unique_ptr<Reconstructor>()>& make,
+                                              std::span<const TrackerSample> samples,
+                                              std::span<const std::int64_t> frame_times_ns, std::int64_t t_star_ns,
+                                              std::int64_t lookahead_ns = 500'000'000);
+
+// Tracker samples for clip number `clip_index` (sorted by time). bodyd-eval's source simulates
+// them from the clip (noise, dropout) with a seed derived from the run's seed and clip_index.
+using TrackerSource = std::function<std::vector<TrackerSample>(const Motion& clip, int clip_index)>;
+
+struct EvalOptions {
+  std::vector<std::string> methods{"diffusion", "ik"};
+  std::filesystem::path model_path;         // for methods that need a model
+  std::optional<std::filesystem::path> out_dir;  // write <clip>.pred.bvh / <clip>.<method>.pred.bvh
+  // Called after each clip (for progress); may be empty.
+  std::function<void(int clip_index, int clip_count, const std::filesystem::path& clip)> on_clip;
+};
+
+struct MethodReport {
+  std::string name;
+  AccuracyMetrics metrics;
+  double ms_per_frame_p50 = 0.0;
+  double ms_per_frame_p99 = 0.0;
+  std::int64_t unanswered_frames = 0;
+};
+
+struct EvalReport {
+  int clips = 0;
+  std::int64_t frames = 0;
+  std::vector<MethodReport> methods;  // in the order of EvalOptions::methods
+  MotionQuality ground_truth;
+  // Timing of "diffusion" if evaluated, otherwise of the first method.
+  std::string timing_method;
+  double ms_per_frame_p50 = 0.0;
+  double ms_per_frame_p99 = 0.0;
+};
+
+// Evaluates every clip with every method. Throws BvhError for an unreadable clip,
+// ReconstructorError for a method that cannot be made, std::runtime_error for a clip whose
+// skeleton differs from the first clip's or a method that never produced a pose on a clip.
+[[nodiscard]] EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOptions& options,
+                                  const TrackerSource& source);
+
+// Nearest-rank percentile (p in [0, 100]) of values; NaN for none.
+[[nodiscard]] double percentile(std::vector<double> values, double p);
+
+// The report as the JSON document of docs/evaluation.md (NaN metrics as null), 2-space indented.
+[[nodiscard]] std::string report_json(const EvalReport& report);
+// A human-readable table of the report.
+[[nodiscard]] std::string report_table(const EvalReport& report);
+
+// Reads a split file: one path per line, relative to the parent of the split file's folder
+// (splits/val.txt lists dataset-1/... relative to the dataset root, as bodyd-dataset reads it);
+// blank lines and lines starting with '#' are skipped. Throws std::runtime_error naming the
+// file (and line) when it cannot be read or names a file that does not exist.
+[[nodiscard]] std::vector<std::filesystem::path> read_split(const std::filesystem::path& split_file);
+
+}  // namespace bodyd

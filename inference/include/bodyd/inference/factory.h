@@ -1,0 +1,43 @@
+// Makes a Reconstructor by method name: the one place the daemon, the evaluation and the
+// tools turn "ik" or "diffusion" into an object.
+#pragma once
+
+#include "bodyd/inference/reconstructor.h"
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace bodyd {
+
+// A reconstructor could not be made (unknown method, missing or bad model file, missing
+// skeleton); the message says which and what to do.
+class ReconstructorError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// The method names make_reconstructor() knows, e.g. {"diffusion", "ik"}.
+[[nodiscard]] std::vector<std::string> known_methods();
+
+// Method options (ignored by methods they do not apply to).
+struct ReconstructorOptions {
+  int diffusion_steps = 4;      // DDIM steps K
+  float guidance = 1.0f;        // classifier-free guidance scale (1 = off)
+  std::uint64_t seed = 1;       // the diffusion's noise
+};
+
+// method "ik": the fixed-rule baseline (ik.h) on `skeleton_hint` (required; model_path unused).
+// method "diffusion": the diffusion reconstructor loaded from `model_path`.
+// `skeleton_hint` is the skeleton of the data at hand (e.g. the clip being evaluated), or null.
+// Throws ReconstructorError.
+[[nodiscard]] std::unique_ptr<Reconstructor> make_reconstructor(std::string_view method,
+                                                                 const std::filesystem::path& model_path,
+                                                                 const Skeleton* skeleton_hint,
+                                                                 const ReconstructorOptions& options = {});
+
+}  // namespace bodyd

@@ -1,0 +1,125 @@
+// Accuracy metrics of a reconstruction against ground truth, exactly as defined in
+// CONVENTIONS.md ("Accuracy metrics"); docs/evaluation.md repeats the formulas.
+//
+// Per clip, frame by frame, on global joint positions (metres) and rotations from forward
+// kinematics, at the clip's frame rate fps, over the 21 body joints (not joint_Root):
+//   mpjpe_cm        mean |p - g| over all 21 joints and frames, x100
+//   upper/lower/hand/root_pe_cm  the same over the joint sets (upper 12, lower 9, hands 2, Hips)
+//   mpjre_deg       mean geodesic angle between predicted and true global rotations
+//   mpjve_cm_s      mean |(p[t+1] - p[t]) - (g[t+1] - g[t])| * fps * 100 over frame pairs
+//   jitter_m_s3     mean |p[t+3] - 3 p[t+2] + 3 p[t+1] - p[t]| * fps^3 over frame quadruples
+//   foot_skate_ratio  over both Toes joints and frame pairs (t, t+1): the fraction with
+//                   y < 0.06 m in both frames and horizontal (x, z) speed > 0.075 m/s
+// Clips are combined by their frame count: result = sum(n_clip * clip_metric) / sum(n_clip),
+// over the clips where the metric is defined (a 1-frame clip has no velocities, a clip of
+// fewer than 4 frames no jitter); a metric no clip defines is NaN.
+#pragma once
+
+#include "bodyd/motion/skeleton.h"
+
+#include <array>
+#include <cstdint>
+#include <string_view>
+#include <vector>
+
+namespace bodyd {
+
+struct AccuracyMetrics {
+  double mpjpe_cm = 0.0;
+  double upper_pe_cm = 0.0;
+  double lower_pe_cm = 0.0;
+  double hand_pe_cm = 0.0;
+  double root_pe_cm = 0.0;
+  double mpjre_deg = 0.0;
+  double mpjve_cm_s = 0.0;
+  double jitter_m_s3 = 0.0;
+  double foot_skate_ratio = 0.0;
+};
+
+// The metric keys of CONVENTIONS.md, in its order, with their fields.
+struct MetricKey {
+  std::string_view key;
+  double AccuracyMetrics::*field;
+};
+inline constexpr std::array<MetricKey, 9> kMetricKeys{{
+    {"mpjpe_cm", &AccuracyMetrics::mpjpe_cm},
+    {"upper_pe_cm", &AccuracyMetrics::upper_pe_cm},
+    {"lower_pe_cm", &AccuracyMetrics::lower_pe_cm},
+    {"hand_pe_cm", &AccuracyMetrics::hand_pe_cm},
+    {"root_pe_cm", &AccuracyMetrics::root_pe_cm},
+    {"mpjre_deg", &AccuracyMetrics::mpjre_deg},
+    {"mpjve_cm_s", &AccuracyMetrics::mpjve_cm_s},
+    {"jitter_m_s3", &AccuracyMetrics::jitter_m_s3},
+    {"foot_skate_ratio", &AccuracyMetrics::foot_skate_ratio},
+}};
+
+// Smoothness and foot skating of one motion on its own (reported for ground truth).
+struct MotionQuality {
+  double jitter_m_s3 = 0.0;
+  double foot_skate_ratio = 0.0;
+};
+
+// Contact thresholds of foot_skate_ratio.
+inline constexpr double kFootContactHeightM = 0.06;
+inline constexpr double kFootSkateSpeedMS = 0.075;
+
+// Skeleton indices of the joint sets of CONVENTIONS.md, found by name.
+struct JointSets {
+  std::vector<int> all;    // the 21 body joints: upper then lower
+  std::vector<int> upper;  // Spine, Chest, Neck, Head, Shoulder_L/R, UpperArm_L/R, LowerArm_L/R, Hand_L/R
+  std::vector<int> lower;  // Hips, UpperLeg_L/R, LowerLeg_L/R, Foot_L/R, Toes_L/R
+  std::vector<int> hands;  // Hand_L, Hand_R
+  std::vector<int> root;   // Hips
+  std::array<int, 2> toes{};  // Toes_L, Toes_R
+};
+// Throws std::invalid_argument naming the first body joint the skeleton lacks.
+[[nodiscard]] JointSets joint_sets(const Skeleton& skeleton);
+
+// Accumulates the metrics over clips. Per frame: add_frame(predicted, truth), both global
+// poses indexed like the skeleton given to the constructor. Keeps only the last four frames
+// of positions, so memory does not grow with clip length; add_frame does not allocate.
+class MetricsAccumulator {
+ public:
+  explicit MetricsAccumulator(const Skeleton& skeleton);
+
+  // Starts a clip at `fps` frames per second (> 0). An unfinished clip is discarded.
+  void begin_clip(double fps);
+  void add_frame(const GlobalPose& predicted, const GlobalPose& truth);
+  // Finishes the clip; its metrics join the totals weighted by its frame count. Returns them
+  // (NaN where undefined for this clip). A clip without frames adds nothing.
+  AccuracyMetrics end_clip();
+  // Ground truth's own jitter and foot skating of the clip last ended.
+  [[nodiscard]] const MotionQuality& last_clip_truth() const { return last_truth_; }
+
+  // Frame-weighted means over the finished clips (NaN where no clip defines a metric).
+  [[nodiscard]] AccuracyMetrics result() const;
+  [[nodiscard]] MotionQuality truth_result() const;
+  [[nodiscard]] int clips() const { return clips_; }
+  [[nodiscard]] std::int64_t frames() const { return frames_; }
+
+ private:
+  // Sums and counts of one quantity within a clip, and its weighted total over clips.
+  struct Term {
+    double clip_sum = 0.0;
+    std::int64_t clip_count = 0;
+    double total = 0.0;          // sum over clips of n_frames * clip mean
+    double total_weight = 0.0;   // sum over clips (defining it) of n_frames
+    void add(double v) { clip_sum += v; ++clip_count; }
+    double finish(int clip_frames);  // the clip mean (NaN if undefined); folds it into the totals
+    [[nodiscard]] double mean() const;
+  };
+  enum TermId { kAll, kUpper, kLower, kHands, kRoot, kRot, kVel, kJitter, kSkate, kTruthJitter, kTruthSkate, kTerms };
+
+  JointSets sets_;
+  double fps_ = 30.0;
+  bool in_clip_ = false;
+  int clip_frames_ = 0;
+  int clips_ = 0;
+  std::int64_t frames_ = 0;
+  std::array<Term, kTerms> terms_{};
+  MotionQuality last_truth_;
+  // Positions of the body joints (sets_.all order) of the last 4 frames, slot = frame % 4.
+  std::vector<Vec3> pred_hist_, true_hist_;
+};
+
+}  // namespace bodyd

@@ -1,0 +1,331 @@
+#include "bodyd/inference/evaluation.h"
+
+#include "bodyd/inference/factory.h"
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <stdexcept>
+
+namespace bodyd {
+
+std::vector<std::int64_t> clip_frame_times_ns(const Motion& clip) {
+  const double period_ns = 1e9 / clip.fps();
+  std::vector<std::int64_t> times(static_cast<size_t>(clip.frame_count()));
+  for (size_t k = 0; k < times.size(); ++k) times[k] = std::llround(static_cast<double>(k) * period_ns);
+  return times;
+}
+
+OnlineRun run_online(Reconstructor& reconstructor, std::span<const TrackerSample> samples,
+                     std::span<const std::int64_t> frame_times_ns, std::int64_t lookahead_ns) {
+  OnlineRun run;
+  const size_t n = frame_times_ns.size();
+  run.poses.resize(n);
+  run.answered.assign(n, false);
+  run.ms_per_frame.resize(n);
+  size_t next = 0;
+  int first_answer = -1;
+  BodyPose pose;
+  for (size_t f = 0; f < n; ++f) {
+    const std::int64_t t = frame_times_ns[f];
+    while (next < samples.size() && samples[next].t_ns <= t + lookahead_ns) reconstructor.push(samples[next++]);
+    const auto start = std::chrono::steady_clock::now();
+    const bool ok = reconstructor.reconstruct(t, pose);
+    const auto stop = std::chrono::steady_clock::now();
+    run.ms_per_frame[f] = std::chrono::duration<double, std::milli>(stop - start).count();
+    run.answered[f] = ok;
+    if (ok) {
+      run.poses[f] = pose;
+      if (first_answer < 0) first_answer = static_cast<int>(f);
+    } else {
+      ++run.unanswered;
+      if (f > 0) run.poses[f] = run.poses[f - 1];
+    }
+  }
+  if (first_answer > 0)
+    for (int f = 0; f < first_answer; ++f) run.poses[static_cast<size_t>(f)] = run.poses[static_cast<size_t>(first_answer)];
+  return run;
+}
+
+namespace {
+
+bool same_pose(const BodyPose& a, const BodyPose& b, std::string& what) {
+  if (a.pose.local_rotations.size() != b.pose.local_rotations.size()) {
+    what = "joint count";
+    return false;
+  }
+  for (size_t j = 0; j < a.pose.local_rotations.size(); ++j) {
+    if (a.pose.local_rotations[j].coeffs() != b.pose.local_rotations[j].coeffs()) {
+      what = fmt::format("local rotation of joint {}", j);
+      return false;
+    }
+    if (a.pose.local_translations[j] != b.pose.local_translations[j]) {
+      what = fmt::format("local translation of joint {}", j);
+      return false;
+    }
+  }
+  if (a.foot_contact != b.foot_contact) {
+    what = "foot contacts";
+    return false;
+  }
+  if (a.tracker_valid != b.tracker_valid) {
+    what = "tracker validity";
+    return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+CausalityReport check_causality(const std::function<std::unique_ptr<Reconstructor>()>& make,
+                                std::span<const TrackerSample> samples,
+                                std::span<const std::int64_t> frame_times_ns, std::int64_t t_star_ns,
+                                std::int64_t lookahead_ns) {
+  std::vector<TrackerSample> changed(samples.begin(), samples.end());
+  const Quat turn(Eigen::AngleAxisd(M_PI / 3.0, Vec3(1.0, 2.0, 3.0).normalized()));
+  int k = 0;
+  for (TrackerSample& s : changed) {
+    if (s.t_ns <= t_star_ns) continue;
+    s.position_m += Vec3(0.3, -0.2, 0.25);
+    s.rotation = (turn * s.rotation).normalized();
+    if (++k % 3 == 0) s.valid = !s.valid;
+  }
+  const auto original = make();
+  const auto perturbed = make();
+  const OnlineRun a = run_online(*original, samples, frame_times_ns, lookahead_ns);
+  const OnlineRun b = run_online(*perturbed, changed, frame_times_ns, lookahead_ns);
+
+  CausalityReport report;
+  for (size_t f = 0; f < frame_times_ns.size(); ++f) {
+    std::string what;
+    const bool same = a.answered[f] == b.answered[f] && same_pose(a.poses[f], b.poses[f], what);
+    if (a.answered[f] != b.answered[f]) what = "whether a pose was produced";
+    if (frame_times_ns[f] <= t_star_ns) {
+      ++report.frames_checked;
+      if (!same && report.causal) {
+        report.causal = false;
+        report.first_violation = static_cast<int>(f);
+        report.message = fmt::format(
+            "{}: frame {} (t = {} ns <= t* = {} ns) changed ({}) when only samples after t* changed",
+            original->name(), f, frame_times_ns[f], t_star_ns, what);
+      }
+    } else if (!same) {
+      report.future_changed = true;
+    }
+  }
+  return report;
+}
+
+double percentile(std::vector<double> values, double p) {
+  if (values.empty()) return std::numeric_limits<double>::quiet_NaN();
+  std::sort(values.begin(), values.end());
+  const double rank = std::ceil(std::clamp(p, 0.0, 100.0) / 100.0 * static_cast<double>(values.size()));
+  const size_t i = rank < 1.0 ? 0 : static_cast<size_t>(rank) - 1;
+  return values[std::min(i, values.size() - 1)];
+}
+
+namespace {
+
+// Where each joint of `truth` (by name) is in `predicted`; empty when the orders agree.
+std::vector<int> joint_map(const Skeleton& truth, const Skeleton& predicted, const std::string& method) {
+  if (truth.names == predicted.names) return {};
+  std::vector<int> map(truth.names.size());
+  for (size_t j = 0; j < truth.names.size(); ++j) {
+    map[j] = predicted.find(truth.names[j]);
+    if (map[j] < 0)
+      throw std::runtime_error(fmt::format("method '{}': its skeleton has no joint '{}' of the clip's skeleton",
+                                           method, truth.names[j]));
+  }
+  return map;
+}
+
+// Remaps a pose into the clip's joint order (no-op for an empty map).
+void remap(const std::vector<int>& map, const BodyPose& in, Pose& pose, GlobalPose& global) {
+  if (map.empty()) {
+    pose = in.pose;
+    global = in.global;
+    return;
+  }
+  pose.local_rotations.resize(map.size());
+  pose.local_translations.resize(map.size());
+  global.positions.resize(map.size());
+  global.rotations.resize(map.size());
+  for (size_t j = 0; j < map.size(); ++j) {
+    const auto s = static_cast<size_t>(map[j]);
+    pose.local_rotations[j] = in.pose.local_rotations[s];
+    pose.local_translations[j] = in.pose.local_translations[s];
+    global.positions[j] = in.global.positions[s];
+    global.rotations[j] = in.global.rotations[s];
+  }
+}
+
+std::string out_name(const std::filesystem::path& clip, const std::string& method) {
+  const std::string stem = clip.stem().string();
+  return method == "diffusion" ? stem + ".pred.bvh" : stem + "." + method + ".pred.bvh";
+}
+
+}  // namespace
+
+EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOptions& options,
+                    const TrackerSource& source) {
+  if (options.methods.empty()) throw std::invalid_argument("evaluate: no methods given");
+  if (options.out_dir) std::filesystem::create_directories(*options.out_dir);
+
+  EvalReport report;
+  std::optional<Skeleton> first_skeleton;
+  std::vector<MetricsAccumulator> metrics;
+  std::vector<std::vector<double>> times(options.methods.size());
+  std::vector<std::int64_t> unanswered(options.methods.size(), 0);
+
+  int index = 0;
+  for (const std::filesystem::path& path : clips) {
+    const Motion clip = read_bvh(path);
+    if (clip.frame_count() == 0) throw std::runtime_error(fmt::format("{}: the clip has no frames", path.string()));
+    if (!first_skeleton) {
+      first_skeleton = clip.skeleton;
+      for (size_t m = 0; m < options.methods.size(); ++m) metrics.emplace_back(clip.skeleton);
+    } else if (clip.skeleton.names != first_skeleton->names) {
+      throw std::runtime_error(fmt::format(
+          "{}: its joints (names or order) differ from the first clip's; evaluate clips of one skeleton together",
+          path.string()));
+    }
+
+    std::vector<GlobalPose> truth(static_cast<size_t>(clip.frame_count()));
+    for (size_t f = 0; f < truth.size(); ++f) forward_kinematics(clip.skeleton, clip.frames[f], truth[f]);
+    const std::vector<TrackerSample> samples = source(clip, index);
+    const std::vector<std::int64_t> frame_times = clip_frame_times_ns(clip);
+
+    for (size_t m = 0; m < options.methods.size(); ++m) {
+      const std::string& method = options.methods[m];
+      const auto reconstructor = make_reconstructor(method, options.model_path, &clip.skeleton);
+      const OnlineRun run = run_online(*reconstructor, samples, frame_times);
+      if (run.unanswered == clip.frame_count())
+        throw std::runtime_error(fmt::format("{}: method '{}' produced no pose for any frame (no valid head sample?)",
+                                             path.string(), method));
+      unanswered[m] += run.unanswered;
+      times[m].insert(times[m].end(), run.ms_per_frame.begin(), run.ms_per_frame.end());
+
+      const std::vector<int> map = joint_map(clip.skeleton, reconstructor->skeleton(), method);
+      Motion written;
+      if (options.out_dir) {
+        written.skeleton = clip.skeleton;
+        written.channels = clip.channels;
+        written.frame_time_s = clip.frame_time_s;
+        written.frames.resize(truth.size());
+      }
+      Pose pose;
+      GlobalPose global;
+      metrics[m].begin_clip(clip.fps());
+      for (size_t f = 0; f < truth.size(); ++f) {
+        remap(map, run.poses[f], pose, global);
+        metrics[m].add_frame(global, truth[f]);
+        if (options.out_dir) written.frames[f] = pose;
+      }
+      (void)metrics[m].end_clip();
+      if (options.out_dir) write_bvh(*options.out_dir / out_name(path, method), written);
+    }
+    ++report.clips;
+    report.frames += clip.frame_count();
+    if (options.on_clip) options.on_clip(index, static_cast<int>(clips.size()), path);
+    ++index;
+  }
+
+  size_t timed = 0;
+  for (size_t m = 0; m < options.methods.size(); ++m) {
+    MethodReport r;
+    r.name = options.methods[m];
+    if (!metrics.empty()) r.metrics = metrics[m].result();
+    r.ms_per_frame_p50 = percentile(times[m], 50.0);
+    r.ms_per_frame_p99 = percentile(times[m], 99.0);
+    r.unanswered_frames = unanswered[m];
+    report.methods.push_back(r);
+    if (options.methods[m] == "diffusion") timed = m;
+  }
+  if (!metrics.empty()) report.ground_truth = metrics[0].truth_result();
+  report.timing_method = report.methods[timed].name;
+  report.ms_per_frame_p50 = report.methods[timed].ms_per_frame_p50;
+  report.ms_per_frame_p99 = report.methods[timed].ms_per_frame_p99;
+  return report;
+}
+
+namespace {
+
+nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
+
+}  // namespace
+
+std::string report_json(const EvalReport& report) {
+  nlohmann::ordered_json doc;
+  doc["clips"] = report.clips;
+  doc["frames"] = report.frames;
+  nlohmann::ordered_json methods = nlohmann::ordered_json::object();
+  for (const MethodReport& m : report.methods) {
+    nlohmann::ordered_json o;
+    for (const MetricKey& k : kMetricKeys) o[std::string(k.key)] = number(m.metrics.*k.field);
+    o["ms_per_frame_p50"] = number(m.ms_per_frame_p50);
+    o["ms_per_frame_p99"] = number(m.ms_per_frame_p99);
+    methods[m.name] = o;
+  }
+  doc["methods"] = methods;
+  doc["ground_truth"] = {{"jitter_m_s3", number(report.ground_truth.jitter_m_s3)},
+                         {"foot_skate_ratio", number(report.ground_truth.foot_skate_ratio)}};
+  doc["timing"] = {{"ms_per_frame_p50", number(report.ms_per_frame_p50)},
+                   {"ms_per_frame_p99", number(report.ms_per_frame_p99)}};
+  return doc.dump(2) + "\n";
+}
+
+std::string report_table(const EvalReport& report) {
+  std::string out = fmt::format("{} clips, {} frames\n", report.clips, report.frames);
+  out += fmt::format("{:<18}", "metric");
+  for (const MethodReport& m : report.methods) out += fmt::format("{:>12}", m.name);
+  out += fmt::format("{:>14}\n", "ground truth");
+  for (const MetricKey& k : kMetricKeys) {
+    out += fmt::format("{:<18}", k.key);
+    for (const MethodReport& m : report.methods) out += fmt::format("{:>12.4f}", m.metrics.*k.field);
+    if (k.key == "jitter_m_s3")
+      out += fmt::format("{:>14.4f}", report.ground_truth.jitter_m_s3);
+    else if (k.key == "foot_skate_ratio")
+      out += fmt::format("{:>14.4f}", report.ground_truth.foot_skate_ratio);
+    out += "\n";
+  }
+  out += fmt::format("{:<18}", "ms/frame p50");
+  for (const MethodReport& m : report.methods) out += fmt::format("{:>12.4f}", m.ms_per_frame_p50);
+  out += fmt::format("\n{:<18}", "ms/frame p99");
+  for (const MethodReport& m : report.methods) out += fmt::format("{:>12.4f}", m.ms_per_frame_p99);
+  out += "\n";
+  for (const MethodReport& m : report.methods)
+    if (m.unanswered_frames > 0)
+      out += fmt::format("note: {} had no pose for {} frames (scored with its previous pose)\n", m.name,
+                         m.unanswered_frames);
+  return out;
+}
+
+std::vector<std::filesystem::path> read_split(const std::filesystem::path& split_file) {
+  std::ifstream in(split_file);
+  if (!in) throw std::runtime_error(fmt::format("{}: cannot open the split file", split_file.string()));
+  // Paths are relative to the split folder's parent (splits/val.txt -> the dataset root).
+  const std::filesystem::path base = split_file.parent_path().parent_path();
+  std::vector<std::filesystem::path> paths;
+  std::string line;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    while (!line.empty() && (line.back() == '\r' || line.back() == ' ' || line.back() == '\t')) line.pop_back();
+    size_t start = line.find_first_not_of(" \t");
+    if (start == std::string::npos || line[start] == '#') continue;
+    const std::filesystem::path p = base / line.substr(start);
+    if (!std::filesystem::exists(p))
+      throw std::runtime_error(fmt::format("{}:{}: '{}' does not exist (paths are relative to {})", split_file.string(),
+                                           line_no, p.string(), base.string()));
+    paths.push_back(p);
+  }
+  if (paths.empty()) throw std::runtime_error(fmt::format("{}: the split lists no files", split_file.string()));
+  return paths;
+}
+
+}  // namespace bodyd

@@ -1,0 +1,277 @@
+#include "bodyd/inference/evaluation.h"
+
+#include "bodyd/inference/factory.h"
+#include "bodyd/inference/ik.h"
+#include "bodyd/inference/tracker_history.h"
+#include "bodyd/simulators/tracker_sim.h"
+
+#include "../test_paths.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <sstream>
+
+using namespace bodyd;
+
+namespace {
+
+const std::filesystem::path kWalk = test::fixtures() / "walk_60.bvh";
+const std::filesystem::path kBow = test::fixtures() / "bow_30.bvh";
+
+TrackerSource simulator(double noise_mm, double dropout_rate_hz, std::uint64_t seed) {
+  return [=](const Motion& clip, int index) {
+    SimOptions o;
+    o.rate_hz = clip.fps();
+    o.position_noise_mm = noise_mm;
+    o.dropout_rate_hz = dropout_rate_hz;
+    o.dropout_mean_ms = 200.0;
+    o.seed = seed * 1000 + static_cast<std::uint64_t>(index);
+    return simulate_trackers(clip, o);
+  };
+}
+
+EvalReport evaluate_ik(std::vector<std::filesystem::path> clips, const TrackerSource& source,
+                       std::optional<std::filesystem::path> out_dir = std::nullopt) {
+  EvalOptions o;
+  o.methods = {"ik"};
+  o.out_dir = std::move(out_dir);
+  return evaluate(clips, o, source);
+}
+
+// The report without its wall-clock timing (the only part that is not deterministic).
+nlohmann::json without_timing(const EvalReport& r) {
+  nlohmann::json j = nlohmann::json::parse(report_json(r));
+  j.erase("timing");
+  for (auto& [name, m] : j["methods"].items()) {
+    m.erase("ms_per_frame_p50");
+    m.erase("ms_per_frame_p99");
+  }
+  return j;
+}
+
+std::string run_command(const std::string& cmd, int& status) {
+  std::string out;
+  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
+  if (p == nullptr) {
+    status = -1;
+    return out;
+  }
+  std::array<char, 4096> buf{};
+  while (fgets(buf.data(), static_cast<int>(buf.size()), p) != nullptr) out += buf.data();
+  status = pclose(p);
+  return out;
+}
+
+// A reconstructor that breaks the contract: it reports the newest head sample pushed, even one
+// later than the requested time. check_causality must catch it.
+class PeekingReconstructor final : public Reconstructor {
+ public:
+  explicit PeekingReconstructor(const Skeleton& s) : skeleton_(s) {}
+  std::string_view name() const override { return "peeking"; }
+  const Skeleton& skeleton() const override { return skeleton_; }
+  void push(const TrackerSample& s) override { history_.push(s); }
+  bool reconstruct(std::int64_t t_ns, BodyPose& out) override {
+    const TrackerSample* head = history_.newest(Role::Head);
+    if (head == nullptr) return false;
+    out.t_ns = t_ns;
+    out.pose = rest_pose(skeleton_);
+    out.pose.local_translations[1] = head->position_m;
+    out.global = forward_kinematics(skeleton_, out.pose);
+    return true;
+  }
+  void reset() override { history_.clear(); }
+  void set_user_height(double) override {}
+  double user_height() const override { return 1.0; }
+
+ private:
+  Skeleton skeleton_;
+  TrackerHistory history_;
+};
+
+}  // namespace
+
+TEST(Evaluation, FrameTimesMatchTheSimulatorsSampleTimes) {
+  const Motion clip = read_bvh(kWalk);
+  SimOptions o;
+  o.rate_hz = clip.fps();
+  const std::vector<TrackerSample> samples = simulate_trackers(clip, o);
+  const std::vector<std::int64_t> times = clip_frame_times_ns(clip);
+  ASSERT_EQ(times.size(), 60u);
+  ASSERT_EQ(samples.size(), 3u * times.size());
+  for (size_t k = 0; k < times.size(); ++k)
+    for (size_t r = 0; r < 3; ++r) EXPECT_EQ(samples[3 * k + r].t_ns, times[k]) << "frame " << k;
+}
+
+TEST(Evaluation, IkOnWalkWithoutNoise) {
+  const EvalReport r = evaluate_ik({kWalk}, simulator(0.0, 0.0, 1));
+  EXPECT_EQ(r.clips, 1);
+  EXPECT_EQ(r.frames, 60);
+  ASSERT_EQ(r.methods.size(), 1u);
+  const AccuracyMetrics& m = r.methods[0].metrics;
+  for (const MetricKey& k : kMetricKeys) EXPECT_TRUE(std::isfinite(m.*k.field)) << k.key;
+  EXPECT_LT(m.hand_pe_cm, 0.5);  // IK puts the hands on the trackers (up to the arm's reach)
+  EXPECT_GT(m.mpjpe_cm, 1.0);    // but it is not the ground truth
+  EXPECT_LT(m.mpjpe_cm, 20.0);
+  EXPECT_EQ(r.methods[0].unanswered_frames, 0);
+  EXPECT_EQ(r.timing_method, "ik");
+
+  // Ground truth's jitter and skating, computed here directly from the definitions.
+  const Motion clip = read_bvh(kWalk);
+  std::vector<GlobalPose> g;
+  for (const Pose& p : clip.frames) g.push_back(forward_kinematics(clip.skeleton, p));
+  double jitter = 0.0;
+  int jn = 0;
+  for (size_t f = 3; f < g.size(); ++f)
+    for (int j = 1; j < clip.skeleton.size(); ++j) {
+      const auto jj = static_cast<size_t>(j);
+      jitter += (g[f].positions[jj] - 3.0 * g[f - 1].positions[jj] + 3.0 * g[f - 2].positions[jj] -
+                 g[f - 3].positions[jj])
+                    .norm() *
+                std::pow(clip.fps(), 3);
+      ++jn;
+    }
+  int skating = 0, pairs = 0;
+  for (const char* toes : {"Toes_L", "Toes_R"}) {
+    const auto j = static_cast<size_t>(clip.skeleton.find(toes));
+    for (size_t f = 1; f < g.size(); ++f) {
+      const Vec3 a = g[f - 1].positions[j], b = g[f].positions[j];
+      const double speed =
+          std::sqrt((b.x() - a.x()) * (b.x() - a.x()) + (b.z() - a.z()) * (b.z() - a.z())) * clip.fps();
+      skating += a.y() < 0.06 && b.y() < 0.06 && speed > 0.075;
+      ++pairs;
+    }
+  }
+  EXPECT_NEAR(r.ground_truth.jitter_m_s3, jitter / jn, 1e-6 * jitter / jn);
+  EXPECT_NEAR(r.ground_truth.foot_skate_ratio, static_cast<double>(skating) / pairs, 1e-12);
+  EXPECT_GT(r.ground_truth.jitter_m_s3, 0.0);
+}
+
+TEST(Evaluation, CausalityHelperPassesIkAndCatchesAPeekingReconstructor) {
+  const Motion clip = read_bvh(kWalk);
+  SimOptions o;
+  o.rate_hz = clip.fps();
+  const std::vector<TrackerSample> samples = simulate_trackers(clip, o);
+  const std::vector<std::int64_t> times = clip_frame_times_ns(clip);
+  const std::int64_t t_star = times[29];
+
+  const CausalityReport ik = check_causality(
+      [&] { return make_reconstructor("ik", {}, &clip.skeleton); }, samples, times, t_star);
+  EXPECT_TRUE(ik.causal) << ik.message;
+  EXPECT_EQ(ik.frames_checked, 30);
+  EXPECT_TRUE(ik.future_changed);  // the perturbation reached the outputs after t*
+
+  const CausalityReport peek = check_causality(
+      [&] { return std::make_unique<PeekingReconstructor>(clip.skeleton); }, samples, times, t_star);
+  EXPECT_FALSE(peek.causal);
+  EXPECT_GE(peek.first_violation, 0);
+  EXPECT_LE(peek.first_violation, 29);
+  EXPECT_NE(peek.message.find("peeking"), std::string::npos) << peek.message;
+}
+
+TEST(Evaluation, DeterministicForASeedAndTheSeedMatters) {
+  const auto run = [&](std::uint64_t seed) {
+    return without_timing(evaluate_ik({kWalk, kBow}, simulator(5.0, 1.0, seed)));
+  };
+  const nlohmann::json a = run(3), b = run(3), c = run(4);
+  EXPECT_EQ(a.dump(), b.dump());
+  EXPECT_NE(a["methods"]["ik"]["mpjpe_cm"], c["methods"]["ik"]["mpjpe_cm"]);
+  EXPECT_EQ(a["clips"], 2);
+  EXPECT_EQ(a["frames"], 90);
+}
+
+TEST(Evaluation, JsonHasExactlyTheDocumentedKeys) {
+  const nlohmann::ordered_json j =
+      nlohmann::ordered_json::parse(report_json(evaluate_ik({kBow}, simulator(0.0, 0.0, 1))));
+  std::vector<std::string> top;
+  for (auto& [k, v] : j.items()) top.push_back(k);
+  EXPECT_EQ(top, (std::vector<std::string>{"clips", "frames", "methods", "ground_truth", "timing"}));
+  for (const MetricKey& k : kMetricKeys) EXPECT_TRUE(j["methods"]["ik"][std::string(k.key)].is_number()) << k.key;
+  EXPECT_EQ(j["ground_truth"].size(), 2u);
+  EXPECT_TRUE(j["ground_truth"]["jitter_m_s3"].is_number());
+  EXPECT_TRUE(j["ground_truth"]["foot_skate_ratio"].is_number());
+  EXPECT_EQ(j["timing"].size(), 2u);
+  EXPECT_TRUE(j["timing"]["ms_per_frame_p50"].is_number());
+  EXPECT_TRUE(j["timing"]["ms_per_frame_p99"].is_number());
+}
+
+TEST(Evaluation, OutDirHoldsReadableReconstructions) {
+  const auto dir = std::filesystem::temp_directory_path() / "bodyd_eval_test_out";
+  std::filesystem::remove_all(dir);
+  (void)evaluate_ik({kWalk}, simulator(0.0, 0.0, 1), dir);
+  const Motion truth = read_bvh(kWalk);
+  const Motion pred = read_bvh(dir / "walk_60.ik.pred.bvh");
+  EXPECT_EQ(pred.frame_count(), truth.frame_count());
+  EXPECT_EQ(pred.skeleton.names, truth.skeleton.names);
+  EXPECT_EQ(pred.channels, truth.channels);
+  EXPECT_NEAR(pred.frame_time_s, truth.frame_time_s, 1e-9);
+  // The written hands are on the tracked (true) hands, to the file's precision.
+  const auto hand = static_cast<size_t>(truth.skeleton.find("Hand_R"));
+  double err = 0.0;
+  for (int f = 0; f < truth.frame_count(); ++f)
+    err += (forward_kinematics(pred.skeleton, pred.frames[static_cast<size_t>(f)]).positions[hand] -
+            forward_kinematics(truth.skeleton, truth.frames[static_cast<size_t>(f)]).positions[hand])
+               .norm();
+  EXPECT_LT(err / truth.frame_count(), 0.01);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Evaluation, PercentileIsNearestRank) {
+  EXPECT_DOUBLE_EQ(percentile({5, 1, 4, 2, 3}, 50), 3);
+  EXPECT_DOUBLE_EQ(percentile({5, 1, 4, 2, 3}, 99), 5);
+  EXPECT_DOUBLE_EQ(percentile({5, 1, 4, 2, 3}, 0), 1);
+  EXPECT_TRUE(std::isnan(percentile({}, 50)));
+}
+
+TEST(Evaluation, SplitFilesResolveAgainstTheDatasetRoot) {
+  const auto root = std::filesystem::temp_directory_path() / "bodyd_eval_split_test";
+  std::filesystem::remove_all(root);
+  std::filesystem::create_directories(root / "splits");
+  std::filesystem::create_directories(root / "clips");
+  std::filesystem::copy_file(kBow, root / "clips" / "bow.bvh");
+  {
+    std::ofstream(root / "splits" / "val.txt") << "# comment\n\nclips/bow.bvh\n";
+    std::ofstream(root / "splits" / "bad.txt") << "clips/bow.bvh\nclips/missing.bvh\n";
+  }
+  const auto paths = read_split(root / "splits" / "val.txt");
+  ASSERT_EQ(paths.size(), 1u);
+  EXPECT_TRUE(std::filesystem::exists(paths[0]));
+  try {
+    (void)read_split(root / "splits" / "bad.txt");
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.txt:2"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW((void)read_split(root / "splits" / "none.txt"), std::runtime_error);
+  std::filesystem::remove_all(root);
+}
+
+TEST(BodydEval, CommandLineWritesTheReportAndExplainsMissingMethods) {
+  const auto json = std::filesystem::temp_directory_path() / "bodyd_eval_cli_test.json";
+  std::filesystem::remove(json);
+  const std::string exe = (test::bin_dir() / "bodyd-eval").string();
+  int status = 0;
+  std::string out = run_command(exe + " --methods ik --seed 2 --noise-mm 3 --json " + json.string() + " " +
+                                    kWalk.string() + " " + kBow.string(),
+                                status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("mpjpe_cm"), std::string::npos) << out;
+  std::ifstream in(json);
+  const nlohmann::json j = nlohmann::json::parse(in);
+  EXPECT_EQ(j["clips"], 2);
+  EXPECT_EQ(j["frames"], 90);
+  EXPECT_TRUE(j["methods"]["ik"]["mpjpe_cm"].is_number());
+  std::filesystem::remove(json);
+
+  out = run_command(exe + " --methods diffusion,ik --json " + json.string() + " " + kBow.string(), status);
+  EXPECT_NE(status, 0);
+  EXPECT_NE(out.find("diffusion"), std::string::npos) << out;
+  out = run_command(exe + " --methods ik " + (test::fixtures() / "no_such.bvh").string(), status);
+  EXPECT_NE(status, 0);
+  EXPECT_NE(out.find("no_such.bvh"), std::string::npos) << out;
+}
