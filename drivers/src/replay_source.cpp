@@ -100,7 +100,9 @@ class ReplaySource final : public TrackerSource {
         out.sample.t_ns = recorded.t_ns + shift_ns;
         if (options_.paced) {
           const double offset_ns = static_cast<double>(out.sample.t_ns - t_first) / options_.speed;
-          if (!wait_until(host_start_ns + static_cast<std::int64_t>(offset_ns))) return;
+          const std::int64_t due_ns = host_start_ns + static_cast<std::int64_t>(offset_ns);
+          if (!wait_until(due_ns)) return;
+          if (options_.restamp) out.sample.t_ns = due_ns;
           out.arrival_ns = monotonic_ns();
           sink.push(out);
         } else {

@@ -1,12 +1,14 @@
 // Replay source: feeds recorded tracker samples (a tracker log, docs/tracker-log.md) to the
 // pipeline as if a device produced them.
 //
-// Samples keep the log's time base in TrackerSample::t_ns (so a replay reconstructs exactly
-// what an offline run on the same log computes). Paced replay releases each sample when
-// (t_ns - t_first) / speed has elapsed on the host clock since start and pushes without
-// blocking, like a device; fast replay pushes as soon as the sink has room and never loses a
-// sample. Looping starts again at the first sample with every timestamp shifted by the
-// log's span plus one sample period, so time keeps increasing.
+// Paced replay releases each sample when (t_ns - t_first) / speed has elapsed on the host
+// clock since start and pushes without blocking, like a device; by default it also restamps
+// the sample with that host time (CLOCK_MONOTONIC), so a paced replay is indistinguishable
+// from a live device and mixes with live sources. Fast replay pushes as soon as the sink has
+// room, never loses a sample, and keeps the log's time base (there is no host time to give:
+// the same input as an offline run on the log). Looping starts again at the first sample
+// with every timestamp shifted by the log's span plus one sample period, so time keeps
+// increasing.
 #pragma once
 
 #include "bodyd/drivers/source.h"
@@ -22,6 +24,7 @@ struct ReplayOptions {
   bool paced = true;    // follow the log's timestamps; false: as fast as the pipeline takes them
   bool loop = false;    // start again at the end (forever, until stop())
   double speed = 1.0;   // paced replay speed factor (2 = twice as fast); must be > 0
+  bool restamp = true;  // paced: t_ns = the host time the sample is released; false: keep the log's
 };
 
 // A replay of samples already in memory (tests, simulated devices). `name` is reported in
