@@ -1,6 +1,8 @@
 #include "bodyd/inference/factory.h"
 
+#include "bodyd/inference/diffusion.h"
 #include "bodyd/inference/ik.h"
+#include "bodyd/inference/model_file.h"
 
 #include <fmt/format.h>
 #include <fmt/ranges.h>
@@ -10,7 +12,8 @@ namespace bodyd {
 std::vector<std::string> known_methods() { return {"diffusion", "ik"}; }
 
 std::unique_ptr<Reconstructor> make_reconstructor(std::string_view method, const std::filesystem::path& model_path,
-                                                  const Skeleton* skeleton_hint) {
+                                                  const Skeleton* skeleton_hint,
+                                                  const ReconstructorOptions& options) {
   if (method == "ik") {
     if (skeleton_hint == nullptr)
       throw ReconstructorError("method 'ik' needs a skeleton: pass the skeleton of the motion data (a BVH file)");
@@ -21,9 +24,25 @@ std::unique_ptr<Reconstructor> make_reconstructor(std::string_view method, const
     }
   }
   if (method == "diffusion") {
-    // Replaced by the diffusion reconstructor (diffusion.h) once it is wired in.
-    (void)model_path;
-    throw ReconstructorError("diffusion method not available yet (use --methods ik)");
+    if (model_path.empty())
+      throw ReconstructorError("method 'diffusion' needs a model file (--model; the default is "
+                               "models/bodyd-default.safetensors)");
+    std::shared_ptr<const inference::Model> model;
+    try {
+      model = inference::load_model(model_path);
+    } catch (const inference::ModelFileError& e) {
+      throw ReconstructorError(fmt::format("cannot load the model: {} (retrain it with training/train.py, see "
+                                           "docs/models.md, or pass another --model)", e.what()));
+    }
+    DiffusionOptions d;
+    d.steps = options.diffusion_steps;
+    d.guidance = options.guidance;
+    d.seed = options.seed;
+    try {
+      return std::make_unique<DiffusionReconstructor>(std::move(model), d);
+    } catch (const std::invalid_argument& e) {
+      throw ReconstructorError(fmt::format("method 'diffusion': {}", e.what()));
+    }
   }
   throw ReconstructorError(fmt::format("unknown reconstruction method '{}' (known: {})", method,
                                        fmt::join(known_methods(), ", ")));

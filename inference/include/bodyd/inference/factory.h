@@ -24,12 +24,20 @@ class ReconstructorError : public std::runtime_error {
 // The method names make_reconstructor() knows, e.g. {"diffusion", "ik"}.
 [[nodiscard]] std::vector<std::string> known_methods();
 
+// Method options (ignored by methods they do not apply to).
+struct ReconstructorOptions {
+  int diffusion_steps = 4;      // DDIM steps K
+  float guidance = 1.0f;        // classifier-free guidance scale (1 = off)
+  std::uint64_t seed = 1;       // the diffusion's noise
+};
+
 // method "ik": the fixed-rule baseline (ik.h) on `skeleton_hint` (required; model_path unused).
 // method "diffusion": the diffusion reconstructor loaded from `model_path`.
 // `skeleton_hint` is the skeleton of the data at hand (e.g. the clip being evaluated), or null.
 // Throws ReconstructorError.
 [[nodiscard]] std::unique_ptr<Reconstructor> make_reconstructor(std::string_view method,
                                                                  const std::filesystem::path& model_path,
-                                                                 const Skeleton* skeleton_hint);
+                                                                 const Skeleton* skeleton_hint,
+                                                                 const ReconstructorOptions& options = {});
 
 }  // namespace bodyd
