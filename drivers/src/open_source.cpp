@@ -1,5 +1,6 @@
 #include "bodyd/drivers/open_source.h"
 
+#include "bodyd/drivers/device_list.h"
 #include "bodyd/drivers/sim_source.h"
 
 namespace bodyd::drivers {
@@ -37,10 +38,7 @@ std::unique_ptr<TrackerSource> open_source(std::string_view text, const SourceOp
     case SourceKind::Replay: return open_replay_source(spec->argument, options.replay, error);
     case SourceKind::Sim: return open_sim_source(spec->argument, options.sim, options.replay, error);
     case SourceKind::Hid:
-    case SourceKind::Usb:
-      error = "source \"" + std::string(text) +
-              "\": HID and USB device drivers are not built yet (issue 5); use replay:FILE or sim:FILE.bvh";
-      return nullptr;
+    case SourceKind::Usb: return open_device_source(text, spec->kind == SourceKind::Usb, spec->argument, error);
   }
   error = "source \"" + std::string(text) + "\": unknown kind";
   return nullptr;

@@ -1,0 +1,39 @@
+// HID driver: reads tracker devices through a HidTransport (hidapi, or a fake one).
+//
+// It enumerates the configured vendor/product IDs every `rescan_interval_ms`, opens each
+// matching device it is not reading yet, and reads each in its own thread with a
+// `read_timeout_ms` timeout (so stop() is prompt). Each report is stamped with the host's
+// monotonic clock when read, decoded, and pushed. An unplugged device is reported
+// (status().last_error, connected=false when none is left) and picked up again when it
+// reappears. A device may carry several roles.
+//
+// Protocols: the bodyd tracker report (docs/hid-tracker.md) for any ID, and the Razer
+// Hydra (1532:0300, docs/drivers.md), which is switched to motion mode with its feature report.
+#pragma once
+
+#include "bodyd/drivers/device_source.h"
+#include "bodyd/drivers/hid_transport.h"
+#include "bodyd/drivers/hydra.h"
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace bodyd::drivers {
+
+enum class HidProtocol { Auto, BodydReport, Hydra };  // Auto: Hydra for 1532:0300, else bodyd report
+
+struct HidSourceOptions {
+  std::string name;                  // status name, e.g. "hid:1209:B0D1"
+  std::vector<DeviceId> devices;     // the IDs to look for
+  HidProtocol protocol = HidProtocol::Auto;
+  int read_timeout_ms = 50;
+  int rescan_interval_ms = 1000;
+  int stall_timeout_ms = 1000;       // an open device silent this long is reported stalled
+  HydraOptions hydra;
+};
+
+[[nodiscard]] std::unique_ptr<DeviceSource> make_hid_source(const HidSourceOptions& options,
+                                                            std::shared_ptr<HidTransport> transport);
+
+}  // namespace bodyd::drivers

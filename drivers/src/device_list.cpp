@@ -1,0 +1,127 @@
+#include "bodyd/drivers/device_list.h"
+
+#include "bodyd/drivers/fake_devices.h"
+#include "bodyd/drivers/hid_source.h"
+#include "bodyd/drivers/usb_source.h"
+#include "bodyd/drivers/hydra.h"
+#include "device_source_base.h"
+
+#include <algorithm>
+#include <charconv>
+
+namespace bodyd::drivers {
+
+std::vector<DeviceId> known_device_ids() {
+  return {{0x1209, 0xB0D1}, {0x1209, 0xB0D2}, {kHydraVendorId, kHydraProductId}};
+}
+
+std::vector<ListedDevice> list_devices(HidTransport* hid, UsbTransport* usb) {
+  const std::vector<DeviceId> known = known_device_ids();
+  auto is_known = [&](DeviceId id) { return std::find(known.begin(), known.end(), id) != known.end(); };
+  std::vector<ListedDevice> out;
+  if (hid) {
+    for (const HidDeviceInfo& d : hid->enumerate(0, 0)) {
+      const DeviceId id{d.vendor_id, d.product_id};
+      const bool hydra = id == DeviceId{kHydraVendorId, kHydraProductId};
+      const bool bodyd_usage = d.usage_page == 0xFF00 && d.usage == 0x01;
+      if (!is_known(id) && !bodyd_usage) continue;
+      if (hydra && d.interface_number == kHydraControlInterface) continue;  // one line per Hydra
+      std::string what = hydra ? "Razer Hydra (two hands)" : "bodyd tracker report";
+      if (!d.product.empty()) what = d.product + ", " + what;
+      out.push_back({"hid:" + detail::format_device_id(id), d.path, what});
+    }
+  }
+  if (usb) {
+    for (const DeviceId id : known) {
+      if (id == DeviceId{kHydraVendorId, kHydraProductId}) continue;  // HID only
+      for (const UsbDeviceInfo& d : usb->enumerate(id.vendor_id, id.product_id))
+        out.push_back({"usb:" + detail::format_device_id(id), d.key,
+                       (d.product.empty() ? std::string() : d.product + ", ") + "bodyd tracker report over USB"});
+    }
+  }
+  return out;
+}
+
+std::string list_devices_text() {
+  std::string error;
+  std::shared_ptr<SimulatedDeviceSet> fake = simulated_device_set_from_env(error);
+  if (!error.empty()) return "error: " + error + "\n";
+  std::shared_ptr<HidTransport> hid;
+  std::shared_ptr<UsbTransport> usb;
+  std::string text;
+  if (fake) {
+    hid = fake->hid;
+    usb = fake->usb;
+    text += "(simulated devices: BODYD_FAKE_DEVICES is set)\n";
+  } else {
+    hid = make_hidapi_transport();
+    std::string usb_error;
+    usb = make_libusb_transport(usb_error);
+    if (!usb) text += "USB devices not searched: " + usb_error + "\n";
+  }
+  const std::vector<ListedDevice> devices = list_devices(hid.get(), usb.get());
+  if (devices.empty()) {
+    text +=
+        "no tracker device found (searched HID devices with the bodyd report usage 0xFF00:0x01 or IDs "
+        "1209:B0D1, 1209:B0D2, 1532:0300, and USB devices 1209:B0D1, 1209:B0D2).\n"
+        "Check that the device is plugged in (lsusb lists it); if it is, the udev rule may be missing: "
+        "see docs/drivers.md. Without hardware: bodyd --source sim:FILE.bvh.\n";
+    return text;
+  }
+  for (const ListedDevice& d : devices) text += d.spec + "  " + d.path + "  " + d.description + "\n";
+  return text;
+}
+
+std::optional<std::vector<DeviceId>> parse_device_ids(std::string_view text, std::string& error) {
+  std::vector<DeviceId> ids;
+  auto parse_hex = [](std::string_view s, std::uint16_t& out) {
+    if (s.empty() || s.size() > 4) return false;
+    const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), out, 16);
+    return ec == std::errc() && end == s.data() + s.size();
+  };
+  std::size_t start = 0;
+  for (;;) {
+    const std::size_t comma = text.find(',', start);
+    const std::string_view item = text.substr(start, comma == std::string_view::npos ? comma : comma - start);
+    const std::size_t colon = item.find(':');
+    DeviceId id;
+    if (colon == std::string_view::npos || !parse_hex(item.substr(0, colon), id.vendor_id) ||
+        !parse_hex(item.substr(colon + 1), id.product_id)) {
+      error = "\"" + std::string(item) + "\" is not VID:PID (hexadecimal vendor and product ID, e.g. 1209:B0D1)";
+      return std::nullopt;
+    }
+    ids.push_back(id);
+    if (comma == std::string_view::npos) break;
+    start = comma + 1;
+  }
+  return ids;
+}
+
+std::unique_ptr<TrackerSource> open_device_source(std::string_view spec, bool usb, std::string_view argument,
+                                                 std::string& error) {
+  std::optional<std::vector<DeviceId>> ids = parse_device_ids(argument, error);
+  if (!ids) {
+    error = "source \"" + std::string(spec) + "\": " + error;
+    return nullptr;
+  }
+  std::shared_ptr<SimulatedDeviceSet> fake = simulated_device_set_from_env(error);
+  if (!error.empty()) return nullptr;
+  if (usb) {
+    std::shared_ptr<UsbTransport> transport = fake ? fake->usb : nullptr;
+    if (!transport) transport = make_libusb_transport(error);
+    if (!transport) {
+      error = "source \"" + std::string(spec) + "\": " + error;
+      return nullptr;
+    }
+    UsbSourceOptions options;
+    options.name = std::string(spec);
+    options.devices = *ids;
+    return make_usb_source(options, transport);
+  }
+  HidSourceOptions options;
+  options.name = std::string(spec);
+  options.devices = *ids;
+  return make_hid_source(options, fake ? std::shared_ptr<HidTransport>(fake->hid) : make_hidapi_transport());
+}
+
+}  // namespace bodyd::drivers
