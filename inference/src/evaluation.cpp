@@ -184,50 +184,55 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
 
   int index = 0;
   for (const std::filesystem::path& path : clips) {
-    const Motion clip = read_bvh(path);
-    if (clip.frame_count() == 0) throw std::runtime_error(fmt::format("{}: the clip has no frames", path.string()));
-    if (!first_skeleton) {
-      first_skeleton = clip.skeleton;
-      for (size_t m = 0; m < options.methods.size(); ++m) metrics.emplace_back(clip.skeleton);
-    } else if (clip.skeleton.names != first_skeleton->names) {
-      throw std::runtime_error(fmt::format(
-          "{}: its joints (names or order) differ from the first clip's; evaluate clips of one skeleton together",
-          path.string()));
-    }
-
-    std::vector<GlobalPose> truth(static_cast<size_t>(clip.frame_count()));
-    for (size_t f = 0; f < truth.size(); ++f) forward_kinematics(clip.skeleton, clip.frames[f], truth[f]);
-    const std::vector<TrackerSample> samples = source(clip, index);
-    const std::vector<std::int64_t> frame_times = clip_frame_times_ns(clip);
-
-    for (size_t m = 0; m < options.methods.size(); ++m) {
-      const std::string& method = options.methods[m];
-      const auto reconstructor = make_reconstructor(method, options.model_path, &clip.skeleton);
-      const OnlineRun run = run_online(*reconstructor, samples, frame_times);
-      if (run.unanswered == clip.frame_count())
-        throw std::runtime_error(fmt::format("{}: method '{}' produced no pose for any frame (no valid head sample?)",
-                                             path.string(), method));
-      unanswered[m] += run.unanswered;
-      times[m].insert(times[m].end(), run.ms_per_frame.begin(), run.ms_per_frame.end());
-
-      const std::vector<int> map = joint_map(clip.skeleton, reconstructor->skeleton(), method);
-      Motion written;
-      if (options.out_dir) {
-        written.skeleton = clip.skeleton;
-        written.channels = clip.channels;
-        written.frame_time_s = clip.frame_time_s;
-        written.frames.resize(truth.size());
+    const Motion clip = read_bvh(path);  // BvhError names the file and line
+    try {
+      if (clip.frame_count() == 0) throw std::runtime_error("the clip has no frames");
+      if (!first_skeleton) {
+        first_skeleton = clip.skeleton;
+        for (size_t m = 0; m < options.methods.size(); ++m) metrics.emplace_back(clip.skeleton);
+      } else if (clip.skeleton.names != first_skeleton->names) {
+        throw std::runtime_error(
+            "its joints (names or order) differ from the first clip's; evaluate clips of one skeleton together");
       }
-      Pose pose;
-      GlobalPose global;
-      metrics[m].begin_clip(clip.fps());
-      for (size_t f = 0; f < truth.size(); ++f) {
-        remap(map, run.poses[f], pose, global);
-        metrics[m].add_frame(global, truth[f]);
-        if (options.out_dir) written.frames[f] = pose;
+
+      std::vector<GlobalPose> truth(static_cast<size_t>(clip.frame_count()));
+      for (size_t f = 0; f < truth.size(); ++f) forward_kinematics(clip.skeleton, clip.frames[f], truth[f]);
+      const std::vector<TrackerSample> samples = source(clip, index);
+      const std::vector<std::int64_t> frame_times = clip_frame_times_ns(clip);
+
+      for (size_t m = 0; m < options.methods.size(); ++m) {
+        const std::string& method = options.methods[m];
+        const auto reconstructor = make_reconstructor(method, options.model_path, &clip.skeleton);
+        const OnlineRun run = run_online(*reconstructor, samples, frame_times);
+        if (run.unanswered == clip.frame_count())
+          throw std::runtime_error(
+              fmt::format("method '{}' produced no pose for any frame (no valid head sample?)", method));
+        unanswered[m] += run.unanswered;
+        times[m].insert(times[m].end(), run.ms_per_frame.begin(), run.ms_per_frame.end());
+
+        const std::vector<int> map = joint_map(clip.skeleton, reconstructor->skeleton(), method);
+        Motion written;
+        if (options.out_dir) {
+          written.skeleton = clip.skeleton;
+          written.channels = clip.channels;
+          written.frame_time_s = clip.frame_time_s;
+          written.frames.resize(truth.size());
+        }
+        Pose pose;
+        GlobalPose global;
+        metrics[m].begin_clip(clip.fps());
+        for (size_t f = 0; f < truth.size(); ++f) {
+          remap(map, run.poses[f], pose, global);
+          metrics[m].add_frame(global, truth[f]);
+          if (options.out_dir) written.frames[f] = pose;
+        }
+        (void)metrics[m].end_clip();
+        if (options.out_dir) write_bvh(*options.out_dir / out_name(path, method), written);
       }
-      (void)metrics[m].end_clip();
-      if (options.out_dir) write_bvh(*options.out_dir / out_name(path, method), written);
+    } catch (const ReconstructorError&) {
+      throw;  // says which method and what to do; the same for every clip
+    } catch (const std::exception& e) {
+      throw std::runtime_error(fmt::format("{}: {}", path.string(), e.what()));
     }
     ++report.clips;
     report.frames += clip.frame_count();

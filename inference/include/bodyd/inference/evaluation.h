@@ -96,8 +96,9 @@ struct EvalReport {
 };
 
 // Evaluates every clip with every method. Throws BvhError for an unreadable clip,
-// ReconstructorError for a method that cannot be made, std::runtime_error for a clip whose
-// skeleton differs from the first clip's or a method that never produced a pose on a clip.
+// ReconstructorError for a method that cannot be made, and std::runtime_error naming the clip
+// for anything else (a skeleton that differs from the first clip's or lacks a body joint, a
+// method that never produced a pose on the clip, a tracker source that failed).
 [[nodiscard]] EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOptions& options,
                                   const TrackerSource& source);
 
