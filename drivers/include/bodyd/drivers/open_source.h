@@ -2,8 +2,9 @@
 //
 //   replay:FILE      a tracker log (docs/tracker-log.md)
 //   sim:FILE.bvh     simulated head and hand trackers from a BVH clip (docs/simulator.md)
-//   hid:VID:PID      hidapi device (issue 5; not built yet: open_source says so)
-//   usb:VID:PID      libusb device (issue 5; not built yet)
+//   hid:VID:PID      HID tracker device(s) via hidapi (docs/drivers.md; VID:PID[,VID:PID...])
+//   usb:VID:PID      USB tracker device(s) via libusb (docs/drivers.md)
+//                    (with BODYD_FAKE_DEVICES=clip.bvh: simulated devices, fake_devices.h)
 //
 // A spec without a known "kind:" prefix is an error (so "C:\x" or a typo is never guessed).
 #pragma once
