@@ -1,0 +1,46 @@
+// Which endpoints bodyd may bind, and ZeroMQ CURVE keys.
+//
+// Body motion identifies people, so by default bodyd binds only where nobody else on the
+// network can connect: ipc:// (a Unix socket; bodyd creates its directory with mode 0700),
+// inproc://, and TCP on a loopback address (127.0.0.0/8, localhost, [::1], the "lo"
+// interface). Anything else (0.0.0.0, *, a LAN address, another transport) is refused unless
+// the user asked for it with --allow-remote; then CURVE encryption (docs/daemon.md) should be
+// configured too.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <string_view>
+
+namespace bodyd::daemon {
+
+// True for ipc://, inproc:// and loopback TCP endpoints.
+[[nodiscard]] bool is_local_endpoint(std::string_view endpoint);
+
+// Empty when `endpoint` may be bound; otherwise what is wrong and what to do. `what` names
+// the socket in the message ("--pub", "--control").
+[[nodiscard]] std::string check_bind_endpoint(std::string_view endpoint, bool allow_remote, std::string_view what);
+
+// For ipc:// endpoints: creates the socket's directory (mode 0700) if missing, and refuses a
+// socket file that another process is listening on ("another bodyd running?"); a stale file
+// left by a crashed process is fine (ZeroMQ replaces it). Empty on success, else the error.
+[[nodiscard]] std::string prepare_ipc_endpoint(std::string_view endpoint, std::string_view what);
+
+// A CURVE key pair, Z85 text (40 characters each).
+struct CurveKeyPair {
+  std::string public_key;
+  std::string secret_key;
+};
+
+// Generates a key pair and writes DIR/server.public (0644) and DIR/server.secret (0600),
+// refusing to overwrite existing files. Empty on success, else the error.
+[[nodiscard]] std::string generate_curve_keys(const std::filesystem::path& dir, CurveKeyPair& out_keys);
+
+// Reads a Z85 key file (40 key characters; whitespace and '#' comment lines ignored).
+// Empty on success, else "file: what is wrong".
+[[nodiscard]] std::string read_curve_key_file(const std::filesystem::path& path, std::string& out_key);
+
+// The public key of a Z85 secret key; empty when the secret key is malformed.
+[[nodiscard]] std::string curve_public_from_secret(const std::string& secret_key);
+
+}  // namespace bodyd::daemon

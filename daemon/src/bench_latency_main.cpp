@@ -1,0 +1,160 @@
+// bodyd-bench-latency: the daemon's latency and CPU use (docs/daemon.md, "Benchmark").
+//
+// Runs the real pipeline in-process (a paced replay source -> queue -> reconstruction ->
+// ZeroMQ PUB send) on a tracker log at its recorded rate, looping it until enough poses were
+// published, and reports per pose: the time from the head sample's arrival in the daemon
+// (pushed into the queue by its source) to the pose's publication (zmq_send returned), its
+// parts (queue wait, reconstruction, encode + send), and the process's CPU time (getrusage)
+// over the run as a percentage of one core. Not a test: numbers depend on the machine.
+#include "bodyd/daemon/config.h"
+#include "bodyd/daemon/daemon.h"
+#include "bodyd/daemon/reconstructors.h"
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <thread>
+#include <vector>
+
+namespace {
+
+volatile std::sig_atomic_t g_stop = 0;
+extern "C" void on_signal(int) { g_stop = 1; }
+
+double cpu_seconds() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  auto seconds = [](const timeval& t) { return static_cast<double>(t.tv_sec) + static_cast<double>(t.tv_usec) / 1e6; };
+  return seconds(usage.ru_utime) + seconds(usage.ru_stime);
+}
+
+struct Percentiles {
+  double p50 = 0, p90 = 0, p99 = 0, max = 0, mean = 0;
+};
+
+Percentiles percentiles_us(std::vector<std::int64_t> v_ns) {
+  Percentiles p;
+  if (v_ns.empty()) return p;
+  std::sort(v_ns.begin(), v_ns.end());
+  auto at = [&](double q) {
+    const auto k = static_cast<std::size_t>(std::max(0.0, std::ceil(q * static_cast<double>(v_ns.size())) - 1));
+    return static_cast<double>(v_ns[std::min(k, v_ns.size() - 1)]) / 1e3;
+  };
+  p.p50 = at(0.5), p.p90 = at(0.9), p.p99 = at(0.99), p.max = static_cast<double>(v_ns.back()) / 1e3;
+  double sum = 0;
+  for (auto x : v_ns) sum += static_cast<double>(x);
+  p.mean = sum / static_cast<double>(v_ns.size()) / 1e3;
+  return p;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace bodyd::daemon;
+  CLI::App app{"bodyd-bench-latency: sample-arrival-to-publication latency and CPU use of the bodyd pipeline"};
+  std::string replay = bundled_recording_path().string();
+  std::string method = "diffusion", model, skeleton;
+  int frames = 3000, warmup = 30;
+  double speed = 1.0;
+  bool json_out = false;
+  app.add_option("--replay", replay, "tracker log to replay, paced, in a loop (default: the bundled recording)");
+  app.add_option("--method", method, "diffusion (falls back to ik if the default model is missing) or ik");
+  app.add_option("--model", model, "model file for diffusion");
+  app.add_option("--skeleton", skeleton, "BVH skeleton for ik (default: bundled)");
+  app.add_option("--frames", frames, "poses to measure (at 90 Hz, 3000 take 33 s)")->check(CLI::PositiveNumber);
+  app.add_option("--warmup", warmup, "poses to skip first")->check(CLI::NonNegativeNumber);
+  app.add_option("--speed", speed, "replay speed factor (1: the recorded rate)")->check(CLI::PositiveNumber);
+  app.add_flag("--json", json_out, "print the results as one JSON object");
+  CLI11_PARSE(app, argc, argv);
+
+  spdlog::set_level(spdlog::level::warn);
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
+
+  DaemonConfig config;
+  config.sources = {"replay:" + replay};
+  config.loop = true;
+  config.replay_speed = speed;
+  config.method = method;
+  config.model_path = model;
+  config.pub_endpoint = fmt::format("ipc:///tmp/bodyd-bench-{}/pose", ::getpid());
+  config.control_endpoint = "none";
+  if (std::string e = validate_config(config); !e.empty()) {
+    fmt::print(stderr, "bodyd-bench-latency: {}\n", e);
+    return 2;
+  }
+  std::string warning;
+  const ModelChoice choice = choose_model(config, warning);
+  if (!warning.empty()) fmt::print(stderr, "bodyd-bench-latency: {}\n", warning);
+
+  const std::size_t total = static_cast<std::size_t>(frames + warmup);
+  std::vector<FrameTiming> timings;
+  timings.reserve(total);
+  std::atomic<bool> done{false};
+  Daemon daemon(config, make_default_factory(skeleton.empty() ? bundled_skeleton_path() : std::filesystem::path(skeleton)));
+  daemon.set_frame_observer([&](const FrameTiming& t) {
+    if (timings.size() < total) timings.push_back(t);
+    if (timings.size() == total) done.store(true);
+  });
+  if (std::string e = daemon.start(); !e.empty()) {
+    fmt::print(stderr, "bodyd-bench-latency: {}\n", e);
+    return 1;
+  }
+  const std::string method_name = daemon.status().value("method", std::string("?"));
+  if (!json_out)
+    fmt::print("bodyd-bench-latency: {} poses (+{} warm-up) from {} at {}x the recorded rate, method {}\n", frames, warmup,
+               replay, speed, method_name);
+  const double cpu0 = cpu_seconds();
+  const auto wall0 = std::chrono::steady_clock::now();
+  while (!done.load() && !g_stop) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  const double cpu_s = cpu_seconds() - cpu0;
+  const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+  const nlohmann::json status = daemon.status();
+  daemon.stop();
+
+  std::vector<std::int64_t> total_ns, queue_ns, reconstruct_ns, send_ns, overhead_ns;
+  std::size_t failed = 0;
+  for (std::size_t i = std::min<std::size_t>(warmup, timings.size()); i < timings.size(); ++i) {
+    const FrameTiming& t = timings[i];
+    total_ns.push_back(t.published_ns - t.arrival_ns);
+    queue_ns.push_back(t.reconstruct_start_ns - t.arrival_ns);
+    reconstruct_ns.push_back(t.reconstruct_end_ns - t.reconstruct_start_ns);
+    send_ns.push_back(t.published_ns - t.reconstruct_end_ns);
+    overhead_ns.push_back(total_ns.back() - reconstruct_ns.back());
+    failed += t.sent ? 0 : 1;
+  }
+  const double cpu_percent = wall_s > 0 ? 100.0 * cpu_s / wall_s : 0.0;
+  const double head_rate_hz = wall_s > 0 ? static_cast<double>(timings.size()) / wall_s : 0.0;
+  const auto rows = {std::pair{"arrival -> published", percentiles_us(total_ns)},
+                     std::pair{"  queue wait", percentiles_us(queue_ns)},
+                     std::pair{"  reconstruction", percentiles_us(reconstruct_ns)},
+                     std::pair{"  encode + send", percentiles_us(send_ns)},
+                     std::pair{"latency - reconstruction", percentiles_us(overhead_ns)}};
+  if (json_out) {
+    nlohmann::json j{{"method", method_name},  {"frames", total_ns.size()},  {"cpu_percent_of_one_core", cpu_percent},
+                     {"wall_s", wall_s},        {"cpu_s", cpu_s},              {"pose_rate_hz", head_rate_hz},
+                     {"sends_failed", failed},  {"samples_dropped", status.value("samples_dropped", 0)}};
+    for (const auto& [name, p] : rows)
+      j["latency_us"][name] = {{"p50", p.p50}, {"p90", p.p90}, {"p99", p.p99}, {"max", p.max}, {"mean", p.mean}};
+    fmt::print("{}\n", j.dump(2));
+  } else {
+    fmt::print("{:<26} {:>9} {:>9} {:>9} {:>9} {:>9}   (microseconds)\n", "", "p50", "p90", "p99", "max", "mean");
+    for (const auto& [name, p] : rows)
+      fmt::print("{:<26} {:>9.1f} {:>9.1f} {:>9.1f} {:>9.1f} {:>9.1f}\n", name, p.p50, p.p90, p.p99, p.max, p.mean);
+    fmt::print("poses: {} measured at {:.1f} Hz; sends failed: {}; samples dropped: {}\n", total_ns.size(), head_rate_hz,
+               failed, status.value("samples_dropped", 0));
+    fmt::print("CPU: {:.2f} s over {:.2f} s wall = {:.1f}% of one core (whole process: sources, reconstruction, ZeroMQ)\n",
+               cpu_s, wall_s, cpu_percent);
+  }
+  return 0;
+}

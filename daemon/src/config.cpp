@@ -1,0 +1,405 @@
+#include "bodyd/daemon/config.h"
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+#ifndef BODYD_DATA_DIR
+#define BODYD_DATA_DIR "data"
+#endif
+#ifndef BODYD_MODELS_DIR
+#define BODYD_MODELS_DIR "models"
+#endif
+
+namespace bodyd::daemon {
+namespace {
+
+using nlohmann::json;
+
+std::string type_name(const json& j) { return j.type_name(); }
+
+// Reads one typed value; on a type mismatch, sets `error`.
+template <typename T>
+bool get_value(const json& j, const std::string& where, T& out, std::string& error) {
+  if constexpr (std::is_same_v<T, bool>) {
+    if (!j.is_boolean()) {
+      error = where + ": expected true or false, got " + type_name(j);
+      return false;
+    }
+  } else if constexpr (std::is_same_v<T, std::string>) {
+    if (!j.is_string()) {
+      error = where + ": expected a string, got " + type_name(j);
+      return false;
+    }
+  } else if constexpr (std::is_integral_v<T>) {
+    if (!j.is_number_integer() || (std::is_unsigned_v<T> && j.get<std::int64_t>() < 0)) {
+      error = where + ": expected a " + (std::is_unsigned_v<T> ? "non-negative " : "") + "integer, got " +
+              (j.is_number() ? j.dump() : type_name(j));
+      return false;
+    }
+  } else {
+    if (!j.is_number()) {
+      error = where + ": expected a number, got " + type_name(j);
+      return false;
+    }
+  }
+  out = j.get<T>();
+  return true;
+}
+
+bool get_vec(const json& j, const std::string& where, std::size_t n, std::vector<double>& out, std::string& error) {
+  if (!j.is_array() || j.size() != n) {
+    error = where + ": expected an array of " + std::to_string(n) + " numbers";
+    return false;
+  }
+  out.clear();
+  for (const auto& v : j) {
+    if (!v.is_number()) {
+      error = where + ": expected an array of " + std::to_string(n) + " numbers, found " + type_name(v);
+      return false;
+    }
+    out.push_back(v.get<double>());
+  }
+  return true;
+}
+
+std::string offset_from_values(const std::vector<double>& v, const std::string& where, DeviceOffset& out) {
+  for (double x : v)
+    if (!std::isfinite(x)) return where + ": values must be finite";
+  out.position_m = Vec3(v[0], v[1], v[2]);
+  out.rotation = Quat::Identity();
+  if (v.size() == 7) {
+    const Quat q(v[6], v[3], v[4], v[5]);  // (w, x, y, z) constructor; input is x, y, z, w
+    if (std::abs(q.norm() - 1.0) > 1e-3)
+      return where + ": the rotation (x, y, z, w) must be a unit quaternion (norm " + std::to_string(q.norm()) + ")";
+    out.rotation = q.normalized();
+  }
+  return {};
+}
+
+std::string apply_offsets(const json& j, const std::string& where, DaemonConfig& config) {
+  if (!j.is_object()) return where + ": expected an object with keys head, left_hand, right_hand";
+  for (const auto& [key, value] : j.items()) {
+    const std::string w = where + "." + key;
+    const auto role = role_from_name(key);
+    if (!role) return w + ": unknown role (expected head, left_hand or right_hand)";
+    if (!value.is_object()) return w + ": expected an object {\"position_m\": [x,y,z], \"rotation_xyzw\": [x,y,z,w]}";
+    std::vector<double> values{0, 0, 0};
+    std::string error;
+    for (const auto& [k, v] : value.items()) {
+      if (k == "position_m") {
+        std::vector<double> p;
+        if (!get_vec(v, w + ".position_m", 3, p, error)) return error;
+        values[0] = p[0], values[1] = p[1], values[2] = p[2];
+      } else if (k == "rotation_xyzw") {
+        std::vector<double> q;
+        if (!get_vec(v, w + ".rotation_xyzw", 4, q, error)) return error;
+        values.resize(3);
+        values.insert(values.end(), q.begin(), q.end());
+      } else {
+        return w + "." + k + ": unknown key (expected position_m, rotation_xyzw)";
+      }
+    }
+    DeviceOffset offset;
+    if (std::string e = offset_from_values(values, w, offset); !e.empty()) return e;
+    config.offsets[static_cast<int>(*role)] = offset;
+  }
+  return {};
+}
+
+std::string apply_sim(const json& j, const std::string& where, SimOptions& sim) {
+  if (!j.is_object()) return where + ": expected an object";
+  std::string error;
+  for (const auto& [key, value] : j.items()) {
+    const std::string w = where + "." + key;
+    bool ok = true;
+    if (key == "rate_hz") ok = get_value(value, w, sim.rate_hz, error);
+    else if (key == "head_rate_hz") ok = get_value(value, w, sim.role_rate_hz[0], error);
+    else if (key == "left_hand_rate_hz") ok = get_value(value, w, sim.role_rate_hz[1], error);
+    else if (key == "right_hand_rate_hz") ok = get_value(value, w, sim.role_rate_hz[2], error);
+    else if (key == "position_noise_mm") ok = get_value(value, w, sim.position_noise_mm, error);
+    else if (key == "rotation_noise_deg") ok = get_value(value, w, sim.rotation_noise_deg, error);
+    else if (key == "latency_ms") ok = get_value(value, w, sim.latency_ms, error);
+    else if (key == "jitter_ms") ok = get_value(value, w, sim.jitter_ms, error);
+    else if (key == "dropout_rate_hz") ok = get_value(value, w, sim.dropout_rate_hz, error);
+    else if (key == "dropout_mean_ms") ok = get_value(value, w, sim.dropout_mean_ms, error);
+    else if (key == "seed") ok = get_value(value, w, sim.seed, error);
+    else return w + ": unknown key (see docs/daemon.md, \"sim\")";
+    if (!ok) return error;
+  }
+  return {};
+}
+
+}  // namespace
+
+std::filesystem::path bundled_recording_path() { return std::filesystem::path(BODYD_DATA_DIR) / "demo" / "walk.csv"; }
+std::filesystem::path bundled_skeleton_path() { return std::filesystem::path(BODYD_DATA_DIR) / "demo" / "skeleton.bvh"; }
+double configured_head_height_m(const DaemonConfig& c) {
+  if (c.head_height_m > 0.0) return c.head_height_m;
+  return c.user_height_m > 0.0 ? c.user_height_m * kHeadHeightPerStature : 0.0;
+}
+std::filesystem::path default_model_path() { return std::filesystem::path(BODYD_MODELS_DIR) / "bodyd-default.safetensors"; }
+
+std::string apply_config_json(const json& j, const std::string& source, DaemonConfig& config) {
+  if (!j.is_object()) return source + ": the config must be a JSON object {\"key\": value, ...}";
+  std::string error;
+  for (const auto& [key, value] : j.items()) {
+    const std::string w = source + ": " + key;
+    bool ok = true;
+    if (key == "sources") {
+      if (!value.is_array()) return w + ": expected an array of strings like \"replay:FILE\"";
+      config.sources.clear();
+      for (const auto& s : value) {
+        std::string spec;
+        if (!get_value(s, w, spec, error)) return error;
+        config.sources.push_back(spec);
+      }
+    } else if (key == "fast") ok = get_value(value, w, config.fast, error);
+    else if (key == "replay_speed") ok = get_value(value, w, config.replay_speed, error);
+    else if (key == "loop") ok = get_value(value, w, config.loop, error);
+    else if (key == "exit_at_end") ok = get_value(value, w, config.exit_at_end, error);
+    else if (key == "sim") {
+      if (std::string e = apply_sim(value, w, config.sim); !e.empty()) return e;
+    } else if (key == "pub") ok = get_value(value, w, config.pub_endpoint, error);
+    else if (key == "control") ok = get_value(value, w, config.control_endpoint, error);
+    else if (key == "allow_remote") ok = get_value(value, w, config.allow_remote, error);
+    else if (key == "curve_secret_key") ok = get_value(value, w, config.curve_secret_key_file, error);
+    else if (key == "send_hwm") ok = get_value(value, w, config.send_hwm, error);
+    else if (key == "wait_for_subscriber") ok = get_value(value, w, config.wait_for_subscriber, error);
+    else if (key == "endpoints_file") ok = get_value(value, w, config.endpoints_file, error);
+    else if (key == "rate_hz") ok = get_value(value, w, config.rate_hz, error);
+    else if (key == "queue_capacity") ok = get_value(value, w, config.queue_capacity, error);
+    else if (key == "method") ok = get_value(value, w, config.method, error);
+    else if (key == "model") ok = get_value(value, w, config.model_path, error);
+    else if (key == "user_height_m") ok = get_value(value, w, config.user_height_m, error);
+    else if (key == "head_height_m") ok = get_value(value, w, config.head_height_m, error);
+    else if (key == "skeleton") ok = get_value(value, w, config.skeleton_path, error);
+    else if (key == "offsets") {
+      if (std::string e = apply_offsets(value, w, config); !e.empty()) return e;
+    } else if (key == "log_level") ok = get_value(value, w, config.log_level, error);
+    else return w + ": unknown key (the keys are listed in docs/daemon.md)";
+    if (!ok) return error;
+  }
+  return {};
+}
+
+std::string load_config_file(const std::filesystem::path& path, DaemonConfig& config) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return path.string() + ": cannot open the config file";
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  const std::string text = buffer.str();
+  json j = json::parse(text, nullptr, /*allow_exceptions=*/false, /*ignore_comments=*/true);
+  if (j.is_discarded()) {
+    // Find where: parse again with exceptions only to learn the byte offset.
+    std::size_t byte = 0;
+    std::string what = "not valid JSON";
+    try {
+      const json ignored = json::parse(text, nullptr, true, true);
+      (void)ignored;
+    } catch (const json::parse_error& e) {
+      byte = e.byte;
+      what = e.what();
+    }
+    int line = 1, column = 1;
+    for (std::size_t i = 0; i + 1 < byte && i < text.size(); ++i) {
+      if (text[i] == '\n') ++line, column = 1;
+      else ++column;
+    }
+    return path.string() + ":" + std::to_string(line) + ":" + std::to_string(column) + ": " + what;
+  }
+  return apply_config_json(j, path.string(), config);
+}
+
+std::string parse_offset_flag(const std::string& text, DaemonConfig& config) {
+  const std::string where = "--offset " + text;
+  const auto eq = text.find('=');
+  if (eq == std::string::npos) return where + ": expected ROLE=x,y,z or ROLE=x,y,z,qx,qy,qz,qw";
+  const auto role = role_from_name(text.substr(0, eq));
+  if (!role) return where + ": unknown role \"" + text.substr(0, eq) + "\" (head, left_hand, right_hand)";
+  std::vector<double> values;
+  std::stringstream ss(text.substr(eq + 1));
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    try {
+      std::size_t used = 0;
+      values.push_back(std::stod(item, &used));
+      if (used != item.size()) throw std::invalid_argument(item);
+    } catch (const std::exception&) {
+      return where + ": \"" + item + "\" is not a number";
+    }
+  }
+  if (values.size() != 3 && values.size() != 7)
+    return where + ": expected 3 numbers (position, metres) or 7 (position, then rotation x,y,z,w)";
+  DeviceOffset offset;
+  if (std::string e = offset_from_values(values, where, offset); !e.empty()) return e;
+  config.offsets[static_cast<int>(*role)] = offset;
+  return {};
+}
+
+std::string validate_config(const DaemonConfig& c) {
+  if (!(c.replay_speed > 0.0) || !std::isfinite(c.replay_speed)) return "replay_speed must be > 0";
+  if (!(c.rate_hz >= 0.0) || !std::isfinite(c.rate_hz)) return "rate_hz must be >= 0 (0: one pose per head sample)";
+  if (c.queue_capacity < 16 || c.queue_capacity > (1u << 20)) return "queue_capacity must be in 16 .. 1048576";
+  if (c.send_hwm < 1) return "send_hwm must be >= 1";
+  if (c.method != "diffusion" && c.method != "ik") return "method \"" + c.method + "\": expected diffusion or ik";
+  for (auto [name, h] : {std::pair{"user_height_m", c.user_height_m}, std::pair{"head_height_m", c.head_height_m}}) {
+    if (!std::isfinite(h) || h < 0.0 || h > 2.6 || (h > 0.0 && h < 0.5))
+      return std::string(name) + " must be 0 (the model's size) or a height in metres between 0.5 and 2.6 (e.g. 1.75), not " +
+             std::to_string(h);
+  }
+  if (c.user_height_m > 0.0 && c.head_height_m > 0.0)
+    return "give user_height_m (body height) or head_height_m (standing head height), not both";
+  static const char* kLevels[] = {"trace", "debug", "info", "warn", "error", "critical", "off"};
+  bool level_ok = false;
+  for (const char* l : kLevels) level_ok |= c.log_level == l;
+  if (!level_ok) return "log_level \"" + c.log_level + "\": expected trace, debug, info, warn, error, critical or off";
+  if (c.exit_at_end && c.loop) return "exit_at_end and loop contradict each other: a looped replay never ends";
+  if (const std::string e = c.sim.validate(); !e.empty()) return "sim: " + e;
+  return {};
+}
+
+json config_to_json(const DaemonConfig& c) {
+  json offsets = json::object();
+  for (Role r : kRoles) {
+    const auto& o = c.offsets[static_cast<int>(r)];
+    if (!o) continue;
+    offsets[std::string(role_name(r))] = {
+        {"position_m", {o->position_m.x(), o->position_m.y(), o->position_m.z()}},
+        {"rotation_xyzw", {o->rotation.x(), o->rotation.y(), o->rotation.z(), o->rotation.w()}}};
+  }
+  return json{
+      {"sources", c.sources},
+      {"fast", c.fast},
+      {"replay_speed", c.replay_speed},
+      {"loop", c.loop},
+      {"exit_at_end", c.exit_at_end},
+      {"sim",
+       {{"rate_hz", c.sim.rate_hz},
+        {"head_rate_hz", c.sim.role_rate_hz[0]},
+        {"left_hand_rate_hz", c.sim.role_rate_hz[1]},
+        {"right_hand_rate_hz", c.sim.role_rate_hz[2]},
+        {"position_noise_mm", c.sim.position_noise_mm},
+        {"rotation_noise_deg", c.sim.rotation_noise_deg},
+        {"latency_ms", c.sim.latency_ms},
+        {"jitter_ms", c.sim.jitter_ms},
+        {"dropout_rate_hz", c.sim.dropout_rate_hz},
+        {"dropout_mean_ms", c.sim.dropout_mean_ms},
+        {"seed", c.sim.seed}}},
+      {"pub", c.pub_endpoint},
+      {"control", c.control_endpoint},
+      {"allow_remote", c.allow_remote},
+      {"curve_secret_key", c.curve_secret_key_file},
+      {"send_hwm", c.send_hwm},
+      {"wait_for_subscriber", c.wait_for_subscriber},
+      {"endpoints_file", c.endpoints_file},
+      {"rate_hz", c.rate_hz},
+      {"queue_capacity", c.queue_capacity},
+      {"method", c.method},
+      {"model", c.model_path},
+      {"skeleton", c.skeleton_path},
+      {"user_height_m", c.user_height_m},
+      {"head_height_m", c.head_height_m},
+      {"offsets", offsets},
+      {"log_level", c.log_level},
+  };
+}
+
+CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& config) {
+  CliResult result;
+  // The config file is read first so that flags override it.
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    std::string path;
+    if (arg == "--config" && i + 1 < argc) path = argv[i + 1];
+    else if (arg.rfind("--config=", 0) == 0) path = arg.substr(9);
+    if (path.empty()) continue;
+    if (std::string e = load_config_file(path, config); !e.empty()) {
+      std::cerr << "bodyd: " << e << "\n";
+      result.action = CliResult::Action::Exit;
+      result.exit_code = 2;
+      return result;
+    }
+  }
+
+  CLI::App app{"bodyd: full-body pose from head and hand trackers, published over ZeroMQ (docs/daemon.md)"};
+  app.set_version_flag("--version", "bodyd 0.1.0");
+  std::string config_file;
+  app.add_option("--config", config_file, "JSON config file (keys: docs/daemon.md); flags override it");
+
+  std::vector<std::string> source_flags, replay_flags, sim_flags, offset_flags;
+  app.add_option("--source", source_flags,
+                 "tracker source: replay:FILE, sim:FILE.bvh (hid:VID:PID, usb:VID:PID later); repeatable. "
+                 "Default: the bundled recording, looped");
+  app.add_option("--replay", replay_flags, "replay a tracker log (same as --source replay:LOG)");
+  app.add_option("--sim", sim_flags, "simulated trackers from a BVH clip (same as --source sim:FILE.bvh)");
+  app.add_flag("--fast", config.fast, "replay as fast as possible (lossless) instead of at the log's pace");
+  app.add_option("--speed", config.replay_speed, "paced replay speed factor")->check(CLI::PositiveNumber);
+  app.add_flag("--loop", config.loop, "start replays again at the end");
+  app.add_flag("--exit-at-end", config.exit_at_end, "exit when every replay has been published");
+  app.add_option("--sim-seed", config.sim.seed, "random seed of the simulated trackers");
+  app.add_option("--pub", config.pub_endpoint, "pose stream endpoint (PUB), e.g. tcp://127.0.0.1:5570");
+  app.add_option("--control", config.control_endpoint, "control endpoint (REP, JSON), or \"none\"");
+  app.add_flag("--allow-remote", config.allow_remote, "allow binding to non-loopback addresses (use CURVE!)");
+  app.add_option("--curve-secret-key", config.curve_secret_key_file,
+                 "CURVE server secret key file (from --gen-keys): encrypt and authenticate both sockets");
+  app.add_option("--send-hwm", config.send_hwm, "poses queued per subscriber before dropping")->check(CLI::PositiveNumber);
+  app.add_flag("--wait-for-subscriber", config.wait_for_subscriber,
+               "start the sources only when a subscriber has subscribed");
+  app.add_option("--endpoints-file", config.endpoints_file, "write the bound endpoints here as JSON");
+  app.add_option("--rate-hz", config.rate_hz, "output rate limit; 0: one pose per head sample")->check(CLI::NonNegativeNumber);
+  app.add_option("--queue-capacity", config.queue_capacity, "tracker samples the queue holds");
+  app.add_option("--method", config.method, "reconstruction: diffusion (default) or ik");
+  app.add_option("--model", config.model_path, "model file (default models/bodyd-default.safetensors)");
+  app.add_option("--skeleton", config.skeleton_path, "BVH file whose skeleton the ik method uses (default: bundled)");
+  app.add_option("--user-height-m", config.user_height_m,
+                 "user's body height in metres (approximate scaling; 0: the model's size)");
+  app.add_option("--head-height-m", config.head_height_m,
+                 "user's standing head height in metres (exact scaling; 0: the model's size)");
+  app.add_option("--offset", offset_flags,
+                 "device offset ROLE=x,y,z[,qx,qy,qz,qw] (metres; rotation x,y,z,w), repeatable");
+  app.add_option("--log-level", config.log_level, "trace, debug, info, warn, error, off");
+  std::string gen_keys_dir;
+  app.add_option("--gen-keys", gen_keys_dir, "write a CURVE key pair to DIR (server.public, server.secret) and exit");
+  bool print_config = false;
+  app.add_flag("--print-config", print_config, "print the effective configuration as JSON and exit");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    result.action = CliResult::Action::Exit;
+    result.exit_code = app.exit(e);
+    return result;
+  }
+  std::vector<std::string> sources = source_flags;
+  for (const auto& r : replay_flags) sources.push_back("replay:" + r);
+  for (const auto& s : sim_flags) sources.push_back("sim:" + s);
+  if (!sources.empty()) config.sources = sources;
+  for (const auto& o : offset_flags) {
+    if (std::string e = parse_offset_flag(o, config); !e.empty()) {
+      std::cerr << "bodyd: " << e << "\n";
+      result.action = CliResult::Action::Exit;
+      result.exit_code = 2;
+      return result;
+    }
+  }
+  if (!gen_keys_dir.empty()) {
+    result.action = CliResult::Action::GenKeys;
+    result.gen_keys_dir = gen_keys_dir;
+    return result;
+  }
+  if (std::string e = validate_config(config); !e.empty()) {
+    std::cerr << "bodyd: " << e << "\n";
+    result.action = CliResult::Action::Exit;
+    result.exit_code = 2;
+    return result;
+  }
+  if (print_config) result.action = CliResult::Action::PrintConfig;
+  return result;
+}
+
+}  // namespace bodyd::daemon

@@ -1,0 +1,92 @@
+#include "bodyd/daemon/control.h"
+
+#include "bodyd/daemon/config.h"
+
+#include <cmath>
+#include <initializer_list>
+
+namespace bodyd::daemon {
+namespace {
+
+using nlohmann::json;
+
+// Empty when every key of `request` is one of `allowed`.
+std::string unknown_key(const json& request, const std::string& cmd, std::initializer_list<std::string_view> allowed) {
+  for (const auto& [key, value] : request.items()) {
+    bool known = key == "cmd";
+    for (auto a : allowed) known |= key == a;
+    if (!known) {
+      std::string list = "cmd";
+      for (auto a : allowed) list += ", " + std::string(a);
+      return "unknown key \"" + key + "\" for cmd \"" + cmd + "\" (allowed: " + list + ")";
+    }
+  }
+  return {};
+}
+
+json dispatch(const json& request, ControlTarget& target) {
+  if (!request.is_object()) return control_error("a request is a JSON object like {\"cmd\":\"status\"}");
+  const auto cmd_it = request.find("cmd");
+  if (cmd_it == request.end())
+    return control_error("missing \"cmd\" (one of " + std::string(kControlCommands) + ")");
+  if (!cmd_it->is_string()) return control_error("\"cmd\" must be a string, got " + std::string(cmd_it->type_name()));
+  const std::string cmd = cmd_it->get<std::string>();
+
+  if (cmd == "status" || cmd == "skeleton" || cmd == "shutdown") {
+    if (auto e = unknown_key(request, cmd, {}); !e.empty()) return control_error(e);
+    if (cmd == "status") return target.status();
+    if (cmd == "skeleton") return target.skeleton();
+    return target.shutdown();
+  }
+  if (cmd == "calibrate") {
+    if (auto e = unknown_key(request, cmd, {"user_height_m", "head_height_m", "from"}); !e.empty()) return control_error(e);
+    const int given = int(request.contains("user_height_m")) + int(request.contains("head_height_m")) +
+                      int(request.contains("from"));
+    if (given != 1)
+      return control_error(
+          "calibrate takes exactly one of \"user_height_m\": METRES (body height), \"head_height_m\": METRES "
+          "(standing head height) or \"from\": \"head\"");
+    if (request.contains("from")) {
+      const json& from = request["from"];
+      if (!from.is_string() || from.get<std::string>() != "head")
+        return control_error("calibrate \"from\" must be \"head\" (the height is taken from the standing head height)");
+      return target.calibrate_from_head();
+    }
+    const char* key = request.contains("user_height_m") ? "user_height_m" : "head_height_m";
+    const json& h = request[key];
+    if (!h.is_number()) return control_error(std::string("\"") + key + "\" must be a number (metres), got " + h.type_name());
+    const double height_m = h.get<double>();
+    if (!std::isfinite(height_m) || (height_m != 0.0 && (height_m < kMinUserHeightM || height_m > kMaxUserHeightM)))
+      return control_error(std::string("\"") + key + "\" must be in metres between 0.5 and 2.6 (0 restores the model's size)");
+    return target.calibrate_height(key == std::string_view("user_height_m") ? height_m * kHeadHeightPerStature : height_m);
+  }
+  if (cmd == "reload-model") {
+    if (auto e = unknown_key(request, cmd, {"path"}); !e.empty()) return control_error(e);
+    std::optional<std::string> path;
+    if (request.contains("path")) {
+      const json& p = request["path"];
+      if (!p.is_string() || p.get<std::string>().empty())
+        return control_error("\"path\" must be a non-empty string (a model file)");
+      path = p.get<std::string>();
+    }
+    return target.reload_model(path);
+  }
+  return control_error("unknown cmd \"" + cmd + "\" (one of " + std::string(kControlCommands) + ")");
+}
+
+}  // namespace
+
+json control_error(const std::string& message) { return json{{"ok", false}, {"error", message}}; }
+
+json handle_control_request(std::string_view request, ControlTarget& target) {
+  json parsed = json::parse(request.begin(), request.end(), nullptr, /*allow_exceptions=*/false);
+  if (parsed.is_discarded()) return control_error("the request is not valid JSON; send e.g. {\"cmd\":\"status\"}");
+  try {
+    return dispatch(parsed, target);
+  } catch (const std::exception& e) {
+    // A target failing is a bug or an unexpected state, reported rather than killing the control thread.
+    return control_error(std::string("internal error: ") + e.what());
+  }
+}
+
+}  // namespace bodyd::daemon

@@ -1,0 +1,157 @@
+#include "bodyd/daemon/endpoint.h"
+
+#include <zmq.h>
+
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+namespace bodyd::daemon {
+namespace {
+
+bool starts_with(std::string_view s, std::string_view p) { return s.substr(0, p.size()) == p; }
+
+// The host part of "tcp://HOST:PORT" ("[::1]" keeps its brackets), or nullopt-like empty.
+std::string_view tcp_host(std::string_view endpoint) {
+  std::string_view rest = endpoint.substr(6);  // after "tcp://"
+  if (rest.find(';') != std::string_view::npos) return {};  // "source;destination" is for connect
+  const auto colon = rest.rfind(':');
+  if (colon == std::string_view::npos) return {};
+  return rest.substr(0, colon);
+}
+
+bool is_loopback_host(std::string_view host) {
+  if (host == "localhost" || host == "lo" || host == "[::1]" || host == "::1") return true;
+  in_addr v4{};
+  const std::string h(host);
+  if (inet_pton(AF_INET, h.c_str(), &v4) == 1) return (ntohl(v4.s_addr) >> 24) == 127;
+  return false;
+}
+
+}  // namespace
+
+bool is_local_endpoint(std::string_view endpoint) {
+  if (starts_with(endpoint, "ipc://") || starts_with(endpoint, "inproc://")) return true;
+  if (starts_with(endpoint, "tcp://")) return is_loopback_host(tcp_host(endpoint));
+  return false;
+}
+
+std::string check_bind_endpoint(std::string_view endpoint, bool allow_remote, std::string_view what) {
+  const std::string ep(endpoint);
+  const std::string opt(what);
+  if (endpoint.empty()) return opt + ": empty endpoint";
+  if (endpoint.find("://") == std::string_view::npos)
+    return opt + " " + ep + ": not a ZeroMQ endpoint; write ipc:///path or tcp://127.0.0.1:PORT";
+  if (starts_with(endpoint, "tcp://") && tcp_host(endpoint).empty())
+    return opt + " " + ep + ": expected tcp://HOST:PORT (PORT may be * or 0 for any free port)";
+  if (starts_with(endpoint, "ipc://") && endpoint.size() == 6) return opt + " " + ep + ": ipc:// needs a path";
+  if (is_local_endpoint(endpoint)) return {};
+  if (allow_remote) return {};
+  return opt + " " + ep +
+         ": refusing to bind where other machines can connect (body motion identifies people). "
+         "Use ipc:///PATH or tcp://127.0.0.1:PORT, or pass --allow-remote (and configure CURVE keys: "
+         "bodyd --gen-keys DIR, then --curve-secret-key DIR/server.secret; see docs/daemon.md)";
+}
+
+std::string prepare_ipc_endpoint(std::string_view endpoint, std::string_view what) {
+  if (!starts_with(endpoint, "ipc://")) return {};
+  const std::filesystem::path path(std::string(endpoint.substr(6)));
+  const std::string opt(what);
+  if (path.string().empty() || path.string()[0] == '@') return {};  // abstract namespace: nothing on disk
+  const std::filesystem::path dir = path.parent_path();
+  std::error_code ec;
+  if (!dir.empty() && !std::filesystem::exists(dir, ec)) {
+    // Only this user may connect to a socket in a 0700 directory.
+    std::filesystem::create_directories(dir, ec);
+    if (ec) return opt + " " + std::string(endpoint) + ": cannot create directory " + dir.string() + ": " + ec.message();
+    ::chmod(dir.c_str(), 0700);
+  }
+  if (std::filesystem::exists(path, ec)) {
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    if (path.string().size() >= sizeof(addr.sun_path))
+      return opt + " " + std::string(endpoint) + ": path too long for a Unix socket";
+    std::strncpy(addr.sun_path, path.c_str(), sizeof(addr.sun_path) - 1);
+    const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    if (fd >= 0) {
+      const bool listening = ::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) == 0;
+      ::close(fd);
+      if (listening)
+        return opt + " " + std::string(endpoint) +
+               ": in use: a process is listening on it (another bodyd running? stop it, or choose another " + opt +
+               " endpoint)";
+    }
+  }
+  return {};
+}
+
+std::string generate_curve_keys(const std::filesystem::path& dir, CurveKeyPair& out_keys) {
+  if (!zmq_has("curve")) return "this libzmq was built without CURVE support";
+  char pub[41] = {}, sec[41] = {};
+  if (zmq_curve_keypair(pub, sec) != 0) return std::string("zmq_curve_keypair: ") + zmq_strerror(zmq_errno());
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) return dir.string() + ": cannot create directory: " + ec.message();
+  const auto pub_path = dir / "server.public";
+  const auto sec_path = dir / "server.secret";
+  for (const auto& p : {pub_path, sec_path})
+    if (std::filesystem::exists(p, ec)) return p.string() + ": exists; not overwriting keys (delete it first)";
+  {
+    // Create the secret file with mode 0600 before anything is written to it.
+    const int fd = ::open(sec_path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
+    if (fd < 0) return sec_path.string() + ": " + std::strerror(errno);
+    const std::string text = std::string("# bodyd CURVE server secret key (Z85). Keep private.\n") + sec + "\n";
+    const bool ok = ::write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size());
+    ::close(fd);
+    if (!ok) return sec_path.string() + ": write failed";
+  }
+  std::ofstream out(pub_path);
+  out << "# bodyd CURVE server public key (Z85). Give it to clients (ZMQ_CURVE_SERVERKEY).\n" << pub << "\n";
+  if (!out) return pub_path.string() + ": write failed";
+  out_keys.public_key = pub;
+  out_keys.secret_key = sec;
+  return {};
+}
+
+std::string read_curve_key_file(const std::filesystem::path& path, std::string& out_key) {
+  std::ifstream in(path);
+  if (!in) return path.string() + ": cannot open CURVE key file (create keys with bodyd --gen-keys DIR)";
+  std::string line, key;
+  int line_no = 0, key_line = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    std::string trimmed;
+    for (char c : line)
+      if (!std::isspace(static_cast<unsigned char>(c))) trimmed += c;
+    if (trimmed.empty() || trimmed[0] == '#') continue;
+    if (!key.empty()) return path.string() + ":" + std::to_string(line_no) + ": more than one key in the file";
+    key = trimmed;
+    key_line = line_no;
+  }
+  if (key.empty()) return path.string() + ": no key in the file";
+  if (key.size() != 40)
+    return path.string() + ":" + std::to_string(key_line) + ": a Z85 CURVE key has 40 characters, this has " +
+           std::to_string(key.size());
+  std::uint8_t raw[32];
+  if (zmq_z85_decode(raw, key.c_str()) == nullptr)
+    return path.string() + ":" + std::to_string(key_line) + ": not valid Z85 text";
+  out_key = key;
+  return {};
+}
+
+std::string curve_public_from_secret(const std::string& secret_key) {
+  if (secret_key.size() != 40) return {};
+  char pub[41] = {};
+  if (zmq_curve_public(pub, secret_key.c_str()) != 0) return {};
+  return pub;
+}
+
+}  // namespace bodyd::daemon
