@@ -14,16 +14,28 @@
 #include <functional>
 #include <string>
 #include <thread>
+#include <vector>
+
 #include <unistd.h>
 
 namespace bodyd::test {
 
-// A fresh ipc:// endpoint in the test's temporary directory (unique per process and call).
+// Directories made by ipc_endpoint(), removed when the test process exits.
+struct TempDirs {
+  std::vector<std::filesystem::path> dirs;
+  ~TempDirs() {
+    std::error_code ec;
+    for (const auto& d : dirs) std::filesystem::remove_all(d, ec);
+  }
+};
+
+// A fresh ipc:// endpoint in the temporary directory (unique per process and call).
 inline std::string ipc_endpoint(const std::string& name) {
-  static int counter = 0;
+  static TempDirs temp_dirs;
   const auto dir = std::filesystem::temp_directory_path() /
-                   ("bodyd-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+                   ("bodyd-test-" + std::to_string(::getpid()) + "-" + std::to_string(temp_dirs.dirs.size()));
   std::filesystem::create_directories(dir);
+  temp_dirs.dirs.push_back(dir);
   return "ipc://" + (dir / name).string();
 }
 
