@@ -142,7 +142,8 @@ TEST(TwoBoneIk, UnreachableTargetsClampAlongTheDirection) {
     near.keep_hinge = hinge;
     r = solve_two_bone_ik(sk, c, near, pose, g);
     EXPECT_FALSE(r.reachable);
-    EXPECT_LT((g.positions[e] - (a + std::abs(lab - lbc) * dir)).norm(), 1e-9);
+    // Folded back on itself (a rotation by ~180 degrees): a little less precise.
+    EXPECT_LT((g.positions[e] - (a + std::abs(lab - lbc) * dir)).norm(), 1e-7);
 
     TwoBoneTarget on_shoulder;  // no direction at all: must stay finite
     on_shoulder.position_m = a;
