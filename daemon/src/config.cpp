@@ -365,6 +365,8 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
   app.add_option("--log-level", config.log_level, "trace, debug, info, warn, error, off");
   std::string gen_keys_dir;
   app.add_option("--gen-keys", gen_keys_dir, "write a CURVE key pair to DIR (server.public, server.secret) and exit");
+  bool list_devices = false;
+  app.add_flag("--list-devices", list_devices, "list the tracker devices bodyd can see (for --source) and exit");
   bool print_config = false;
   app.add_flag("--print-config", print_config, "print the effective configuration as JSON and exit");
 
@@ -386,6 +388,10 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
       result.exit_code = 2;
       return result;
     }
+  }
+  if (list_devices) {
+    result.action = CliResult::Action::ListDevices;
+    return result;
   }
   if (!gen_keys_dir.empty()) {
     result.action = CliResult::Action::GenKeys;

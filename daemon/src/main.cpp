@@ -5,6 +5,7 @@
 #include "bodyd/daemon/endpoint.h"
 #include "bodyd/daemon/reconstructors.h"
 #include "bodyd/drivers/device_list.h"
+#include "bodyd/drivers/device_list.h"
 
 #include <nlohmann/json.hpp>
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -57,6 +58,7 @@ int main(int argc, char** argv) {
                 << "public key: " << keys.public_key << "\n";
       return 0;
     }
+    case CliResult::Action::ListDevices: std::cout << bodyd::drivers::list_devices_text(); return 0;
     case CliResult::Action::Run: break;
   }
 

@@ -92,7 +92,7 @@ struct DaemonConfig {
 
 // What the command line asks for besides running.
 struct CliResult {
-  enum class Action { Run, Exit, GenKeys, PrintConfig } action = Action::Run;
+  enum class Action { Run, Exit, GenKeys, PrintConfig, ListDevices } action = Action::Run;
   int exit_code = 0;           // for Action::Exit
   std::string gen_keys_dir;    // for Action::GenKeys
 };
