@@ -5,7 +5,6 @@
 #include "bodyd/daemon/endpoint.h"
 #include "bodyd/daemon/reconstructors.h"
 #include "bodyd/drivers/device_list.h"
-#include "bodyd/drivers/device_list.h"
 
 #include <nlohmann/json.hpp>
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -14,7 +13,6 @@
 #include <csignal>
 #include <cstdio>
 #include <iostream>
-#include <string_view>
 
 namespace {
 
@@ -36,12 +34,6 @@ void install_signal_handlers() {
 
 int main(int argc, char** argv) {
   using namespace bodyd::daemon;
-  // --list-devices (issue 5, drivers/device_list.h): what tracker devices are visible, then exit.
-  for (int i = 1; i < argc; ++i)
-    if (std::string_view(argv[i]) == "--list-devices") {
-      std::cout << bodyd::drivers::list_devices_text();
-      return 0;
-    }
   DaemonConfig config;
   const CliResult cli = parse_command_line(argc, argv, config);
   switch (cli.action) {
