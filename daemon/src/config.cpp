@@ -333,7 +333,7 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
 
   std::vector<std::string> source_flags, replay_flags, sim_flags, offset_flags;
   app.add_option("--source", source_flags,
-                 "tracker source: replay:FILE, sim:FILE.bvh (hid:VID:PID, usb:VID:PID later); repeatable. "
+                 "tracker source: replay:FILE, sim:FILE.bvh, hid:VID:PID, usb:VID:PID (docs/drivers.md); repeatable. "
                  "Default: the bundled recording, looped");
   app.add_option("--replay", replay_flags, "replay a tracker log (same as --source replay:LOG)");
   app.add_option("--sim", sim_flags, "simulated trackers from a BVH clip (same as --source sim:FILE.bvh)");
