@@ -1,0 +1,440 @@
+// The live viewer: the WebSocket/HTTP helpers against RFC 6455's examples, bodyd-viewer-bridge
+// end to end (bodyd replaying the bundled recording -> bridge -> an HTTP and WebSocket client
+// written here), and the page itself in headless Chromium with a screenshot whose skeleton
+// pixels are counted. The Chromium test skips when chromium or viewer/node_modules (npm install)
+// is missing.
+#include "bodyd/viewer/websocket.h"
+
+#include "../test_paths.h"
+
+#include <arpa/inet.h>
+#include <cairo.h>
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <nlohmann/json.hpp>
+#include <poll.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <fstream>
+#include <optional>
+#include <sstream>
+#include <thread>
+
+extern char** environ;
+
+namespace fs = std::filesystem;
+using namespace bodyd::viewer;
+using namespace std::chrono_literals;
+
+namespace {
+
+std::string read_text(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+class TempDir {
+ public:
+  TempDir() {
+    path_ = fs::temp_directory_path() / ("bodyd-viewer-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter_++));
+    fs::create_directories(path_);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  [[nodiscard]] const fs::path& path() const { return path_; }
+
+ private:
+  static inline int counter_ = 0;
+  fs::path path_;
+};
+
+// A child process with stdout/stderr in files; SIGTERM then SIGKILL on destruction.
+class Process {
+ public:
+  Process(std::vector<std::string> args, const fs::path& dir, const std::string& name)
+      : out_(dir / (name + ".stdout")), err_(dir / (name + ".stderr")) {
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
+    posix_spawn_file_actions_addopen(&actions, 1, out_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_addopen(&actions, 2, err_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (posix_spawnp(&pid_, argv[0], &actions, nullptr, argv.data(), environ) != 0) pid_ = -1;
+    posix_spawn_file_actions_destroy(&actions);
+  }
+  ~Process() { stop(); }
+  [[nodiscard]] bool started() const { return pid_ > 0; }
+  // Waits up to `timeout` for the process to exit; its exit code, or nullopt.
+  std::optional<int> wait(std::chrono::milliseconds timeout) {
+    const auto until = std::chrono::steady_clock::now() + timeout;
+    while (pid_ > 0) {
+      int status = 0;
+      if (waitpid(pid_, &status, WNOHANG) == pid_) {
+        pid_ = -1;
+        return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+      }
+      if (std::chrono::steady_clock::now() > until) return std::nullopt;
+      std::this_thread::sleep_for(20ms);
+    }
+    return std::nullopt;
+  }
+  void stop() {
+    if (pid_ <= 0) return;
+    kill(pid_, SIGTERM);
+    if (!wait(3000ms)) {
+      kill(pid_, SIGKILL);
+      waitpid(pid_, nullptr, 0);
+      pid_ = -1;
+    }
+  }
+  [[nodiscard]] std::string out() const { return read_text(out_); }
+  [[nodiscard]] std::string err() const { return read_text(err_); }
+
+ private:
+  pid_t pid_ = -1;
+  fs::path out_, err_;
+};
+
+// A TCP connection to 127.0.0.1:port with blocking I/O and a receive timeout.
+class Socket {
+ public:
+  explicit Socket(int port) {
+    fd_ = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_port = htons(static_cast<std::uint16_t>(port));
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    if (::connect(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) {
+      ::close(fd_);
+      fd_ = -1;
+    }
+    timeval tv{2, 0};
+    if (fd_ >= 0) ::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+  }
+  ~Socket() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  [[nodiscard]] bool ok() const { return fd_ >= 0; }
+  void send_all(std::string_view s) {
+    while (!s.empty()) {
+      const ssize_t n = ::send(fd_, s.data(), s.size(), MSG_NOSIGNAL);
+      if (n <= 0) return;
+      s.remove_prefix(static_cast<size_t>(n));
+    }
+  }
+  // Appends what arrives to buf_; false on close/timeout.
+  bool receive_more() {
+    char tmp[65536];
+    const ssize_t n = ::recv(fd_, tmp, sizeof tmp, 0);
+    if (n <= 0) return false;
+    buf_.append(tmp, static_cast<size_t>(n));
+    return true;
+  }
+  std::string& buffer() { return buf_; }
+
+ private:
+  int fd_ = -1;
+  std::string buf_;
+};
+
+// GET `target`; the whole response (the server closes the connection).
+std::string http_get(int port, const std::string& target) {
+  Socket s(port);
+  if (!s.ok()) return {};
+  s.send_all("GET " + target + " HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n");
+  while (s.receive_more()) {
+  }
+  return s.buffer();
+}
+
+std::string body_of(const std::string& response) {
+  const size_t at = response.find("\r\n\r\n");
+  return at == std::string::npos ? std::string() : response.substr(at + 4);
+}
+
+// bodyd replaying the bundled recording (ik, looped) on an ephemeral port, and the bridge on
+// another; both killed when this goes out of scope.
+struct Stack {
+  TempDir dir;
+  std::unique_ptr<Process> daemon, bridge;
+  int http_port = 0;
+  std::string error;
+
+  Stack() {
+    const fs::path bin = bodyd::test::bin_dir();
+    const fs::path endpoints = dir.path() / "endpoints.json";
+    daemon = std::make_unique<Process>(
+        std::vector<std::string>{(bin / "bodyd").string(), "--replay",
+                                 (bodyd::test::source_dir() / "data/demo/walk.csv").string(), "--method", "ik", "--loop",
+                                 "--pub", "tcp://127.0.0.1:*", "--control", "none", "--endpoints-file", endpoints.string(),
+                                 "--log-level", "warn"},
+        dir.path(), "bodyd");
+    std::string pub;
+    for (int i = 0; i < 250 && pub.empty(); ++i) {
+      std::this_thread::sleep_for(20ms);
+      try {
+        if (fs::exists(endpoints)) pub = nlohmann::json::parse(read_text(endpoints)).at("pub").get<std::string>();
+      } catch (const std::exception&) {
+      }
+    }
+    if (pub.empty()) {
+      error = "bodyd did not write its endpoints: " + daemon->err();
+      return;
+    }
+    bridge = std::make_unique<Process>(std::vector<std::string>{(bin / "bodyd-viewer-bridge").string(), "--endpoint", pub,
+                                                                "--http", "127.0.0.1:0", "--log-level", "warn"},
+                                       dir.path(), "bridge");
+    for (int i = 0; i < 250 && http_port == 0; ++i) {
+      std::this_thread::sleep_for(20ms);
+      const std::string out = bridge->out();
+      const size_t at = out.find("http://127.0.0.1:");
+      if (at != std::string::npos && out.find('/', at + 17) != std::string::npos) http_port = std::stoi(out.substr(at + 17));
+    }
+    if (http_port == 0) error = "the bridge did not report its port: " + bridge->err();
+  }
+
+  // Waits until the bridge has received poses and the skeleton.
+  bool wait_for_poses() {
+    for (int i = 0; i < 150; ++i) {
+      try {
+        const auto status = nlohmann::json::parse(body_of(http_get(http_port, "/status")));
+        if (status.at("poses").get<int>() > 5 && status.at("skeleton").get<bool>()) return true;
+      } catch (const std::exception&) {
+      }
+      std::this_thread::sleep_for(50ms);
+    }
+    return false;
+  }
+};
+
+std::optional<std::string> find_chromium() {
+  for (const char* name : {"chromium", "chromium-browser", "google-chrome"}) {
+    for (const char* dir : {"/usr/bin", "/usr/local/bin", "/snap/bin"}) {
+      const fs::path p = fs::path(dir) / name;
+      if (::access(p.c_str(), X_OK) == 0) return p.string();
+    }
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+TEST(WebSocket, AcceptKeyOfRfc6455Example) {
+  // RFC 6455 section 1.3.
+  EXPECT_EQ(websocket_accept_key("dGhlIHNhbXBsZSBub25jZQ=="), "s3pPLMBiTxaQ9kYGzzhZRbK+xOo=");
+}
+
+TEST(WebSocket, HandshakeChecksTheRequest) {
+  HttpRequest req;
+  ASSERT_EQ(parse_http_request("GET /ws?x=1 HTTP/1.1\r\nHost: a\r\nUpgrade: WebSocket\r\nConnection: keep-alive, Upgrade\r\n"
+                               "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13",
+                               req),
+            "");
+  EXPECT_EQ(req.target, "/ws");
+  EXPECT_EQ(req.headers.at("upgrade"), "WebSocket");
+  std::string error;
+  const std::string response = websocket_handshake_response(req, error);
+  EXPECT_EQ(error, "");
+  EXPECT_EQ(response.rfind("HTTP/1.1 101 Switching Protocols\r\n", 0), 0u);
+  EXPECT_NE(response.find("Sec-WebSocket-Accept: s3pPLMBiTxaQ9kYGzzhZRbK+xOo=\r\n"), std::string::npos);
+  req.headers["sec-websocket-version"] = "8";
+  EXPECT_EQ(websocket_handshake_response(req, error), "");
+  EXPECT_NE(error.find("Version"), std::string::npos);
+  EXPECT_NE(parse_http_request("GET\r\n", req), "");
+  EXPECT_NE(parse_http_request("GET index.html HTTP/1.1", req), "");
+  EXPECT_NE(parse_http_request("GET / HTTP/1.1\r\nno colon here", req), "");
+}
+
+TEST(WebSocket, ClientFramesOfRfc6455Examples) {
+  // RFC 6455 section 5.7: a masked "Hello".
+  const std::vector<std::uint8_t> hello{0x81, 0x85, 0x37, 0xfa, 0x21, 0x3d, 0x7f, 0x9f, 0x4d, 0x51, 0x58};
+  ClientFrame f;
+  size_t used = 0;
+  std::string error;
+  ASSERT_EQ(parse_client_frame(hello, f, used, error), FrameParse::kFrame) << error;
+  EXPECT_EQ(used, hello.size());
+  EXPECT_EQ(f.opcode, Opcode::kText);
+  EXPECT_EQ(std::string(f.payload.begin(), f.payload.end()), "Hello");
+  for (size_t n = 0; n < hello.size(); ++n) {
+    EXPECT_EQ(parse_client_frame(std::span(hello.data(), n), f, used, error), FrameParse::kNeedMore) << n;
+  }
+  // The unmasked "Hello" of the same section is a server frame: refused from a client.
+  const std::vector<std::uint8_t> unmasked{0x81, 0x05, 0x48, 0x65, 0x6c, 0x6c, 0x6f};
+  EXPECT_EQ(parse_client_frame(unmasked, f, used, error), FrameParse::kError);
+  EXPECT_NE(error.find("masked"), std::string::npos);
+  const std::vector<std::uint8_t> huge{0x82, 0xFF, 0, 0, 0, 0, 0, 0x10, 0, 0, 1, 2, 3, 4};
+  EXPECT_EQ(parse_client_frame(huge, f, used, error), FrameParse::kError);
+  const std::vector<std::uint8_t> long_ping{0x89, 0xFE, 0x00, 0x7E, 1, 2, 3, 4};
+  EXPECT_EQ(parse_client_frame(long_ping, f, used, error), FrameParse::kError);
+}
+
+TEST(WebSocket, ServerFrameLengths) {
+  // RFC 6455 section 5.7: unmasked "Hello" is 0x81 0x05 "Hello"; 256 bytes use the 16-bit length,
+  // 64 KiB the 64-bit one.
+  std::vector<std::uint8_t> out;
+  append_server_frame(Opcode::kText, "Hello", out);
+  EXPECT_EQ(out, (std::vector<std::uint8_t>{0x81, 0x05, 0x48, 0x65, 0x6c, 0x6c, 0x6f}));
+  out.clear();
+  append_server_frame(Opcode::kBinary, std::vector<std::uint8_t>(256, 7), out);
+  ASSERT_EQ(out.size(), 4u + 256u);
+  EXPECT_EQ(out[0], 0x82);
+  EXPECT_EQ(out[1], 126);
+  EXPECT_EQ(out[2], 0x01);
+  EXPECT_EQ(out[3], 0x00);
+  out.clear();
+  append_server_frame(Opcode::kBinary, std::vector<std::uint8_t>(65536, 7), out);
+  ASSERT_EQ(out.size(), 10u + 65536u);
+  EXPECT_EQ(out[1], 127);
+  EXPECT_EQ((std::vector<std::uint8_t>(out.begin() + 2, out.begin() + 10)),
+            (std::vector<std::uint8_t>{0, 0, 0, 0, 0, 1, 0, 0}));
+}
+
+TEST(ViewerBridge, ServesThePageAndPushesPoses) {
+  Stack stack;
+  ASSERT_EQ(stack.error, "");
+  ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
+
+  const std::string page = http_get(stack.http_port, "/");
+  EXPECT_EQ(page.rfind("HTTP/1.1 200 OK\r\n", 0), 0u) << page.substr(0, 200);
+  EXPECT_NE(page.find("/three/three.module.js"), std::string::npos);
+  EXPECT_EQ(http_get(stack.http_port, "/viewer.js").rfind("HTTP/1.1 200 OK\r\n", 0), 0u);
+  EXPECT_EQ(http_get(stack.http_port, "/three/..%2Fpackage.json").rfind("HTTP/1.1 404", 0), 0u);
+  EXPECT_EQ(http_get(stack.http_port, "/../CMakeLists.txt").rfind("HTTP/1.1 404", 0), 0u);
+  EXPECT_EQ(http_get(stack.http_port, "/ws").rfind("HTTP/1.1 400", 0), 0u);  // not an upgrade
+
+  Socket ws(stack.http_port);
+  ASSERT_TRUE(ws.ok());
+  ws.send_all("GET /ws HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+              "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n");
+  std::string& buf = ws.buffer();
+  while (buf.find("\r\n\r\n") == std::string::npos && ws.receive_more()) {
+  }
+  ASSERT_EQ(buf.rfind("HTTP/1.1 101", 0), 0u) << buf.substr(0, 200);
+  EXPECT_NE(buf.find("Sec-WebSocket-Accept: s3pPLMBiTxaQ9kYGzzhZRbK+xOo="), std::string::npos);
+  buf.erase(0, buf.find("\r\n\r\n") + 4);
+  // Server frames: text, unmasked; read until a skeleton and three poses have arrived.
+  bool skeleton = false;
+  int poses = 0;
+  std::uint64_t last_seq = 0;
+  while (poses < 3) {
+    if (buf.size() >= 2) {
+      const auto b = reinterpret_cast<const std::uint8_t*>(buf.data());
+      ASSERT_EQ(b[0], 0x81);
+      ASSERT_EQ(b[1] & 0x80, 0) << "server frames are not masked";
+      size_t len = b[1] & 0x7F, at = 2;
+      if (len == 126 && buf.size() >= 4) {
+        len = (size_t{b[2]} << 8) | b[3];
+        at = 4;
+      } else if (len == 127) {
+        FAIL() << "unexpectedly large frame";
+      }
+      if (len != 126 && buf.size() >= at + len) {
+        const auto msg = nlohmann::json::parse(buf.substr(at, len));
+        buf.erase(0, at + len);
+        if (msg.at("type") == "skeleton") {
+          skeleton = true;
+          EXPECT_EQ(msg.at("names").size(), 22u);
+        } else {
+          ASSERT_EQ(msg.at("type"), "pose");
+          ASSERT_TRUE(skeleton) << "the skeleton comes before the poses";
+          const auto hips = msg.at("joints").at("Hips");
+          EXPECT_GT(hips.at(1).get<double>(), 0.5);  // about 0.9 m above the floor
+          EXPECT_LT(hips.at(1).get<double>(), 1.3);
+          if (poses > 0) {
+            EXPECT_GT(msg.at("seq").get<std::uint64_t>(), last_seq);
+          }
+          last_seq = msg.at("seq").get<std::uint64_t>();
+          ++poses;
+        }
+        continue;
+      }
+    }
+    ASSERT_TRUE(ws.receive_more()) << "no more poses after " << poses;
+  }
+  // A masked close frame from the client is answered with a close frame.
+  ws.send_all(std::string("\x88\x82\x01\x02\x03\x04", 6) + std::string("\x02\xea", 2));
+  bool closed = false;
+  while (!closed && ws.receive_more()) {
+    for (size_t i = 0; i + 1 < buf.size(); ++i) {
+      if (static_cast<std::uint8_t>(buf[i]) == 0x88) closed = true;
+    }
+  }
+  EXPECT_TRUE(closed);
+}
+
+TEST(ViewerBridge, RefusesNonLoopbackAndBadSpecs) {
+  TempDir dir;
+  const fs::path bin = bodyd::test::bin_dir();
+  for (const char* spec : {"0.0.0.0:8080", "localhost8080", "127.0.0.1:99999"}) {
+    Process p({(bin / "bodyd-viewer-bridge").string(), "--endpoint", "tcp://127.0.0.1:1", "--http", spec}, dir.path(), "b");
+    ASSERT_TRUE(p.started());
+    EXPECT_EQ(p.wait(5000ms), 2) << spec;
+    EXPECT_NE(p.err().find("--http"), std::string::npos) << p.err();
+  }
+}
+
+TEST(ViewerBrowser, HeadlessChromiumShowsTheSkeleton) {
+  const auto chromium = find_chromium();
+  if (!chromium) GTEST_SKIP() << "chromium is not installed (apt-get install chromium); the viewer's browser test is skipped";
+  const fs::path three = bodyd::test::source_dir() / "viewer/node_modules/three/build/three.module.js";
+  if (!fs::exists(three)) {
+    GTEST_SKIP() << three.string() << " is missing (run 'npm install' in viewer/); the viewer's browser test is skipped";
+  }
+  Stack stack;
+  ASSERT_EQ(stack.error, "");
+  ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
+  const fs::path shot = stack.dir.path() / "shot.png";
+  // ?hold-load: the page's load event waits for the first drawn pose, and chromium takes the
+  // screenshot at the load event (--timeout caps the wait; --virtual-time-budget never ends while
+  // a WebSocket is open). SwiftShader renders WebGL on the CPU.
+  Process browser({*chromium, "--headless", "--no-sandbox", "--disable-gpu-sandbox", "--use-angle=swiftshader",
+                   "--enable-unsafe-swiftshader", "--no-first-run", "--disable-extensions", "--hide-scrollbars",
+                   "--user-data-dir=" + (stack.dir.path() / "profile").string(), "--window-size=800,600",
+                   "--timeout=15000", "--screenshot=" + shot.string(),
+                   "http://127.0.0.1:" + std::to_string(stack.http_port) + "/?hold-load"},
+                  stack.dir.path(), "chromium");
+  ASSERT_TRUE(browser.started());
+  const auto code = browser.wait(40000ms);
+  ASSERT_TRUE(code.has_value()) << "chromium did not finish";
+  ASSERT_TRUE(fs::exists(shot)) << "no screenshot; chromium exit " << *code << ": " << browser.err().substr(0, 2000);
+
+  cairo_surface_t* img = cairo_image_surface_create_from_png(shot.c_str());
+  ASSERT_EQ(cairo_surface_status(img), CAIRO_STATUS_SUCCESS);
+  const int w = cairo_image_surface_get_width(img), h = cairo_image_surface_get_height(img);
+  const int stride = cairo_image_surface_get_stride(img);
+  const unsigned char* data = cairo_image_surface_get_data(img);
+  EXPECT_EQ(w, 800);
+  EXPECT_EQ(h, 600);
+  // Lit orange (#ff7f0e: bones, joints) and red (#d62728: head and hands) pixels.
+  int orange = 0, red = 0;
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      const std::uint32_t px = *reinterpret_cast<const std::uint32_t*>(data + y * stride + 4 * x);
+      const int r = (px >> 16) & 0xFF, g = (px >> 8) & 0xFF, b = px & 0xFF;
+      if (r > 120 && r - b > 90 && g > 0.35 * r && g < 0.75 * r) ++orange;
+      if (r > 100 && g < 0.4 * r && b < 0.4 * r) ++red;
+    }
+  }
+  cairo_surface_destroy(img);
+  // The legend's two swatches are ~80 pixels each; the skeleton covers thousands.
+  EXPECT_GT(orange, 1500) << "the screenshot shows no skeleton: " << shot.string();
+  EXPECT_GT(red, 300) << "the screenshot shows no tracked head and hands";
+  std::cerr << "skeleton pixels: " << orange << " orange, " << red << " red\n";
+  if (::testing::Test::HasFailure()) {
+    // Keep the screenshot for a look.
+    std::error_code ec;
+    fs::copy_file(shot, fs::temp_directory_path() / "bodyd-viewer-test-failed.png", fs::copy_options::overwrite_existing, ec);
+  }
+}

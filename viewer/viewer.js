@@ -1,0 +1,151 @@
+// bodyd live viewer: draws the pose stream pushed by bodyd-viewer-bridge over a WebSocket
+// (messages: docs/viewer.md) as a 3D skeleton with three.js. Coordinates are bodyd's: metres,
+// +Y up, the floor at y = 0 (CONVENTIONS.md), which is also three.js's convention.
+import * as THREE from 'three';
+
+const BODY_COLOUR = 0xff7f0e;     // bones and joints
+const TRACKED_COLOUR = 0xd62728;  // Head, Hand_L, Hand_R
+const TRACKED = new Set(['Head', 'Hand_L', 'Hand_R']);
+
+const container = document.getElementById('view');
+const statusEl = document.getElementById('status');
+
+const renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+renderer.setPixelRatio(window.devicePixelRatio);
+renderer.setSize(container.clientWidth, container.clientHeight);
+container.appendChild(renderer.domElement);
+
+const scene = new THREE.Scene();
+scene.background = new THREE.Color(0xf4f4f2);
+scene.add(new THREE.HemisphereLight(0xffffff, 0x888888, 2.0));
+const sun = new THREE.DirectionalLight(0xffffff, 1.5);
+sun.position.set(2, 4, 3);
+scene.add(sun);
+const grid = new THREE.GridHelper(10, 20, 0x999999, 0xcccccc);
+scene.add(grid);
+
+const camera = new THREE.PerspectiveCamera(40, container.clientWidth / container.clientHeight, 0.05, 100);
+const target = new THREE.Vector3(0, 0.9, 0);
+// The camera looks at the body from the front-right, 3.2 m away, and follows the hips.
+const cameraOffset = new THREE.Vector3(1.6, 0.5, 2.8);
+camera.position.copy(target).add(cameraOffset);
+camera.lookAt(target);
+
+const bodyMaterial = new THREE.MeshLambertMaterial({ color: BODY_COLOUR });
+const trackedMaterial = new THREE.MeshLambertMaterial({ color: TRACKED_COLOUR });
+const jointGeometry = new THREE.SphereGeometry(0.035, 16, 12);
+const trackedGeometry = new THREE.SphereGeometry(0.055, 16, 12);
+const boneGeometry = new THREE.CylinderGeometry(0.022, 0.022, 1, 10);  // unit length along +Y
+
+// With ?hold-load in the URL the module (hence the page's load event) does not finish before the
+// first pose is drawn (or 10 s have passed), so `chromium --headless --screenshot` captures a
+// skeleton (docs/viewer.md, tests/render/viewer_test.cpp).
+let firstPoseDrawn;
+const firstPose = new Promise((resolve) => { firstPoseDrawn = resolve; });
+
+let skeleton = null;  // { names, parents, joints: [Mesh], bones: [{mesh, child, parent}] }
+let poses = 0;
+const UP = new THREE.Vector3(0, 1, 0);
+
+function buildSkeleton(msg) {
+  if (skeleton) {
+    for (const m of skeleton.joints) scene.remove(m);
+    for (const b of skeleton.bones) scene.remove(b.mesh);
+  }
+  const s = { id: msg.skeleton_id, names: msg.names, parents: msg.parents, index: new Map(), joints: [], bones: [] };
+  msg.names.forEach((name, i) => {
+    s.index.set(name, i);
+    // joint_Root is a ground-level reference, not a body joint: not drawn.
+    const visible = name !== 'joint_Root';
+    const tracked = TRACKED.has(name);
+    const mesh = new THREE.Mesh(tracked ? trackedGeometry : jointGeometry, tracked ? trackedMaterial : bodyMaterial);
+    mesh.visible = visible;
+    scene.add(mesh);
+    s.joints.push(mesh);
+    const p = msg.parents[i];
+    if (p >= 0 && msg.names[p] !== 'joint_Root' && visible) {
+      const bone = new THREE.Mesh(boneGeometry, bodyMaterial);
+      scene.add(bone);
+      s.bones.push({ mesh: bone, child: i, parent: p });
+    }
+  });
+  skeleton = s;
+}
+
+const a = new THREE.Vector3(), b = new THREE.Vector3(), d = new THREE.Vector3();
+
+function showPose(msg) {
+  if (!skeleton || msg.skeleton_id !== skeleton.id) return false;
+  // joints: {name: [x, y, z]} when the bridge knows the skeleton, else [[x, y, z], ...] in skeleton order.
+  const named = !Array.isArray(msg.joints);
+  const pos = (i) => (named ? msg.joints[skeleton.names[i]] : msg.joints[i]);
+  for (let i = 0; i < skeleton.joints.length; ++i) {
+    const p = pos(i);
+    if (p) skeleton.joints[i].position.set(p[0], p[1], p[2]);
+  }
+  for (const bone of skeleton.bones) {
+    a.copy(skeleton.joints[bone.parent].position);
+    b.copy(skeleton.joints[bone.child].position);
+    d.subVectors(b, a);
+    const length = d.length();
+    bone.mesh.visible = length > 1e-4;
+    if (!bone.mesh.visible) continue;
+    bone.mesh.position.copy(a).addScaledVector(d, 0.5);
+    bone.mesh.scale.set(1, length, 1);
+    bone.mesh.quaternion.setFromUnitVectors(UP, d.normalize());
+  }
+  const hips = skeleton.index.get('Hips');
+  if (hips !== undefined) {
+    const h = skeleton.joints[hips].position;
+    target.set(h.x, 0.9, h.z);
+    camera.position.copy(target).add(cameraOffset);
+    camera.lookAt(target);
+    grid.position.set(Math.round(h.x), 0, Math.round(h.z));
+  }
+  return true;
+}
+
+function render() { renderer.render(scene, camera); }
+
+function setStatus(state, text) {
+  statusEl.dataset.state = state;
+  statusEl.dataset.poses = String(poses);
+  statusEl.textContent = text;
+}
+
+function connect() {
+  const ws = new WebSocket(`ws://${location.host}/ws`);
+  ws.onopen = () => setStatus('connected', 'connected, waiting for poses');
+  ws.onmessage = (event) => {
+    const msg = JSON.parse(event.data);
+    if (msg.type === 'skeleton') {
+      buildSkeleton(msg);
+    } else if (msg.type === 'pose') {
+      if (showPose(msg)) {
+        ++poses;
+        render();
+        firstPoseDrawn();
+        setStatus('streaming', `pose ${msg.seq} · ${poses} received · t ${(msg.t_ns / 1e9).toFixed(2)} s`);
+      } else {
+        setStatus('connected', 'waiting for the skeleton');
+      }
+    }
+  };
+  ws.onclose = () => {
+    setStatus('disconnected', 'disconnected from the bridge, retrying…');
+    setTimeout(connect, 1000);
+  };
+}
+
+window.addEventListener('resize', () => {
+  camera.aspect = container.clientWidth / container.clientHeight;
+  camera.updateProjectionMatrix();
+  renderer.setSize(container.clientWidth, container.clientHeight);
+  render();
+});
+
+render();
+connect();
+if (new URLSearchParams(location.search).has('hold-load')) {
+  await Promise.race([firstPose, new Promise((resolve) => setTimeout(resolve, 10000))]);
+}
