@@ -262,6 +262,15 @@ double nice_step(double max, int ticks) {
   return 10.0 * mag;
 }
 
+// Decimals that print every multiple of `step` exactly (1, 0.5, 0.25 -> 0, 1, 2).
+int decimals_for(double step) {
+  for (int d = 0; d < 3; ++d) {
+    const double scaled = step * std::pow(10.0, d);
+    if (std::abs(scaled - std::round(scaled)) < 1e-9) return d;
+  }
+  return 3;
+}
+
 }  // namespace
 
 Rgb method_colour(int index) {
@@ -398,7 +407,7 @@ std::vector<std::uint8_t> error_plot_png(const Comparison& cmp) {
       cairo_line_to(cr, right, yy);
       cairo_stroke(cr);
       cairo_set_source_rgb(cr, 0.3, 0.3, 0.3);
-      text(cr, left - 6, yy + 4, 11, number(v, y_step < 1.0 ? 1 : 0), Align::kRight);
+      text(cr, left - 6, yy + 4, 11, number(v, decimals_for(y_step)), Align::kRight);
     }
     for (double t = 0.0; t <= duration_s + 1e-9; t += t_step) {
       const double xx = std::round(px(t)) + 0.5;
@@ -407,7 +416,7 @@ std::vector<std::uint8_t> error_plot_png(const Comparison& cmp) {
       cairo_line_to(cr, xx, py + panel_h);
       cairo_stroke(cr);
       cairo_set_source_rgb(cr, 0.3, 0.3, 0.3);
-      text(cr, xx, py + panel_h + 15, 11, number(t, t_step < 1.0 ? 1 : 0), Align::kCentre);
+      text(cr, xx, py + panel_h + 15, 11, number(t, decimals_for(t_step)), Align::kCentre);
     }
     cairo_set_source_rgb(cr, 0.3, 0.3, 0.3);
     cairo_rectangle(cr, left + 0.5, py + 0.5, right - left - 1, panel_h - 1);
