@@ -45,6 +45,7 @@ int main(int argc, char** argv) {
   std::uint64_t seed = 1;
   double noise_mm = 0.0, noise_deg = 0.0, dropout_rate_hz = 0.0, dropout_mean_ms = 300.0;
   std::vector<std::string> files;
+  bodyd::ReconstructorOptions method_options;
   app.add_option("--model", model, "model file (needed by the diffusion method)");
   app.add_option("--json", json_path, "write the report as JSON to this file");
   app.add_option("--seed", seed, "seed of the simulated tracker noise and dropout")->capture_default_str();
@@ -64,6 +65,10 @@ int main(int argc, char** argv) {
   app.add_option("--out-dir", out_dir,
                  "write each clip's reconstruction as <clip>.pred.bvh (diffusion) and <clip>.<method>.pred.bvh");
   app.add_option("--methods", methods_text, "comma-separated methods (diffusion, ik)")->capture_default_str();
+  app.add_option("--steps", method_options.diffusion_steps, "diffusion: DDIM steps per frame")
+      ->capture_default_str()->check(CLI::Range(1, 1000));
+  app.add_option("--guidance", method_options.guidance, "diffusion: classifier-free guidance scale (1 = off)")
+      ->capture_default_str()->check(CLI::Range(0.0, 20.0));
   app.add_option("--split", split, "split file: BVH paths relative to its folder's parent (e.g. splits/val.txt)");
   app.add_option("files", files, "BVH files (besides or instead of --split)");
   CLI11_PARSE(app, argc, argv);
@@ -79,6 +84,7 @@ int main(int argc, char** argv) {
     options.methods = split_list(methods_text);
     if (options.methods.empty()) throw std::runtime_error("--methods names no method");
     options.model_path = model;
+    options.reconstructor = method_options;
     if (!out_dir.empty()) options.out_dir = out_dir;
     options.on_clip = [](int i, int n, const std::filesystem::path& p) {
       spdlog::info("clip {}/{}: {}", i + 1, n, p.filename().string());

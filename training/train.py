@@ -53,6 +53,8 @@ def parse_args():
     p.add_argument("--device", default="auto")
     p.add_argument("--ckpt-every", type=int, default=1000)
     p.add_argument("--eval-every", type=int, default=1000)
+    p.add_argument("--export-only", action="store_true",
+                   help="write --out from the run's latest checkpoint (EMA weights) and exit, without training")
     return p.parse_args()
 
 
@@ -206,7 +208,7 @@ def main():
     log = open(os.path.join(a.run_dir, "log.txt"), "a")
     last_print, seen = t0, 0
     hold_gen = torch.Generator(device=dev)
-    while step < a.steps:
+    while step < a.steps and not a.export_only:
         if a.minutes and (time.time() - t0 + wall_before) / 60.0 >= a.minutes:
             print(f"\nwall-time limit of {a.minutes} min reached at step {step}", flush=True)
             break

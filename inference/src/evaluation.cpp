@@ -202,7 +202,7 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
 
       for (size_t m = 0; m < options.methods.size(); ++m) {
         const std::string& method = options.methods[m];
-        const auto reconstructor = make_reconstructor(method, options.model_path, &clip.skeleton);
+        const auto reconstructor = make_reconstructor(method, options.model_path, &clip.skeleton, options.reconstructor);
         const OnlineRun run = run_online(*reconstructor, samples, frame_times);
         if (run.unanswered == clip.frame_count())
           throw std::runtime_error(

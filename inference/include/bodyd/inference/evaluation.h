@@ -8,6 +8,7 @@
 #pragma once
 
 #include "bodyd/inference/metrics.h"
+#include "bodyd/inference/factory.h"
 #include "bodyd/inference/reconstructor.h"
 #include "bodyd/motion/bvh.h"
 
@@ -71,6 +72,7 @@ using TrackerSource = std::function<std::vector<TrackerSample>(const Motion& cli
 struct EvalOptions {
   std::vector<std::string> methods{"diffusion", "ik"};
   std::filesystem::path model_path;         // for methods that need a model
+  ReconstructorOptions reconstructor;       // method options (diffusion steps, guidance, seed)
   std::optional<std::filesystem::path> out_dir;  // write <clip>.pred.bvh / <clip>.<method>.pred.bvh
   // Called after each clip (for progress); may be empty.
   std::function<void(int clip_index, int clip_count, const std::filesystem::path& clip)> on_clip;

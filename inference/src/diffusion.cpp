@@ -1,0 +1,341 @@
+#include "bodyd/inference/diffusion.h"
+
+#include "bodyd/inference/features.h"
+#include "bodyd/inference/ik.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace bodyd {
+
+namespace {
+constexpr double kNsPerS = 1e9;
+}
+
+DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::Model> model,
+                                               const DiffusionOptions& options)
+    : model_(std::move(model)),
+      network_(std::make_shared<const inference::Network>(*model_)),
+      options_(options),
+      sampler_(network_, inference::SamplerOptions{options.steps, options.guidance, 0.0f}, options.seed),
+      skeleton_(model_->skeleton),
+      user_skeleton_(model_->skeleton),
+      history_(options.history) {
+  if (std::string err = features::check_skeleton(skeleton_); !err.empty())
+    throw std::invalid_argument(fmt::format("{}: model skeleton: {}", model_->source, err));
+  if (network_->dim() != features::kDim)
+    throw std::invalid_argument(fmt::format("{}: model has D = {}, the features have {}", model_->source,
+                                            network_->dim(), features::kDim));
+  if (!(model_->fps > 0)) throw std::invalid_argument(fmt::format("{}: model fps must be > 0", model_->source));
+  W_ = network_->frames();
+  frame_dt_ns_ = static_cast<std::int64_t>(std::llround(kNsPerS / model_->fps));
+  // Reference height: the skeleton's standing head height (the same definition as the IK baseline's).
+  model_height_m_ = standing_head_height_m(skeleton_);
+  arms_[0] = find_two_bone_chain(skeleton_, "UpperArm_L", "LowerArm_L", "Hand_L");
+  arms_[1] = find_two_bone_chain(skeleton_, "UpperArm_R", "LowerArm_R", "Hand_R");
+  legs_[0] = find_two_bone_chain(skeleton_, "UpperLeg_L", "LowerLeg_L", "Foot_L");
+  legs_[1] = find_two_bone_chain(skeleton_, "UpperLeg_R", "LowerLeg_R", "Foot_R");
+
+  const size_t n = static_cast<size_t>(W_) * features::kDim;
+  obs_.assign(n, 0.0f);
+  mask_.assign(n, 0.0f);
+  out_.assign(n, 0.0f);
+  noise_.assign(n, 0.0f);
+  inference::Rng rng(options_.seed);
+  for (float& v : noise_) v = rng.normal();
+  const int capacity = std::max(options_.emitted_capacity, W_ + 2);
+  emitted_.resize(static_cast<size_t>(capacity));
+  for (Emitted& e : emitted_) {
+    e.global.positions.resize(static_cast<size_t>(skeleton_.size()));
+    e.global.rotations.resize(static_cast<size_t>(skeleton_.size()));
+  }
+  scratch_global_ = emitted_[0].global;
+  out_global_ = emitted_[0].global;
+  scratch_pose_ = rest_pose(skeleton_);
+}
+
+void DiffusionReconstructor::push(const TrackerSample& sample) {
+  TrackerSample s = sample;
+  s.position_m *= scale_;  // into the model's body size
+  history_.push(s);
+}
+
+void DiffusionReconstructor::reset() {
+  history_.clear();
+  emitted_head_ = emitted_count_ = 0;
+  emitted_dropped_ = false;
+  have_last_ = false;
+  hand_was_valid_ = {};
+  foot_locked_ = {};
+  foot_release_offset_ = {Vec3::Zero(), Vec3::Zero()};
+  sampler_.reseed(options_.seed);
+}
+
+void DiffusionReconstructor::set_user_height(double height_m) {
+  scale_ = height_m > 0 ? model_height_m_ / height_m : 1.0;
+  for (size_t j = 0; j < user_skeleton_.offsets.size(); ++j) {
+    user_skeleton_.offsets[j] = skeleton_.offsets[j] / scale_;
+    if (skeleton_.end_sites[j]) user_skeleton_.end_sites[j] = *skeleton_.end_sites[j] / scale_;
+  }
+  // Samples already stored are in the old scale: start over (calibration happens while standing).
+  reset();
+}
+
+bool DiffusionReconstructor::emitted_at(std::int64_t t_ns, GlobalPose& out, std::array<bool, 2>& contact) const {
+  if (emitted_count_ == 0) return false;
+  constexpr std::int64_t kTolNs = 1'000'000;  // 1 ms: treat as the same frame
+  const Emitted& oldest = emitted(0);
+  const Emitted& newest = emitted(emitted_count_ - 1);
+  if (t_ns > newest.t_ns + kTolNs) return false;
+  if (t_ns < oldest.t_ns - kTolNs) {
+    // Before the first emitted frame: pad with it, as the training windows pad a clip's start with
+    // its first frame. Once older frames have been dropped from the ring, there is no padding.
+    if (emitted_dropped_) return false;
+    for (size_t j = 0; j < out.positions.size(); ++j) {
+      out.positions[j] = oldest.global.positions[j];
+      out.rotations[j] = oldest.global.rotations[j];
+    }
+    contact = oldest.contact;
+    return true;
+  }
+  // Last emitted frame at or before t_ns (binary search over the ring, times increase).
+  int lo = 0, hi = emitted_count_ - 1;
+  while (lo < hi) {
+    const int mid = (lo + hi + 1) / 2;
+    if (emitted(mid).t_ns <= t_ns) lo = mid; else hi = mid - 1;
+  }
+  auto copy = [&](const Emitted& e) {
+    for (size_t j = 0; j < out.positions.size(); ++j) {
+      out.positions[j] = e.global.positions[j];
+      out.rotations[j] = e.global.rotations[j];
+    }
+    contact = e.contact;
+    return true;
+  };
+  const Emitted& a = emitted(lo);
+  if (std::llabs(a.t_ns - t_ns) <= kTolNs || lo + 1 >= emitted_count_) return copy(a);
+  const Emitted& b = emitted(lo + 1);
+  if (std::llabs(b.t_ns - t_ns) <= kTolNs) return copy(b);
+  // Emitted frames further apart than two model frames leave a gap: not a usable observation.
+  if (b.t_ns - a.t_ns > 2 * frame_dt_ns_) return false;
+  const double u = static_cast<double>(t_ns - a.t_ns) / static_cast<double>(b.t_ns - a.t_ns);
+  for (size_t j = 0; j < out.positions.size(); ++j) {
+    out.positions[j] = (1 - u) * a.global.positions[j] + u * b.global.positions[j];
+    out.rotations[j] = slerp(a.global.rotations[j], b.global.rotations[j], u);
+  }
+  contact = u < 0.5 ? a.contact : b.contact;
+  return true;
+}
+
+bool DiffusionReconstructor::tracker_at(Role role, std::int64_t t_ns, std::int64_t now_ns, Vec3& p, Quat& q) const {
+  TrackerSample s;
+  const TrackerSample* first = history_.first_valid(role);
+  if (first != nullptr && t_ns < first->t_ns) {
+    // Before the first observation: the window is padded with it (CONVENTIONS.md, online protocol).
+    p = first->position_m;
+    q = first->rotation;
+    return true;
+  }
+  if (!history_.query(role, t_ns, now_ns, s)) return false;
+  p = s.position_m;
+  q = s.rotation;
+  return true;
+}
+
+void DiffusionReconstructor::lock_feet(const std::array<bool, 2>& contact, double dt_s) {
+  // A foot the model says is planted may not slide: its toe follows the prediction horizontally
+  // at most at foot_contact_speed_m_s (below what reads as skating), starting from where it was
+  // emitted last; the leg swings about the hip to put it there. When the foot
+  // lifts, the remaining correction decays so the foot eases back to the prediction.
+  const double release = std::exp2(-dt_s / std::max(1e-6, options_.foot_release_half_life_s));
+  const double max_step = options_.foot_contact_speed_m_s * dt_s;
+  const int toes[2] = {features::kToesL, features::kToesR};
+  for (size_t s = 0; s < 2; ++s) {
+    if (!legs_[s]) continue;
+    const Vec3 toe = out_global_.positions[static_cast<size_t>(toes[s])];
+    Vec3 correction = Vec3::Zero();
+    if (contact[s] && foot_locked_[s] && dt_s > 0) {
+      // Horizontal move from the last emitted toe toward the prediction, speed-limited.
+      Vec3 step = toe - foot_lock_toe_[s];
+      step.y() = 0;
+      const double n = step.norm();
+      if (n > options_.foot_unlock_distance_m) {
+        correction = Vec3::Zero();  // the prediction moved far away: re-plant where it is
+      } else {
+        if (n > max_step) step *= max_step / n;
+        Vec3 target = foot_lock_toe_[s] + step;
+        target.y() = toe.y();
+        correction = target - toe;
+      }
+      foot_release_offset_[s] = correction;
+    } else {
+      foot_release_offset_[s] *= release;
+      correction = foot_release_offset_[s];
+    }
+    foot_locked_[s] = contact[s];
+    if (correction.squaredNorm() > 1e-12) {
+      // Swing the whole leg about the hip so the toe moves by `correction` (to first order; the
+      // corrections are centimetres on a ~90 cm leg). Unlike two-bone IK this never flips a
+      // nearly straight knee, which would show as jitter.
+      const auto upper = static_cast<size_t>(legs_[s]->upper);
+      const auto parent = static_cast<size_t>(skeleton_.parents[upper]);
+      const Vec3 hip = out_global_.positions[upper];
+      const Quat swing = Quat::FromTwoVectors(toe - hip, toe + correction - hip);
+      const Quat global_upper = (swing * out_global_.rotations[upper]).normalized();
+      scratch_pose_.local_rotations[upper] = (out_global_.rotations[parent].conjugate() * global_upper).normalized();
+      forward_kinematics(skeleton_, scratch_pose_, out_global_);
+    }
+    foot_lock_toe_[s] = out_global_.positions[static_cast<size_t>(toes[s])];
+  }
+}
+
+bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
+  if (have_last_ && t_ns <= last_t_ns_) return false;  // times must increase
+  Vec3 head_p;
+  Quat head_q;
+  bool head_valid = tracker_at(Role::Head, t_ns, t_ns, head_p, head_q);
+  if (!head_valid) {
+    // Head lost: keep the body where the last valid head sample put it.
+    const TrackerSample* last = history_.newest_valid_at_or_before(Role::Head, t_ns);
+    if (last == nullptr) return false;
+    head_p = last->position_m;
+    head_q = last->rotation;
+  }
+  const features::Canonical canon = features::canonical_from_head(head_p, head_q);
+
+  // Build the window: observations and mask, in feature units, then normalise.
+  std::fill(obs_.begin(), obs_.end(), 0.0f);
+  std::fill(mask_.begin(), mask_.end(), 0.0f);
+  std::array<bool, kRoleCount> valid_now{};
+  std::array<Vec3, kRoleCount> tracker_p;
+  std::array<Quat, kRoleCount> tracker_q;
+  for (int w = 0; w < W_; ++w) {
+    const std::int64_t tw = t_ns - static_cast<std::int64_t>(W_ - 1 - w) * frame_dt_ns_;
+    features::Frame frame(obs_.data() + static_cast<size_t>(w) * features::kDim, features::kDim);
+    float* m = mask_.data() + static_cast<size_t>(w) * features::kDim;
+    std::array<bool, 2> contact{};
+    if (w < W_ - 1 && emitted_at(tw, scratch_global_, contact)) {
+      features::encode_pose(scratch_global_, contact, canon, frame);
+      std::fill(m, m + features::kDim, 1.0f);
+    }
+    for (Role role : kRoles) {
+      Vec3 p;
+      Quat q;
+      const bool ok = (w == W_ - 1 && role == Role::Head)
+                          ? (p = head_p, q = head_q, head_valid)
+                          : tracker_at(role, tw, t_ns, p, q);
+      if (w == W_ - 1) {
+        valid_now[static_cast<size_t>(role)] = ok;
+        tracker_p[static_cast<size_t>(role)] = p;
+        tracker_q[static_cast<size_t>(role)] = q;
+      }
+      if (!ok) continue;
+      features::encode_joint(features::tracker_joint(role), p, q, canon, frame);
+      for (int k : features::tracker_entries(role)) m[k] = 1.0f;
+    }
+  }
+  const auto mean = network_->norm_mean();
+  const auto stdv = network_->norm_std();
+  for (int w = 0; w < W_; ++w)
+    for (int k = 0; k < features::kDim; ++k) {
+      float& v = obs_[static_cast<size_t>(w * features::kDim + k)];
+      v = (v - mean[static_cast<size_t>(k)]) / stdv[static_cast<size_t>(k)];
+    }
+
+  if (options_.fixed_noise)
+    sampler_.sample_from_noise(obs_, mask_, noise_, out_);
+  else
+    sampler_.sample(obs_, mask_, out_);
+
+  // Decode the newest frame.
+  float* newest = out_.data() + static_cast<size_t>(W_ - 1) * features::kDim;
+  for (int k = 0; k < features::kDim; ++k)
+    newest[k] = newest[k] * stdv[static_cast<size_t>(k)] + mean[static_cast<size_t>(k)];
+  std::array<bool, 2> contact{};
+  features::decode_pose(skeleton_, features::ConstFrame(newest, features::kDim), canon, scratch_pose_, contact);
+  forward_kinematics(skeleton_, scratch_pose_, out_global_);
+
+  const double frame_dt_s = have_last_ ? static_cast<double>(t_ns - last_t_ns_) / kNsPerS : 0.0;
+  // Contact with hysteresis, so a value near 0.5 does not flicker between planted and free.
+  for (size_t s = 0; s < 2; ++s) {
+    const float v = newest[features::kContactOffset + static_cast<int>(s)];
+    contact[s] = foot_locked_[s] ? v > options_.contact_off : v > options_.contact_on;
+  }
+  if (options_.foot_lock) lock_feet(contact, frame_dt_s);
+
+  // Hands on the trackers (BMM: constraints exact in the condition's space), easing in after a loss.
+  const double decay = std::exp2(-frame_dt_s / std::max(1e-6, options_.hand_return_half_life_s));
+  for (int side = 0; side < 2; ++side) {
+    const Role role = side == 0 ? Role::LeftHand : Role::RightHand;
+    const auto r = static_cast<size_t>(role);
+    const auto s = static_cast<size_t>(side);
+    if (!arms_[side]) continue;
+    if (!valid_now[r]) {
+      hand_was_valid_[s] = false;
+      continue;
+    }
+    const int hand = arms_[side]->end;
+    if (!hand_was_valid_[s] && have_last_) {
+      // Coming back: start from where the body had the hand, converge to the tracker.
+      hand_offset_[s] = out_global_.positions[static_cast<size_t>(hand)] - tracker_p[r];
+      hand_rot_offset_[s] = (out_global_.rotations[static_cast<size_t>(hand)] * tracker_q[r].conjugate()).normalized();
+    } else {
+      hand_offset_[s] *= decay;
+      hand_rot_offset_[s] = slerp(Quat::Identity(), hand_rot_offset_[s], decay);
+    }
+    hand_was_valid_[s] = true;
+    TwoBoneTarget target;
+    target.position_m = tracker_p[r] + hand_offset_[s];
+    {
+      // Pole: the elbow as predicted, nudged outward, down and back in the body's frame. A bent
+      // elbow keeps its plane; a nearly straight one (whose plane is undefined and would flip
+      // between frames) bends the way elbows do.
+      const double outward = side == 0 ? 1.0 : -1.0;  // canonical +X is the user's left
+      const Vec3 hint = canon.R_world_canon * Vec3(0.5 * outward, -0.5, -1.0).normalized();
+      const auto elbow = static_cast<size_t>(arms_[side]->lower);
+      target.pole_m = out_global_.positions[elbow] + options_.elbow_pole_bias_m * hint;
+    }
+    (void)solve_two_bone_ik(skeleton_, *arms_[side], target, scratch_pose_, out_global_);
+  }
+
+  // Remember what was emitted (model scale) for the next windows.
+  {
+    if (emitted_count_ == static_cast<int>(emitted_.size())) {
+      emitted_head_ = (emitted_head_ + 1) % static_cast<int>(emitted_.size());
+      --emitted_count_;
+      emitted_dropped_ = true;
+    }
+    Emitted& e = emitted_[static_cast<size_t>((emitted_head_ + emitted_count_) % static_cast<int>(emitted_.size()))];
+    ++emitted_count_;
+    e.t_ns = t_ns;
+    const GlobalPose& src = out_global_;
+    for (size_t j = 0; j < e.global.positions.size(); ++j) {
+      e.global.positions[j] = src.positions[j];
+      e.global.rotations[j] = src.rotations[j];
+    }
+    e.contact = contact;
+  }
+  last_t_ns_ = t_ns;
+  have_last_ = true;
+
+  // Back to the user's size.
+  const double inv = 1.0 / scale_;
+  const size_t nj = static_cast<size_t>(skeleton_.size());
+  if (out.pose.local_rotations.size() != nj) out.pose = rest_pose(user_skeleton_);
+  if (out.global.positions.size() != nj) out.global = out_global_;
+  for (size_t j = 0; j < nj; ++j) {
+    out.pose.local_rotations[j] = scratch_pose_.local_rotations[j];
+    out.pose.local_translations[j] = scratch_pose_.local_translations[j] * inv;
+    out.global.positions[j] = out_global_.positions[j] * inv;
+    out.global.rotations[j] = out_global_.rotations[j];
+  }
+  out.t_ns = t_ns;
+  out.foot_contact = contact;
+  out.tracker_valid = valid_now;
+  return true;
+}
+
+}  // namespace bodyd

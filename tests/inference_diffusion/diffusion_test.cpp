@@ -1,0 +1,213 @@
+// The online diffusion reconstructor: determinism, causality, no per-frame allocation, hands on
+// the trackers, a lost hand coming back smoothly, calibration. Uses the tiny parity model
+// (tests/data) for the properties that do not depend on a trained model, and the shipped default
+// model (models/) for the ones that do.
+#include "bodyd/inference/diffusion.h"
+#include "bodyd/inference/evaluation.h"
+#include "bodyd/inference/features.h"
+#include "bodyd/simulators/tracker_sim.h"
+
+#include "../inference_eval/alloc_counter.h"
+#include "../test_paths.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+using namespace bodyd;
+
+namespace {
+
+std::shared_ptr<const inference::Model> tiny_model() {
+  return inference::load_model(test::fixtures() / "tiny_model.safetensors");
+}
+std::filesystem::path default_model_path() { return test::source_dir() / "models" / "bodyd-default.safetensors"; }
+
+struct Outputs {
+  std::vector<BodyPose> poses;
+};
+
+// Feeds the clip's trackers (30 Hz at the frame times unless `options` says otherwise) and
+// reconstructs at every frame time, pushing only samples up to that time.
+Outputs feed_and_reconstruct(Reconstructor& r, const std::vector<TrackerSample>& samples, const std::vector<std::int64_t>& times) {
+  Outputs run;
+  size_t next = 0;
+  for (std::int64_t t : times) {
+    while (next < samples.size() && samples[next].t_ns <= t) r.push(samples[next++]);
+    BodyPose pose;
+    EXPECT_TRUE(r.reconstruct(t, pose));
+    run.poses.push_back(pose);
+  }
+  return run;
+}
+
+std::vector<std::int64_t> frame_times(const Motion& m) {
+  std::vector<std::int64_t> t;
+  for (int f = 0; f < m.frame_count(); ++f) t.push_back(static_cast<std::int64_t>(std::llround(f * m.frame_time_s * 1e9)));
+  return t;
+}
+
+std::vector<TrackerSample> trackers(const Motion& m, double rate_hz = 0, double dropout_rate_hz = 0) {
+  SimOptions o;
+  o.rate_hz = rate_hz > 0 ? rate_hz : m.fps();
+  o.dropout_rate_hz = dropout_rate_hz;
+  o.seed = 3;
+  return simulate_trackers(m, o);
+}
+
+}  // namespace
+
+TEST(Diffusion, DeterministicForASeed) {
+  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
+  const auto samples = trackers(clip);
+  const auto times = frame_times(clip);
+  DiffusionReconstructor a(tiny_model()), b(tiny_model());
+  const Outputs ra = feed_and_reconstruct(a, samples, times), rb = feed_and_reconstruct(b, samples, times);
+  ASSERT_EQ(ra.poses.size(), rb.poses.size());
+  for (size_t f = 0; f < ra.poses.size(); ++f)
+    for (size_t j = 0; j < ra.poses[f].global.positions.size(); ++j)
+      ASSERT_EQ(ra.poses[f].global.positions[j], rb.poses[f].global.positions[j]) << "frame " << f;
+  // reset() starts over: the same run again gives the same poses.
+  a.reset();
+  const Outputs rc = feed_and_reconstruct(a, samples, times);
+  for (size_t f = 0; f < ra.poses.size(); ++f)
+    EXPECT_EQ(ra.poses[f].global.positions[5], rc.poses[f].global.positions[5]) << "frame " << f;
+  // A different seed gives a different reconstruction.
+  DiffusionOptions other;
+  other.seed = 99;
+  DiffusionReconstructor d(tiny_model(), other);
+  const Outputs rd = feed_and_reconstruct(d, samples, times);
+  double diff = 0;
+  for (size_t f = 0; f < ra.poses.size(); ++f)
+    diff += (ra.poses[f].global.positions[1] - rd.poses[f].global.positions[1]).norm();
+  EXPECT_GT(diff, 0.0);
+}
+
+TEST(Diffusion, CausalChangingFutureSamplesNeverChangesPastOutputs) {
+  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
+  const auto samples = trackers(clip, 90.0);
+  const auto times = frame_times(clip);
+  const auto model = tiny_model();
+  const CausalityReport report = check_causality([&] { return std::make_unique<DiffusionReconstructor>(model); },
+                                                 samples, times, times[30]);
+  EXPECT_TRUE(report.causal) << report.message;
+  EXPECT_GT(report.frames_checked, 25);
+  EXPECT_TRUE(report.future_changed);  // the check could have failed
+}
+
+TEST(Diffusion, ReconstructDoesNotAllocateOnceWarm) {
+  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
+  const auto samples = trackers(clip, 90.0);
+  const auto times = frame_times(clip);
+  DiffusionReconstructor r(tiny_model());
+  BodyPose pose;
+  size_t next = 0;
+  std::int64_t allocations = 0;
+  for (size_t f = 0; f < times.size(); ++f) {
+    while (next < samples.size() && samples[next].t_ns <= times[f]) r.push(samples[next++]);
+    if (f < 2) {
+      ASSERT_TRUE(r.reconstruct(times[f], pose));  // the first call may size `pose`
+      continue;
+    }
+    test::AllocationCounter counter;
+    ASSERT_TRUE(r.reconstruct(times[f], pose));
+    allocations += counter.count();
+  }
+  EXPECT_EQ(allocations, 0);
+}
+
+TEST(Diffusion, NoPoseBeforeTheFirstHeadSampleAndTimesMustIncrease) {
+  DiffusionReconstructor r(tiny_model());
+  BodyPose pose;
+  EXPECT_FALSE(r.reconstruct(1000, pose));
+  TrackerSample s;
+  s.role = Role::Head;
+  s.valid = true;
+  s.t_ns = 0;
+  s.position_m = Vec3(0, 1.5, 0);
+  r.push(s);
+  EXPECT_TRUE(r.reconstruct(1000, pose));
+  EXPECT_FALSE(r.reconstruct(1000, pose));  // not increasing
+  EXPECT_TRUE(r.reconstruct(2000, pose));
+}
+
+TEST(Diffusion, RejectsAModelOnAnotherSkeleton) {
+  auto model = std::make_shared<inference::Model>(*tiny_model());
+  model->skeleton.names[5] = "Kopf";
+  EXPECT_THROW(DiffusionReconstructor r(model), std::invalid_argument);
+}
+
+class DefaultModel : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!std::filesystem::exists(default_model_path())) GTEST_SKIP() << "no default model at " << default_model_path();
+    model_ = inference::load_model(default_model_path());
+  }
+  std::shared_ptr<const inference::Model> model_;
+};
+
+TEST_F(DefaultModel, HandsOnTheTrackersAndABelievableBody) {
+  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
+  const auto samples = trackers(clip);  // at the frame times, so the newest sample is the truth
+  const auto times = frame_times(clip);
+  DiffusionReconstructor r(model_);
+  const Outputs run = feed_and_reconstruct(r, samples, times);
+  double hand_err = 0, body_err = 0;
+  int n = 0;
+  for (size_t f = 0; f < times.size(); ++f) {
+    const GlobalPose truth = forward_kinematics(clip.skeleton, clip.frames[f]);
+    for (int j : {features::kHandL, features::kHandR})
+      hand_err += (run.poses[f].global.positions[static_cast<size_t>(j)] - truth.positions[static_cast<size_t>(j)]).norm();
+    for (int j = 1; j < 22; ++j)
+      body_err += (run.poses[f].global.positions[static_cast<size_t>(j)] - truth.positions[static_cast<size_t>(j)]).norm();
+    n++;
+  }
+  EXPECT_LT(hand_err / (2 * n), 0.005);  // hands within 5 mm on average (IK onto the trackers)
+  EXPECT_LT(body_err / (21 * n), 0.10);  // a walking body, not noise: mean joint error under 10 cm
+}
+
+TEST_F(DefaultModel, ALostHandComesBackSmoothly) {
+  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
+  auto samples = trackers(clip, 90.0);
+  const auto times = frame_times(clip);
+  // The left hand is lost from 0.6 s to 1.2 s.
+  for (TrackerSample& s : samples)
+    if (s.role == Role::LeftHand && s.t_ns >= 600'000'000 && s.t_ns < 1'200'000'000) s.valid = false;
+  DiffusionReconstructor r(model_);
+  const Outputs run = feed_and_reconstruct(r, samples, times);
+  double max_step = 0, max_truth_step = 0;
+  for (size_t f = 1; f < times.size(); ++f) {
+    const auto j = static_cast<size_t>(features::kHandL);
+    max_step = std::max(max_step, (run.poses[f].global.positions[j] - run.poses[f - 1].global.positions[j]).norm());
+    const GlobalPose a = forward_kinematics(clip.skeleton, clip.frames[f - 1]);
+    const GlobalPose b = forward_kinematics(clip.skeleton, clip.frames[f]);
+    max_truth_step = std::max(max_truth_step, (b.positions[j] - a.positions[j]).norm());
+    if (times[f] >= 600'000'000 && times[f] < 1'200'000'000) {
+      EXPECT_FALSE(run.poses[f].tracker_valid[1]);
+    }
+  }
+  // No pop: the hand never moves much more per frame than the real hand does.
+  EXPECT_LT(max_step, max_truth_step + 0.05);
+  // And it is back on the tracker by the end.
+  const GlobalPose last = forward_kinematics(clip.skeleton, clip.frames.back());
+  EXPECT_LT((run.poses.back().global.positions[features::kHandL] - last.positions[features::kHandL]).norm(), 0.01);
+}
+
+TEST_F(DefaultModel, UserHeightScalesTheBody) {
+  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
+  const auto times = frame_times(clip);
+  DiffusionReconstructor r(model_);
+  const double model_h = r.model_height();
+  r.set_user_height(model_h * 1.2);
+  auto samples = trackers(clip);
+  for (TrackerSample& s : samples) s.position_m *= 1.2;  // a user 20% taller
+  const Outputs run = feed_and_reconstruct(r, samples, times);
+  const auto head = static_cast<size_t>(features::kHead);
+  const GlobalPose truth = forward_kinematics(clip.skeleton, clip.frames.back());
+  EXPECT_NEAR(run.poses.back().global.positions[head].y(), 1.2 * truth.positions[head].y(), 0.03);
+  EXPECT_NEAR(r.skeleton().offsets[2].norm(), 1.2 * model_->skeleton.offsets[2].norm(), 1e-9);
+  // Feet stay on the floor (the floor does not scale away).
+  const double toe = std::min(run.poses.back().global.positions[features::kToesL].y(),
+                              run.poses.back().global.positions[features::kToesR].y());
+  EXPECT_LT(toe, 0.12);
+}
