@@ -26,7 +26,7 @@ class ReconstructorError : public std::runtime_error {
 
 // Method options (ignored by methods they do not apply to).
 struct ReconstructorOptions {
-  int diffusion_steps = 4;      // DDIM steps K
+  int diffusion_steps = 2;      // DDIM steps K (docs/models.md)
   float guidance = 1.0f;        // classifier-free guidance scale (1 = off)
   std::uint64_t seed = 1;       // the diffusion's noise
 };
