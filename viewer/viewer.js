@@ -17,8 +17,11 @@ container.appendChild(renderer.domElement);
 
 const scene = new THREE.Scene();
 scene.background = new THREE.Color(0xf4f4f2);
-scene.add(new THREE.HemisphereLight(0xffffff, 0x888888, 2.0));
-const sun = new THREE.DirectionalLight(0xffffff, 1.5);
+// three.js r155 made light intensities physical; Debian's libjs-three (r111) predates that, so its
+// lights are dimmed to give the same picture.
+const LIGHT_SCALE = parseInt(THREE.REVISION, 10) >= 155 ? 1.0 : 0.45;
+scene.add(new THREE.HemisphereLight(0xffffff, 0x888888, 2.0 * LIGHT_SCALE));
+const sun = new THREE.DirectionalLight(0xffffff, 1.5 * LIGHT_SCALE);
 sun.position.set(2, 4, 3);
 scene.add(sun);
 const grid = new THREE.GridHelper(10, 20, 0x999999, 0xcccccc);

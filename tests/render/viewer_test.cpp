@@ -388,9 +388,11 @@ TEST(ViewerBridge, RefusesNonLoopbackAndBadSpecs) {
 TEST(ViewerBrowser, HeadlessChromiumShowsTheSkeleton) {
   const auto chromium = find_chromium();
   if (!chromium) GTEST_SKIP() << "chromium is not installed (apt-get install chromium); the viewer's browser test is skipped";
-  const fs::path three = bodyd::test::source_dir() / "viewer/node_modules/three/build/three.module.js";
-  if (!fs::exists(three)) {
-    GTEST_SKIP() << three.string() << " is missing (run 'npm install' in viewer/); the viewer's browser test is skipped";
+  const fs::path npm_three = bodyd::test::source_dir() / "viewer/node_modules/three/build/three.module.js";
+  const fs::path debian_three = "/usr/share/javascript/three/three.module.js";
+  if (!fs::exists(npm_three) && !fs::exists(debian_three)) {
+    GTEST_SKIP() << "three.js is missing (apt-get install libjs-three, or npm ci --prefix viewer); the viewer's browser "
+                    "test is skipped";
   }
   Stack stack;
   ASSERT_EQ(stack.error, "");
@@ -423,7 +425,8 @@ TEST(ViewerBrowser, HeadlessChromiumShowsTheSkeleton) {
     for (int x = 0; x < w; ++x) {
       const std::uint32_t px = *reinterpret_cast<const std::uint32_t*>(data + y * stride + 4 * x);
       const int r = (px >> 16) & 0xFF, g = (px >> 8) & 0xFF, b = px & 0xFF;
-      if (r > 120 && r - b > 90 && g > 0.35 * r && g < 0.75 * r) ++orange;
+      // Orange to yellow: the shade depends on the three.js version's lighting.
+      if (r > 120 && r - b > 90 && g > 0.35 * r && g <= r) ++orange;
       if (r > 100 && g < 0.4 * r && b < 0.4 * r) ++red;
     }
   }

@@ -1,5 +1,5 @@
 // bodyd-viewer-bridge: subscribes to bodyd's pose stream and serves the live 3D viewer page
-// (viewer/index.html, three.js from viewer/node_modules) with the poses pushed to the page as
+// (viewer/index.html, three.js from viewer/node_modules or Debian's libjs-three) with the poses pushed to the page as
 // JSON over a WebSocket. Specification: docs/viewer.md.
 //
 // Threads: a ZeroMQ thread receives poses (bodyd::client) and formats the newest as JSON; the
@@ -427,6 +427,14 @@ std::string listen_on(const std::string& spec, bool allow_remote, int& out_fd, i
   return {};
 }
 
+// three.js: the npm copy (viewer/node_modules, `npm ci --prefix viewer`) when present, else Debian's
+// libjs-three.
+fs::path default_three_dir() {
+  const fs::path npm = fs::path(BODYD_VIEWER_DIR) / "node_modules" / "three" / "build";
+  if (fs::exists(npm / "three.module.js")) return npm;
+  return "/usr/share/javascript/three";
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -436,7 +444,7 @@ int main(int argc, char** argv) {
   std::string control = "none";
   std::string http = "127.0.0.1:8080";
   bool allow_remote = false;
-  Paths paths{fs::path(BODYD_VIEWER_DIR), fs::path(BODYD_VIEWER_DIR) / "node_modules" / "three" / "build"};
+  Paths paths{fs::path(BODYD_VIEWER_DIR), default_three_dir()};
   std::string log_level = "info";
   app.add_option("--endpoint", endpoint, "the daemon's pose stream (PUB) endpoint")->capture_default_str();
   app.add_option("--control", control, "the daemon's control endpoint, to ask for the skeleton at start; 'none' to wait for "
