@@ -11,19 +11,12 @@
 #include <cstdio>
 #include <cstdlib>
 
+#include "require.h"
+
 namespace bodyd::inference {
 namespace {
 
 constexpr float kLayerNormEps = 1e-5f;
-
-// A broken precondition is a bug in the caller: stop loudly in every build type.
-#define BODYD_NET_REQUIRE(cond, what)                                                        \
-  do {                                                                                       \
-    if (!(cond)) {                                                                           \
-      std::fprintf(stderr, "%s:%d: bug: %s (%s)\n", __FILE__, __LINE__, what, #cond);        \
-      std::abort();                                                                          \
-    }                                                                                        \
-  } while (0)
 
 using RowMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
@@ -108,7 +101,7 @@ Network::Network(const Model& model)
 }
 
 NetworkScratch::NetworkScratch(const Network& network, int max_batch) : config_(network.config()), max_batch_(max_batch) {
-  BODYD_NET_REQUIRE(max_batch >= 1, "NetworkScratch needs max_batch >= 1");
+  BODYD_REQUIRE(max_batch >= 1, "NetworkScratch needs max_batch >= 1");
   const NetConfig& c = config_;
   e_.resize(c.E, c.W * max_batch);
   h_.resize(c.H, max_batch);
@@ -122,14 +115,14 @@ void Network::forward(std::span<const float> x, std::span<const float> m, int t,
                       NetworkScratch& s) const {
   const NetConfig& c = config_;
   const std::size_t window = static_cast<std::size_t>(c.W) * static_cast<std::size_t>(c.D);
-  BODYD_NET_REQUIRE(s.config_.W == c.W && s.config_.D == c.D && s.config_.E == c.E && s.config_.H == c.H,
+  BODYD_REQUIRE(s.config_.W == c.W && s.config_.D == c.D && s.config_.E == c.E && s.config_.H == c.H,
                     "NetworkScratch was made for another network");
-  BODYD_NET_REQUIRE(window > 0 && x.size() % window == 0, "x must hold whole windows of W * D floats");
+  BODYD_REQUIRE(window > 0 && x.size() % window == 0, "x must hold whole windows of W * D floats");
   const auto batch = static_cast<Eigen::Index>(x.size() / window);
-  BODYD_NET_REQUIRE(batch >= 1 && batch <= s.max_batch_, "batch must be in [1, scratch.max_batch()]");
-  BODYD_NET_REQUIRE(m.size() == x.size() && out.size() == x.size(), "x, m and out must have the same size");
-  BODYD_NET_REQUIRE(t >= 0 && t < c.T, "t must be in [0, T)");
-  BODYD_NET_REQUIRE(out.data() != x.data() && out.data() != m.data(), "out may not alias x or m");
+  BODYD_REQUIRE(batch >= 1 && batch <= s.max_batch_, "batch must be in [1, scratch.max_batch()]");
+  BODYD_REQUIRE(m.size() == x.size() && out.size() == x.size(), "x, m and out must have the same size");
+  BODYD_REQUIRE(t >= 0 && t < c.T, "t must be in [0, T)");
+  BODYD_REQUIRE(out.data() != x.data() && out.data() != m.data(), "out may not alias x or m");
 
   const Eigen::Index frames = c.W * batch;
   const Eigen::Map<const Eigen::MatrixXf> X(x.data(), c.D, frames);

@@ -10,16 +10,10 @@
 #include <numbers>
 #include <stdexcept>
 
+#include "require.h"
+
 namespace bodyd::inference {
 namespace {
-
-#define BODYD_SAMPLER_REQUIRE(cond, what)                                                    \
-  do {                                                                                       \
-    if (!(cond)) {                                                                           \
-      std::fprintf(stderr, "%s:%d: bug: %s (%s)\n", __FILE__, __LINE__, what, #cond);        \
-      std::abort();                                                                          \
-    }                                                                                        \
-  } while (0)
 
 std::uint64_t splitmix64(std::uint64_t& state) {
   std::uint64_t z = (state += 0x9e3779b97f4a7c15ULL);
@@ -95,7 +89,7 @@ Sampler::Sampler(std::shared_ptr<const Network> network, const SamplerOptions& o
 
 void Sampler::sample(std::span<const float> obs, std::span<const float> mask, std::span<float> out) {
   const auto window = static_cast<std::size_t>(network_->window_size());
-  BODYD_SAMPLER_REQUIRE(out.size() == window, "out must hold W * D floats");
+  BODYD_REQUIRE(out.size() == window, "out must hold W * D floats");
   for (float& v : std::span<float>(x_in_).first(window)) v = rng_.normal();
   run(obs, mask, out);
 }
@@ -103,7 +97,7 @@ void Sampler::sample(std::span<const float> obs, std::span<const float> mask, st
 void Sampler::sample_from_noise(std::span<const float> obs, std::span<const float> mask, std::span<const float> noise,
                                 std::span<float> out) {
   const auto window = static_cast<std::size_t>(network_->window_size());
-  BODYD_SAMPLER_REQUIRE(noise.size() == window, "noise must hold W * D floats");
+  BODYD_REQUIRE(noise.size() == window, "noise must hold W * D floats");
   std::copy(noise.begin(), noise.end(), x_in_.begin());
   run(obs, mask, out);
 }
@@ -111,7 +105,7 @@ void Sampler::sample_from_noise(std::span<const float> obs, std::span<const floa
 // x_in_[0, window) holds the initial x on entry.
 void Sampler::run(std::span<const float> obs, std::span<const float> mask, std::span<float> out) {
   const std::size_t window = static_cast<std::size_t>(network_->window_size());
-  BODYD_SAMPLER_REQUIRE(obs.size() == window && mask.size() == window && out.size() == window,
+  BODYD_REQUIRE(obs.size() == window && mask.size() == window && out.size() == window,
                         "obs, mask and out must hold W * D floats");
   const bool guided = options_.guidance != 1.0f;
   const std::size_t batch_size = guided ? 2 * window : window;
