@@ -248,11 +248,12 @@ void DeviceSourceBase::read_loop(Reader& reader) {
       last_data_ns = now;
     } else if (!stalled && now - last_data_ns > stall_ns) {
       stalled = true;
-      ctx_.stalls.fetch_add(1);
       const std::string text = reader.description + ": no reports for " + std::to_string(stall_timeout_ms_) +
                                " ms (device stalled or not streaming)";
       spdlog::warn("{}: {}", name_, text);
+      // The error is set before the counter moves, so a reader who sees the stall counted also sees why.
       ctx_.set_error(text);
+      ctx_.stalls.fetch_add(1);
     }
   }
 }
