@@ -235,9 +235,9 @@ void DeviceSourceBase::read_loop(Reader& reader) {
       reader.device.reset();  // close before the manager may reopen the same device
       reader.error = reader.description + ": " + (error.empty() ? "device gone" : error) +
                      "; waiting for it to come back";
-      // Counted and reported before `connected` turns false, so a reader of status() sees why.
-      ctx_.disconnects.fetch_add(1);
+      // Reported, then counted, before `connected` turns false, so a reader of status() sees why.
       ctx_.set_error(reader.error);
+      ctx_.disconnects.fetch_add(1);
       ctx_.devices_open.fetch_sub(1);
       reader.done.store(true);
       return;
