@@ -1,5 +1,5 @@
 // bodyd-eval: accuracy of the reconstruction methods on motion-capture clips under the
-// online protocol of CONVENTIONS.md (docs/evaluation.md).
+// online protocol of docs/conventions.md (docs/evaluation.md).
 //
 //   bodyd-eval --model MODEL --json OUT.json [--seed N] [--noise-mm S] [--dropout-rate P]
 //              [--out-dir DIR] [--methods diffusion,ik] [--split FILE.txt] [FILE.bvh...]

@@ -1,6 +1,6 @@
 // bodyd live viewer: draws the pose stream pushed by bodyd-viewer-bridge over a WebSocket
 // (messages: docs/viewer.md) as a 3D skeleton with three.js. Coordinates are bodyd's: metres,
-// +Y up, the floor at y = 0 (CONVENTIONS.md), which is also three.js's convention.
+// +Y up, the floor at y = 0 (docs/conventions.md), which is also three.js's convention.
 import * as THREE from 'three';
 
 const BODY_COLOUR = 0xff7f0e;     // bones and joints

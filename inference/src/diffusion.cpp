@@ -134,7 +134,7 @@ bool DiffusionReconstructor::tracker_at(Role role, std::int64_t t_ns, std::int64
   TrackerSample s;
   const TrackerSample* first = history_.first_valid(role);
   if (first != nullptr && t_ns < first->t_ns) {
-    // Before the first observation: the window is padded with it (CONVENTIONS.md, online protocol).
+    // Before the first observation: the window is padded with it (docs/conventions.md, online protocol).
     p = first->position_m;
     q = first->rotation;
     return true;

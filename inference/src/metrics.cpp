@@ -21,7 +21,7 @@ int body_joint(const Skeleton& skeleton, std::string_view name) {
   const int j = skeleton.find(name);
   if (j < 0)
     throw std::invalid_argument("metrics: the skeleton has no joint '" + std::string(name) +
-                                "' (the metrics need the 21 body joints of CONVENTIONS.md)");
+                                "' (the metrics need the 21 body joints of docs/conventions.md)");
   return j;
 }
 

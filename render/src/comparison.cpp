@@ -183,7 +183,7 @@ Comparison make_comparison(const std::string& clip_name, const Motion& truth, st
   try {
     sets = joint_sets(truth.skeleton);
   } catch (const std::invalid_argument& e) {
-    throw RenderError(fmt::format("{}: {} (the ground truth must use the bodyd skeleton, CONVENTIONS.md)", clip_name, e.what()));
+    throw RenderError(fmt::format("{}: {} (the ground truth must use the bodyd skeleton, docs/conventions.md)", clip_name, e.what()));
   }
   MetricsAccumulator truth_only(truth.skeleton);
   truth_only.begin_clip(cmp.fps);

@@ -1,4 +1,4 @@
-// Golden values computed by hand from the definitions of CONVENTIONS.md.
+// Golden values computed by hand from the definitions of docs/conventions.md.
 #include "bodyd/inference/metrics.h"
 
 #include "bodyd/motion/bvh.h"

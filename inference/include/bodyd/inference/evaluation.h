@@ -1,4 +1,4 @@
-// The online evaluation (CONVENTIONS.md "Online evaluation protocol"; docs/evaluation.md):
+// The online evaluation (docs/conventions.md "Online evaluation protocol"; docs/evaluation.md):
 // tracker samples of a clip are fed sample by sample to a fresh Reconstructor per method, the
 // pose is requested at every frame time with only the samples up to that time pushed, and
 // every frame is scored against the clip's forward kinematics.

@@ -1,5 +1,5 @@
 // Accuracy metrics of a reconstruction against ground truth, exactly as defined in
-// CONVENTIONS.md ("Accuracy metrics"); docs/evaluation.md repeats the formulas.
+// docs/conventions.md ("Accuracy metrics"); docs/evaluation.md repeats the formulas.
 //
 // Per clip, frame by frame, on global joint positions (metres) and rotations from forward
 // kinematics, at the clip's frame rate fps, over the 21 body joints (not joint_Root):
@@ -36,7 +36,7 @@ struct AccuracyMetrics {
   double foot_skate_ratio = 0.0;
 };
 
-// The metric keys of CONVENTIONS.md, in its order, with their fields.
+// The metric keys of docs/conventions.md, in its order, with their fields.
 struct MetricKey {
   std::string_view key;
   double AccuracyMetrics::*field;
@@ -63,7 +63,7 @@ struct MotionQuality {
 inline constexpr double kFootContactHeightM = 0.06;
 inline constexpr double kFootSkateSpeedMS = 0.075;
 
-// Skeleton indices of the joint sets of CONVENTIONS.md, found by name.
+// Skeleton indices of the joint sets of docs/conventions.md, found by name.
 struct JointSets {
   std::vector<int> all;    // the 21 body joints: upper then lower
   std::vector<int> upper;  // Spine, Chest, Neck, Head, Shoulder_L/R, UpperArm_L/R, LowerArm_L/R, Hand_L/R

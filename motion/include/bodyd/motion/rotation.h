@@ -1,6 +1,6 @@
 // Rotation helpers shared by every part of bodyd.
 //
-// Conventions (docs/CONVENTIONS in ../shared): right-handed, +Y up, metres.
+// Conventions (docs/conventions.md): right-handed, +Y up, metres.
 // Quaternions are Eigen::Quaterniond inside C++; files and the wire use (x, y, z, w).
 // Every function returning a quaternion returns it unit length.
 #pragma once

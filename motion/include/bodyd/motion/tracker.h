@@ -10,7 +10,7 @@
 
 namespace bodyd {
 
-// The three tracked roles, each the pose of one skeleton joint (see CONVENTIONS.md).
+// The three tracked roles, each the pose of one skeleton joint (see docs/conventions.md).
 enum class Role : std::uint8_t { Head = 0, LeftHand = 1, RightHand = 2 };
 inline constexpr int kRoleCount = 3;
 inline constexpr std::array<Role, kRoleCount> kRoles{Role::Head, Role::LeftHand, Role::RightHand};

@@ -1,6 +1,6 @@
 // A reconstruction next to its ground truth, ready to draw: the truth clip and each method's
 // global joint positions frame by frame, checked to match (frame count, joint names), with
-// per-frame errors and the CONVENTIONS.md metrics (computed by bodyd_inference's
+// per-frame errors and the docs/conventions.md metrics (computed by bodyd_inference's
 // MetricsAccumulator; this file only adds per-frame distances).
 //
 // Errors the user can fix (unreadable file, wrong frame count, other skeleton) throw
@@ -30,7 +30,7 @@ struct Track {
 };
 
 // Per-frame mean joint distances (centimetres) of a prediction against the truth, over the joint
-// sets of CONVENTIONS.md (all 21 body joints, lower body 9, hands 2).
+// sets of docs/conventions.md (all 21 body joints, lower body 9, hands 2).
 struct FrameErrors {
   std::vector<double> all_cm;
   std::vector<double> lower_cm;
