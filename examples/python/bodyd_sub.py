@@ -84,17 +84,22 @@ def decode_skeleton(msg):
     magic, version, n, skeleton_id, _reserved = SKELETON_HEADER.unpack_from(msg, 0)
     if magic != SKELETON_MAGIC:
         raise DecodeError(f"skeleton: wrong magic {magic!r}")
-    if version != VERSION:
+    if version not in (1, 2):  # version 2 adds a rest rotation to each joint entry
         raise DecodeError(f"skeleton: unsupported version {version}")
     if not 1 <= n <= MAX_JOINTS:
         raise DecodeError(f"skeleton: joint_count {n} out of range 1..{MAX_JOINTS}")
     pos = SKELETON_HEADER.size
-    names, parents, offsets = [], [], []
+    names, parents, offsets, rests = [], [], [], []
     for i in range(n):
         if pos + SKELETON_JOINT.size > len(msg):
             raise DecodeError(f"skeleton: truncated in joint {i}")
         parent, length, ox, oy, oz = SKELETON_JOINT.unpack_from(msg, pos)
         pos += SKELETON_JOINT.size
+        if version == 2:
+            if pos + 16 > len(msg):
+                raise DecodeError(f"skeleton: truncated in joint {i}")
+            rests.append(list(struct.unpack_from("<4f", msg, pos)))
+            pos += 16
         if not 1 <= length <= MAX_NAME_BYTES or pos + length > len(msg):
             raise DecodeError(f"skeleton: joint {i} name_length {length} invalid")
         name = bytes(msg[pos:pos + length]).decode("utf-8")  # raises on invalid UTF-8
@@ -108,7 +113,10 @@ def decode_skeleton(msg):
         raise DecodeError(f"skeleton: {len(msg) - pos} trailing bytes")
     if fnv1a32(bytes(msg[SKELETON_HEADER.size:])) != skeleton_id:
         raise DecodeError("skeleton: skeleton_id does not match the joint table's hash")
-    return {"skeleton_id": skeleton_id, "names": names, "parents": parents, "offsets_m": offsets}
+    skeleton = {"skeleton_id": skeleton_id, "names": names, "parents": parents, "offsets_m": offsets}
+    if version == 2:
+        skeleton["rest_rotations_xyzw"] = rests
+    return skeleton
 
 
 def main():

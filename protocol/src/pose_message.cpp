@@ -38,7 +38,9 @@ constexpr std::size_t kSkelOffId = 8;
 constexpr std::size_t kSkelJointOffParent = 0;
 constexpr std::size_t kSkelJointOffNameLength = 2;
 constexpr std::size_t kSkelJointOffOffset = 4;
-constexpr std::size_t kSkelJointOffName = 16;
+constexpr std::size_t kSkelJointOffName = 16;       // version 1
+constexpr std::size_t kSkelJointOffRest = 16;       // version 2: rest rotation x, y, z, w
+constexpr std::size_t kSkelJointOffNameV2 = 32;     // version 2
 
 std::string hex_bytes(const std::uint8_t* p, std::size_t n) {
   std::string s;
@@ -132,11 +134,15 @@ std::string printable(const std::string& name) {
   return s;
 }
 
+// The joint table of version 2 when the skeleton has rest rotations, else of version 1.
 void append_joint_table(const SkeletonMessage& skeleton, std::vector<std::uint8_t>& out) {
+  const bool with_rest = !skeleton.rest_rotations_xyzw.empty();
   for (std::size_t i = 0; i < skeleton.names.size(); ++i) {
     detail::put_i16(out, skeleton.parents[i]);
     detail::put_u16(out, static_cast<std::uint16_t>(skeleton.names[i].size()));
     for (float v : skeleton.offsets_m[i]) detail::put_f32(out, v);
+    if (with_rest)
+      for (float v : skeleton.rest_rotations_xyzw[i]) detail::put_f32(out, v);
     detail::put_bytes(out, skeleton.names[i].data(), skeleton.names[i].size());
   }
 }
@@ -159,7 +165,7 @@ Status encode_pose(const PoseMessage& pose, std::vector<std::uint8_t>& out) {
   out.clear();
   out.reserve(kPoseHeaderSize + kPoseJointSize * pose.joints.size());
   detail::put_bytes(out, kPoseMagic.data(), kPoseMagic.size());
-  detail::put_u16(out, kProtocolVersion);
+  detail::put_u16(out, kPoseVersion);
   detail::put_u16(out, static_cast<std::uint16_t>(pose.joints.size()));
   detail::put_u64(out, pose.seq);
   detail::put_i64(out, pose.t_ns);
@@ -192,9 +198,9 @@ Status decode_pose(std::span<const std::uint8_t> bytes, PoseMessage& out) {
                                 ? "; this is a skeleton message" : ""));
   }
   const std::uint16_t version = r.u16(kPoseOffVersion);
-  if (version != kProtocolVersion) {
+  if (version != kPoseVersion) {
     return fail(fmt::format("pose message: unsupported version {} (this decoder reads version {}; "
-                            "update the client or the daemon)", version, kProtocolVersion));
+                            "update the client or the daemon)", version, kPoseVersion));
   }
   const std::size_t n = r.u16(kPoseOffJointCount);
   if (n > kMaxJoints) {
@@ -238,6 +244,10 @@ Status validate_skeleton(const SkeletonMessage& s) {
     return fail(fmt::format("skeleton: {} names but {} parents and {} offsets", n, s.parents.size(),
                             s.offsets_m.size()));
   }
+  if (!s.rest_rotations_xyzw.empty() && s.rest_rotations_xyzw.size() != n) {
+    return fail(fmt::format("skeleton: {} names but {} rest rotations (expected {} or none)", n,
+                            s.rest_rotations_xyzw.size(), n));
+  }
   std::unordered_set<std::string_view> seen;
   for (std::size_t i = 0; i < n; ++i) {
     const std::string& name = s.names[i];
@@ -261,6 +271,10 @@ Status validate_skeleton(const SkeletonMessage& s) {
     if (!finite3(s.offsets_m[i])) {
       return fail(fmt::format("skeleton: joint {} (\"{}\") offset is not finite", i, printable(name)));
     }
+    if (!s.rest_rotations_xyzw.empty()) {
+      if (std::string q = check_quat(s.rest_rotations_xyzw[i]); !q.empty())
+        return fail(fmt::format("skeleton: joint {} (\"{}\") rest rotation {}", i, printable(name), q));
+    }
   }
   return {};
 }
@@ -269,11 +283,15 @@ std::uint32_t skeleton_id_of(const SkeletonMessage& skeleton) {
   std::vector<std::uint8_t> table;
   const std::size_t n = std::min({skeleton.names.size(), skeleton.parents.size(), skeleton.offsets_m.size()});
   SkeletonMessage trimmed;
-  if (n != skeleton.names.size() || n != skeleton.parents.size() || n != skeleton.offsets_m.size()) {
+  const bool rest_mismatch = !skeleton.rest_rotations_xyzw.empty() && skeleton.rest_rotations_xyzw.size() != n;
+  if (n != skeleton.names.size() || n != skeleton.parents.size() || n != skeleton.offsets_m.size() || rest_mismatch) {
     trimmed.names.assign(skeleton.names.begin(), skeleton.names.begin() + static_cast<std::ptrdiff_t>(n));
     trimmed.parents.assign(skeleton.parents.begin(), skeleton.parents.begin() + static_cast<std::ptrdiff_t>(n));
     trimmed.offsets_m.assign(skeleton.offsets_m.begin(),
                              skeleton.offsets_m.begin() + static_cast<std::ptrdiff_t>(n));
+    if (skeleton.rest_rotations_xyzw.size() >= n)
+      trimmed.rest_rotations_xyzw.assign(skeleton.rest_rotations_xyzw.begin(),
+                                         skeleton.rest_rotations_xyzw.begin() + static_cast<std::ptrdiff_t>(n));
     append_joint_table(trimmed, table);
   } else {
     append_joint_table(skeleton, table);
@@ -285,7 +303,7 @@ Status encode_skeleton(const SkeletonMessage& skeleton, std::vector<std::uint8_t
   if (Status s = validate_skeleton(skeleton); !s) return fail("encode_skeleton: " + s.error);
   out.clear();
   detail::put_bytes(out, kSkeletonMagic.data(), kSkeletonMagic.size());
-  detail::put_u16(out, kProtocolVersion);
+  detail::put_u16(out, skeleton.rest_rotations_xyzw.empty() ? kSkeletonVersionWithoutRest : kSkeletonVersion);
   detail::put_u16(out, static_cast<std::uint16_t>(skeleton.names.size()));
   detail::put_u32(out, 0);  // skeleton_id, filled in below
   detail::put_u32(out, 0);  // reserved
@@ -307,10 +325,13 @@ Status decode_skeleton(std::span<const std::uint8_t> bytes, SkeletonMessage& out
                             std::memcmp(r.at(0), kPoseMagic.data(), 4) == 0 ? "; this is a pose message" : ""));
   }
   const std::uint16_t version = r.u16(kSkelOffVersion);
-  if (version != kProtocolVersion) {
-    return fail(fmt::format("skeleton message: unsupported version {} (this decoder reads version {}; "
-                            "update the client or the daemon)", version, kProtocolVersion));
+  if (version != kSkeletonVersion && version != kSkeletonVersionWithoutRest) {
+    return fail(fmt::format("skeleton message: unsupported version {} (this decoder reads versions {} and {}; "
+                            "update the client or the daemon)", version, kSkeletonVersionWithoutRest, kSkeletonVersion));
   }
+  const bool with_rest = version == kSkeletonVersion;
+  const std::size_t fixed = with_rest ? kSkeletonJointFixedSizeV2 : kSkeletonJointFixedSize;
+  const std::size_t name_at = with_rest ? kSkelJointOffNameV2 : kSkelJointOffName;
   const std::size_t n = r.u16(kSkelOffJointCount);
   if (n == 0) return fail("skeleton message: joint_count is 0");
   if (n > kMaxJoints) {
@@ -320,25 +341,28 @@ Status decode_skeleton(std::span<const std::uint8_t> bytes, SkeletonMessage& out
   out.names.resize(n);
   out.parents.resize(n);
   out.offsets_m.resize(n);
+  out.rest_rotations_xyzw.resize(with_rest ? n : 0);
   std::size_t pos = kSkeletonHeaderSize;
   for (std::size_t i = 0; i < n; ++i) {
-    if (!r.has(pos, kSkeletonJointFixedSize)) {
+    if (!r.has(pos, fixed)) {
       return fail(fmt::format("skeleton message: truncated in joint {} of {} (at byte {}, size {})", i, n, pos,
                               bytes.size()));
     }
     out.parents[i] = r.i16(pos + kSkelJointOffParent);
     const std::size_t len = r.u16(pos + kSkelJointOffNameLength);
     for (std::size_t k = 0; k < 3; ++k) out.offsets_m[i][k] = r.f32(pos + kSkelJointOffOffset + 4 * k);
+    if (with_rest)
+      for (std::size_t k = 0; k < 4; ++k) out.rest_rotations_xyzw[i][k] = r.f32(pos + kSkelJointOffRest + 4 * k);
     if (len == 0 || len > kMaxJointNameBytes) {
       return fail(fmt::format("skeleton message: joint {} name_length {} out of range 1..{}", i, len,
                               kMaxJointNameBytes));
     }
-    if (!r.has(pos + kSkelJointOffName, len)) {
+    if (!r.has(pos + name_at, len)) {
       return fail(fmt::format("skeleton message: truncated in joint {} name ({} bytes at byte {}, size {})", i,
-                              len, pos + kSkelJointOffName, bytes.size()));
+                              len, pos + name_at, bytes.size()));
     }
-    out.names[i].assign(reinterpret_cast<const char*>(r.at(pos + kSkelJointOffName)), len);
-    pos += kSkeletonJointFixedSize + len;
+    out.names[i].assign(reinterpret_cast<const char*>(r.at(pos + name_at)), len);
+    pos += fixed + len;
   }
   if (pos != bytes.size()) {
     return fail(fmt::format("skeleton message: {} trailing bytes after {} joints", bytes.size() - pos, n));

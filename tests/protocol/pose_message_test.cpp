@@ -117,6 +117,72 @@ TEST(SkeletonMessage, GoldenBytesMatchTheDocumentedLayout) {
   EXPECT_EQ(skeleton_id_of(s), h);
 }
 
+// Version 2 (a skeleton with rest rotations): each joint entry has the rest rotation between
+// the offset and the name. The same skeleton without rest rotations is the version-1 message above.
+TEST(SkeletonMessage, Version2GoldenBytes) {
+  SkeletonMessage s;
+  s.names = {"R", "Ab"};
+  s.parents = {-1, 0};
+  s.offsets_m = {{0.0f, 0.0f, 0.0f}, {0.0f, 1.0f, -2.0f}};
+  s.rest_rotations_xyzw = {{0.0f, 0.0f, 0.0f, 1.0f}, {0.0f, -1.0f, 0.0f, 0.0f}};
+  const Bytes table = {
+      0xff, 0xff, 0x01, 0x00,                                            // parent -1, name_length 1
+      0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,                                // offset 0, 0, 0
+      0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0x00, 0x00, 0x80, 0x3f,        // rest rotation 0, 0, 0, 1
+      'R',                                                               // name
+      0x00, 0x00, 0x02, 0x00,                                            // parent 0, name_length 2
+      0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0x00, 0xc0,  // offset 0, 1, -2
+      0, 0, 0, 0, 0x00, 0x00, 0x80, 0xbf, 0, 0, 0, 0, 0, 0, 0, 0,        // rest rotation 0, -1, 0, 0
+      'A', 'b'};
+  std::uint32_t h = 2166136261u;
+  for (std::uint8_t c : table) h = (h ^ c) * 16777619u;
+  Bytes expected = {'B', 'D', 'S', 'K', 0x02, 0x00, 0x02, 0x00,
+                    static_cast<std::uint8_t>(h), static_cast<std::uint8_t>(h >> 8),
+                    static_cast<std::uint8_t>(h >> 16), static_cast<std::uint8_t>(h >> 24),
+                    0x00, 0x00, 0x00, 0x00};
+  expected.insert(expected.end(), table.begin(), table.end());
+  EXPECT_EQ(encoded(s), expected);
+  EXPECT_EQ(skeleton_id_of(s), h);
+  SkeletonMessage back;
+  ASSERT_TRUE(decode_skeleton(expected, back).ok());
+  EXPECT_EQ(back.rest_rotations_xyzw, s.rest_rotations_xyzw);
+  EXPECT_EQ(back.offsets_m, s.offsets_m);
+  EXPECT_EQ(back.skeleton_id, h);
+  // Decoding version 1 gives no rest rotations, and re-encoding it gives the same bytes.
+  s.rest_rotations_xyzw.clear();
+  const Bytes v1 = encoded(s);
+  EXPECT_EQ(v1[4], 1);
+  ASSERT_TRUE(decode_skeleton(v1, back).ok());
+  EXPECT_TRUE(back.rest_rotations_xyzw.empty());
+  EXPECT_EQ(encoded(back), v1);
+}
+
+TEST(SkeletonMessageMalformed, Version2RestRotations) {
+  SkeletonMessage s = synthetic_skeleton();
+  s.rest_rotations_xyzw.assign(s.names.size(), {0.0f, 0.0f, 0.0f, 1.0f});
+  const Bytes good = encoded(s);
+  for (std::size_t n = 0; n < good.size(); ++n)
+    EXPECT_NE(skeleton_error(Bytes(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(n))), "(accepted)") << n;
+  // Joint 1's rest rotation w (entry 0 is 32 + its name's bytes long) made 2: not unit length.
+  Bytes b = good;
+  const std::size_t joint1 = 16 + 32 + s.names[0].size();
+  set_f32(b, joint1 + 16 + 12, 2.0f);
+  fix_skeleton_id(b);
+  EXPECT_THAT(skeleton_error(b), HasSubstr("joint 1"));
+  EXPECT_THAT(skeleton_error(b), HasSubstr("rest rotation has norm 2"));
+  set_f32(b, joint1 + 16, std::numeric_limits<float>::quiet_NaN());
+  fix_skeleton_id(b);
+  EXPECT_THAT(skeleton_error(b), HasSubstr("rest rotation is not finite"));
+  // A version-1 message whose bytes are read as version 2 does not decode.
+  b = encoded(synthetic_skeleton());
+  set_u16(b, 4, 2);
+  EXPECT_NE(skeleton_error(b), "(accepted)");
+  // The encoder refuses a rest rotation count that is neither 0 nor the joint count.
+  s.rest_rotations_xyzw.pop_back();
+  Bytes out;
+  EXPECT_THAT(encode_skeleton(s, out).error, HasSubstr("rest rotations"));
+}
+
 // ---- Round trips -------------------------------------------------------------------------
 
 void expect_pose_eq(const PoseMessage& a, const PoseMessage& b) {

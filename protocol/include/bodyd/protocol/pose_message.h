@@ -20,9 +20,15 @@
 
 namespace bodyd::protocol {
 
-// ---- Constants of protocol version 1 -------------------------------------------------
+// ---- Constants -----------------------------------------------------------------------
 
-inline constexpr std::uint16_t kProtocolVersion = 1;
+// Each message kind carries its own version after its magic. The pose message is at version 1;
+// the skeleton message at version 2 (version 1 had no rest rotations; it is still decoded, and
+// written for a skeleton without rest rotations, so old recordings re-encode bit for bit).
+inline constexpr std::uint16_t kPoseVersion = 1;
+inline constexpr std::uint16_t kSkeletonVersion = 2;
+inline constexpr std::uint16_t kSkeletonVersionWithoutRest = 1;
+inline constexpr std::uint16_t kProtocolVersion = kPoseVersion;  // the version of protocol 1's pose message
 
 // Topic frames (the first frame of each multipart message; subscribe by these prefixes).
 inline constexpr std::string_view kPoseTopic = "pose";
@@ -36,7 +42,8 @@ inline constexpr std::array<std::uint8_t, 4> kSkeletonMagic{'B', 'D', 'S', 'K'};
 inline constexpr std::size_t kPoseHeaderSize = 64;
 inline constexpr std::size_t kPoseJointSize = 28;      // position xyz + rotation xyzw, float32
 inline constexpr std::size_t kSkeletonHeaderSize = 16;
-inline constexpr std::size_t kSkeletonJointFixedSize = 16;  // parent i16, name length u16, offset xyz
+inline constexpr std::size_t kSkeletonJointFixedSize = 16;    // v1: parent i16, name length u16, offset xyz
+inline constexpr std::size_t kSkeletonJointFixedSizeV2 = 32;  // v2: ... then rest rotation xyzw
 
 // Limits a decoder enforces (a message beyond them is malformed).
 inline constexpr std::size_t kMaxJoints = 128;
@@ -95,6 +102,11 @@ struct SkeletonMessage {
   std::vector<std::string> names;   // UTF-8, 1..kMaxJointNameBytes bytes, unique
   std::vector<std::int16_t> parents;  // -1 for the root; otherwise < own index
   std::vector<std::array<float, 3>> offsets_m;  // rest offset from the parent, in the parent's frame, metres
+  // Rest rotation of each joint relative to its parent (x, y, z, w), unit length: forward
+  // kinematics of offsets_m and these gives the skeleton's reference T-pose (docs/protocol.md,
+  // "Rest pose"). Empty when unknown: such a skeleton is encoded as a version-1 message, and a
+  // version-1 message decodes with it empty.
+  std::vector<std::array<float, 4>> rest_rotations_xyzw;
 };
 
 // ---- Results ---------------------------------------------------------------------------
@@ -113,8 +125,9 @@ struct [[nodiscard]] Status {
 // out of range, or non-finite numbers.
 Status encode_pose(const PoseMessage& pose, std::vector<std::uint8_t>& out);
 
-// Encodes `skeleton` into `out`. The skeleton_id written is skeleton_id_of(skeleton), whatever
-// skeleton.skeleton_id holds. Fails if the skeleton is invalid (see validate_skeleton).
+// Encodes `skeleton` into `out`: version 2 with rest rotations, version 1 when it has none.
+// The skeleton_id written is skeleton_id_of(skeleton), whatever skeleton.skeleton_id holds.
+// Fails if the skeleton is invalid (see validate_skeleton).
 Status encode_skeleton(const SkeletonMessage& skeleton, std::vector<std::uint8_t>& out);
 
 // The identifier of a skeleton: FNV-1a (32 bit) over its joint table as encoded on the
@@ -131,7 +144,8 @@ Status validate_skeleton(const SkeletonMessage& skeleton);
 // `bytes`, and the status names what is wrong. Reuses `out.joints`' capacity.
 Status decode_pose(std::span<const std::uint8_t> bytes, PoseMessage& out);
 
-// Decodes a skeleton message frame, checking its id against skeleton_id_of().
+// Decodes a skeleton message frame (version 1 or 2), checking its id against the hash of its
+// joint table.
 Status decode_skeleton(std::span<const std::uint8_t> bytes, SkeletonMessage& out);
 
 // ---- Helpers ---------------------------------------------------------------------------
