@@ -61,10 +61,11 @@ typedef struct bodyd_joint {
 } bodyd_joint;
 
 /* A pose (topic "pose"). 64 + 28 * BODYD_MAX_JOINTS = 3648 bytes; joints[joint_count..]
- * are left unchanged. Times: nanoseconds of the daemon's CLOCK_MONOTONIC. */
+ * are left unchanged. Times: nanoseconds; publish_t_ns of the daemon's CLOCK_MONOTONIC, t_ns of
+ * the samples' time base (the same clock for live sources; docs/protocol.md). */
 typedef struct bodyd_pose {
   uint64_t seq;                /* offset 0: +1 per published pose; gaps are dropped poses */
-  int64_t t_ns;                /* 8: newest tracker sample's time (the time the pose is for) */
+  int64_t t_ns;                /* 8: the time the pose is for: its head sample's t_ns */
   int64_t publish_t_ns;        /* 16: when the daemon published it */
   uint32_t flags;              /* 24: BODYD_FLAG_* bits */
   uint32_t skeleton_id;        /* 28: id of the skeleton the joints follow */
