@@ -198,7 +198,13 @@ Status Client::skeleton(SkeletonMessage& out, std::chrono::milliseconds timeout)
 nlohmann::json skeleton_to_json(const SkeletonMessage& s) {
   nlohmann::json offsets = nlohmann::json::array();
   for (const auto& o : s.offsets_m) offsets.push_back({o[0], o[1], o[2]});
-  return {{"skeleton_id", s.skeleton_id}, {"names", s.names}, {"parents", s.parents}, {"offsets_m", offsets}};
+  nlohmann::json j = {{"skeleton_id", s.skeleton_id}, {"names", s.names}, {"parents", s.parents}, {"offsets_m", offsets}};
+  if (!s.rest_rotations_xyzw.empty()) {
+    nlohmann::json rest = nlohmann::json::array();
+    for (const auto& q : s.rest_rotations_xyzw) rest.push_back({q[0], q[1], q[2], q[3]});
+    j["rest_rotations_xyzw"] = rest;
+  }
+  return j;
 }
 
 Status skeleton_from_json(const nlohmann::json& j, SkeletonMessage& out) {
@@ -238,6 +244,19 @@ Status skeleton_from_json(const nlohmann::json& j, SkeletonMessage& out) {
     s.names.push_back(names[i].get<std::string>());
     s.parents.push_back(static_cast<std::int16_t>(parents[i].get<std::int64_t>()));
     s.offsets_m.push_back({o[0].get<float>(), o[1].get<float>(), o[2].get<float>()});
+  }
+  // Optional (docs/protocol.md): absent for a skeleton without a rest pose.
+  if (j.contains("rest_rotations_xyzw")) {
+    const auto& rest = j["rest_rotations_xyzw"];
+    if (!rest.is_array() || rest.size() != names.size())
+      return Status{fmt::format("\"rest_rotations_xyzw\" must be an array of {} quaternions", names.size())};
+    for (std::size_t i = 0; i < rest.size(); ++i) {
+      const auto& q = rest[i];
+      if (!q.is_array() || q.size() != 4 || !q[0].is_number() || !q[1].is_number() || !q[2].is_number() ||
+          !q[3].is_number())
+        return Status{fmt::format("rest_rotations_xyzw[{}] is not an array of 4 numbers", i)};
+      s.rest_rotations_xyzw.push_back({q[0].get<float>(), q[1].get<float>(), q[2].get<float>(), q[3].get<float>()});
+    }
   }
   if (Status v = protocol::validate_skeleton(s); !v) return v;
   const std::uint32_t id = protocol::skeleton_id_of(s);

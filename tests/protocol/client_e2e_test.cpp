@@ -208,6 +208,29 @@ TEST(ClientCpp, SkeletonJsonIsChecked) {
   EXPECT_THAT(client::skeleton_from_json(bad, s).error, HasSubstr("missing field \"names\""));
 }
 
+// A version-2 skeleton (rest rotations) through the control reply's JSON: the same id.
+TEST(ClientCpp, SkeletonJsonCarriesRestRotations) {
+  protocol::SkeletonMessage sk = synthetic_skeleton();
+  for (std::size_t i = 0; i < sk.names.size(); ++i)
+    sk.rest_rotations_xyzw.push_back({0.0f, 0.6f, 0.0f, i % 2 ? 0.8f : -0.8f});
+  sk.skeleton_id = protocol::skeleton_id_of(sk);
+  const auto j = client::skeleton_to_json(sk);
+  ASSERT_TRUE(j.contains("rest_rotations_xyzw"));
+  protocol::SkeletonMessage s;
+  ASSERT_TRUE(client::skeleton_from_json(j, s).ok()) << client::skeleton_from_json(j, s).error;
+  EXPECT_EQ(s.rest_rotations_xyzw, sk.rest_rotations_xyzw);
+  EXPECT_EQ(s.skeleton_id, sk.skeleton_id);
+  auto bad = j;
+  bad["rest_rotations_xyzw"][1] = {0, 0, 1};
+  EXPECT_THAT(client::skeleton_from_json(bad, s).error, HasSubstr("rest_rotations_xyzw[1]"));
+  bad = j;
+  bad["rest_rotations_xyzw"][1] = {0, 0, 2, 0};
+  EXPECT_THAT(client::skeleton_from_json(bad, s).error, HasSubstr("rest rotation has norm 2"));
+  bad = j;
+  bad.erase("rest_rotations_xyzw");  // the id covers the rest rotations
+  EXPECT_THAT(client::skeleton_from_json(bad, s).error, HasSubstr("does not match the skeleton's hash"));
+}
+
 TEST(ClientCpp, InvalidEndpointIsAnError) {
   client::ClientOptions o;
   o.pose_endpoint = "tcp://";
