@@ -1,5 +1,6 @@
 // bodyd-bvh: what a BVH file holds (frames, frame rate, joints), for one or many files.
 #include "bodyd/motion/bvh.h"
+#include "bodyd/motion/printable.h"
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
@@ -38,15 +39,19 @@ int main(int argc, char** argv) {
       if (json) {
         out.push_back({{"path", path}, {"frames", m.frame_count()}, {"fps", m.fps()}, {"joints", m.skeleton.size()}});
       } else {
-        fmt::print("{}: {} frames, {:.6g} fps, {} joints\n", path, m.frame_count(), m.fps(), m.skeleton.size());
+        fmt::print("{}: {} frames, {:.6g} fps, {} joints\n", bodyd::printable(path, 4096), m.frame_count(), m.fps(),
+                   m.skeleton.size());
         std::fflush(stdout);
       }
     } catch (const bodyd::BvhError& e) {
       ++bad;
       std::fflush(stdout);
-      fmt::print(stderr, "bodyd-bvh: {}\n", e.what());
+      // The reader quotes file content escaped; escaping the whole message also covers a file
+      // name with control characters (a terminal must never receive raw escape bytes).
+      fmt::print(stderr, "bodyd-bvh: {}\n", bodyd::printable(e.what(), 4096));
     }
   }
-  if (json) fmt::print("{}\n", out.dump(2));
+  // A path that is not UTF-8 is written with U+FFFD (dump() would otherwise throw).
+  if (json) fmt::print("{}\n", out.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
   return bad == 0 ? 0 : 1;
 }

@@ -1,7 +1,11 @@
 #include "bodyd/motion/bvh.h"
 
+#include "bodyd/motion/limits.h"
+#include "bodyd/motion/printable.h"
+
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <fstream>
@@ -34,7 +38,7 @@ class Tokenizer {
     std::string_view t = next();
     if (t != literal)
       fail(t.empty() ? fmt::format("unexpected end of file, expected '{}'", literal)
-                     : fmt::format("expected '{}', found '{}'", literal, t));
+                     : fmt::format("expected '{}', found {}", literal, quote_printable(t)));
   }
   double expect_number(std::string_view what) {
     std::string_view t = expect(what);
@@ -57,8 +61,8 @@ class Tokenizer {
     const char* first = t.data();
     if (!t.empty() && t.front() == '+') ++first;
     auto [ptr, ec] = std::from_chars(first, t.data() + t.size(), v);
-    if (ec != std::errc() || ptr != t.data() + t.size()) fail(fmt::format("{}: '{}' is not a number", what, t));
-    fail(fmt::format("{}: '{}' is not finite", what, t));
+    if (ec != std::errc() || ptr != t.data() + t.size()) fail(fmt::format("{}: {} is not a number", what, quote_printable(t)));
+    fail(fmt::format("{}: {} is not finite", what, quote_printable(t)));
   }
   // Rest of the current line (after the last token), trimmed; advances to the next line.
   std::string_view rest_of_line() {
@@ -96,7 +100,7 @@ class Tokenizer {
     while (pos_ < text_.size() && text_[pos_] != '\n') {
       if (!is_space(text_[pos_])) {
         token_line_ = line_;
-        fail(fmt::format("unexpected text '{}' after the value", rest_of_line()));
+        fail(fmt::format("unexpected text {} after the value", quote_printable(rest_of_line())));
       }
       ++pos_;
     }
@@ -161,12 +165,29 @@ int axis_of(Channel c) {
 }
 
 constexpr int kMaxJoints = 1024;
+// Rotation channels beyond this many degrees are absurd (a thousand turns) and lose precision.
+constexpr double kMaxAbsRotationDeg = 1e5;
+
+// A length of the file (OFFSET, position channel) in metres, or a BvhError when it is outside
+// the plausible range of a position (limits.h): a finite 1e300 would overflow forward
+// kinematics and poison every metric and tracker computed from the clip.
+double length_m(const Tokenizer& tok, double value, const BvhReadOptions& opt, std::string_view what) {
+  const double m = value * opt.unit_to_m;
+  if (!limits::position_plausible(m))
+    tok.fail(fmt::format("{} {} is {:.6g} m, outside the plausible range +-{} m (docs/reliability.md \"Limits\"): "
+                         "is the file in centimetres? Fix the value or drop the clip",
+                         what, value, m, limits::kMaxAbsPositionM));
+  return m;
+}
 constexpr int kMaxFrames = 10'000'000;
 
 void parse_joint(Tokenizer& tok, Motion& m, int parent, std::string name, const BvhReadOptions& opt, int depth) {
   if (depth > 256) tok.fail("hierarchy nested deeper than 256 joints");
   if (m.skeleton.size() >= kMaxJoints) tok.fail(fmt::format("more than {} joints", kMaxJoints));
-  if (m.skeleton.find(name) >= 0) tok.fail(fmt::format("joint name '{}' appears twice", name));
+  for (char c : name)
+    if (!is_printable_ascii(static_cast<unsigned char>(c)) && static_cast<unsigned char>(c) < 0x80)
+      tok.fail(fmt::format("joint name {} holds a control character; joint names are printable text", quote_printable(name)));
+  if (m.skeleton.find(name) >= 0) tok.fail(fmt::format("joint name {} appears twice", quote_printable(name)));
   const int index = m.skeleton.size();
   m.skeleton.names.push_back(std::move(name));
   m.skeleton.parents.push_back(parent);
@@ -180,8 +201,8 @@ void parse_joint(Tokenizer& tok, Motion& m, int parent, std::string name, const 
     if (t == "OFFSET") {
       if (have_offset) tok.fail("second OFFSET in one joint");
       Vec3 o;
-      for (int k = 0; k < 3; ++k) o[k] = tok.expect_number("OFFSET value");
-      m.skeleton.offsets[static_cast<size_t>(index)] = o * opt.unit_to_m;
+      for (int k = 0; k < 3; ++k) o[k] = length_m(tok, tok.expect_number("OFFSET value"), opt, "OFFSET value");
+      m.skeleton.offsets[static_cast<size_t>(index)] = o;
       have_offset = true;
     } else if (t == "CHANNELS") {
       if (have_channels) tok.fail("second CHANNELS in one joint");
@@ -193,10 +214,10 @@ void parse_joint(Tokenizer& tok, Motion& m, int parent, std::string name, const 
         std::string_view c = tok.expect("channel name");
         Channel ch;
         if (!parse_channel(c, ch))
-          tok.fail(fmt::format("'{}' is not a channel name (CHANNELS declares {} channels; found fewer?)", c,
+          tok.fail(fmt::format("{} is not a channel name (CHANNELS declares {} channels; found fewer?)", quote_printable(c),
                                static_cast<int>(n)));
         for (Channel prev : chans)
-          if (prev == ch) tok.fail(fmt::format("channel {} listed twice", c));
+          if (prev == ch) tok.fail(fmt::format("channel {} listed twice", quote_printable(c)));
         chans.push_back(ch);
       }
       have_channels = true;
@@ -208,22 +229,25 @@ void parse_joint(Tokenizer& tok, Motion& m, int parent, std::string name, const 
       tok.expect_literal("{");
       tok.expect_literal("OFFSET");
       Vec3 o;
-      for (int k = 0; k < 3; ++k) o[k] = tok.expect_number("End Site OFFSET value");
-      m.skeleton.end_sites[static_cast<size_t>(index)] = o * opt.unit_to_m;
+      for (int k = 0; k < 3; ++k)
+        o[k] = length_m(tok, tok.expect_number("End Site OFFSET value"), opt, "End Site OFFSET value");
+      m.skeleton.end_sites[static_cast<size_t>(index)] = o;
       tok.expect_literal("}");
     } else if (t == "}") {
       break;
     } else {
-      tok.fail(fmt::format("unexpected '{}' in joint '{}'", t, m.skeleton.names[static_cast<size_t>(index)]));
+      tok.fail(fmt::format("unexpected {} in joint {}", quote_printable(t), quote_printable(m.skeleton.names[static_cast<size_t>(index)])));
     }
   }
-  if (!have_offset) tok.fail(fmt::format("joint '{}' has no OFFSET", m.skeleton.names[static_cast<size_t>(index)]));
+  if (!have_offset) tok.fail(fmt::format("joint {} has no OFFSET", quote_printable(m.skeleton.names[static_cast<size_t>(index)])));
 }
 
 }  // namespace
 
 Motion parse_bvh(std::string_view text, const std::string& source, const BvhReadOptions& opt) {
   Tokenizer tok(text, source);
+  if (!(std::isfinite(opt.unit_to_m) && opt.unit_to_m > 0.0 && opt.unit_to_m <= 1e3))
+    throw BvhError(fmt::format("{}: unit_to_m {} must be in (0, 1000]", source, opt.unit_to_m));
   Motion m;
   tok.expect_literal("HIERARCHY");
   tok.expect_literal("ROOT");
@@ -232,7 +256,8 @@ Motion parse_bvh(std::string_view text, const std::string& source, const BvhRead
   {
     std::string_view t = tok.next();
     if (t == "ROOT") tok.fail("more than one ROOT (only one skeleton per file is supported)");
-    if (t != "MOTION") tok.fail(t.empty() ? "missing MOTION section" : fmt::format("expected 'MOTION', found '{}'", t));
+    if (t != "MOTION")
+      tok.fail(t.empty() ? "missing MOTION section" : fmt::format("expected 'MOTION', found {}", quote_printable(t)));
   }
   tok.expect_literal("Frames:");
   const double frames_d = tok.expect_number("frame count");
@@ -251,7 +276,9 @@ Motion parse_bvh(std::string_view text, const std::string& source, const BvhRead
   const Skeleton& sk = m.skeleton;
   const size_t nj = static_cast<size_t>(sk.size());
   // Per joint: Euler order of its rotation channels in file order.
-  m.frames.reserve(static_cast<size_t>(frames));
+  // Each frame line takes at least two bytes, so a short file cannot make "Frames: 9999999"
+  // reserve gigabytes before the truncation is found.
+  m.frames.reserve(std::min(static_cast<size_t>(frames), text.size() / 2 + 1));
   std::vector<double> values(total_channels);
   for (int f = 0; f < frames; ++f) {
     std::string_view line;
@@ -283,10 +310,15 @@ Motion parse_bvh(std::string_view text, const std::string& source, const BvhRead
       for (Channel c : m.channels[j]) {
         const double val = values[v++];
         if (is_rotation(c)) {
-          if (std::abs(val) > 1e5) tok.fail(fmt::format("frame {}: rotation {} degrees is absurd", f, val));
+          if (std::abs(val) > kMaxAbsRotationDeg)
+            tok.fail(fmt::format("frame {}: joint {} {} {} degrees is outside the plausible range +-{} degrees", f,
+                                 quote_printable(sk.names[j]), channel_name(c), val, kMaxAbsRotationDeg));
           q = q * Quat(Eigen::AngleAxisd(val * M_PI / 180.0, Vec3::Unit(axis_of(c))));
         } else {
-          pose.local_translations[j][axis_of(c)] = val * opt.unit_to_m;
+          const double val_m = val * opt.unit_to_m;
+          if (!limits::position_plausible(val_m))  // the message is built only on failure
+            (void)length_m(tok, val, opt, fmt::format("frame {}: joint {} {}", f, quote_printable(sk.names[j]), channel_name(c)));
+          pose.local_translations[j][axis_of(c)] = val_m;
         }
       }
       pose.local_rotations[j] = q.normalized();

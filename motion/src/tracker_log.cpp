@@ -1,5 +1,7 @@
 #include "bodyd/motion/tracker_log.h"
 
+#include "bodyd/motion/printable.h"
+
 #include <fmt/format.h>
 
 #include <charconv>
@@ -22,22 +24,9 @@ std::string_view trim(std::string_view s) {
   return s;
 }
 
-// The text as it may appear in an error message: at most 40 characters, control and
-// non-ASCII bytes escaped, so garbage input cannot flood or corrupt a terminal.
-std::string quote(std::string_view s) {
-  constexpr size_t kMax = 40;
-  std::string out = "'";
-  for (size_t i = 0; i < s.size() && i < kMax; ++i) {
-    const auto c = static_cast<unsigned char>(s[i]);
-    if (c >= 0x20 && c < 0x7f)
-      out += static_cast<char>(c);
-    else
-      out += fmt::format("\\x{:02x}", c);
-  }
-  if (s.size() > kMax) out += "...";
-  out += "'";
-  return out;
-}
+// Quoted input in messages: at most 40 characters, control and non-ASCII bytes escaped, so
+// garbage input cannot flood or corrupt a terminal.
+std::string quote(std::string_view s) { return quote_printable(s, 40); }
 
 bool is_key_char(char c) {
   return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' || c == '-' ||
@@ -143,6 +132,10 @@ TrackerSample TrackerLogParser::parse_sample(std::string_view line) const {
     if (ec == std::errc::result_out_of_range) fail(fmt::format("t_ns {} is out of range for int64", quote(t)));
     if (ec != std::errc() || ptr != last)
       fail(fmt::format("t_ns {} is not an integer number of nanoseconds", quote(t)));
+    if (!limits::time_plausible(s.t_ns))
+      fail(fmt::format("t_ns {} is outside the plausible range +-{} ns (about 146 years; docs/tracker-log.md "
+                       "\"Limits\"): is the column in nanoseconds from a sane epoch? Rebase the log's times",
+                       s.t_ns, limits::kMaxAbsTimeNs));
   }
   const std::optional<Role> role = role_from_name(f[1]);
   if (!role) fail(fmt::format("unknown role {} (expected head, left_hand or right_hand)", quote(f[1])));
@@ -164,6 +157,11 @@ TrackerSample TrackerLogParser::parse_sample(std::string_view line) const {
       fail(fmt::format("{} {}", kFieldNames[3 + i], err));
   }
   if (!s.valid) return s;
+  for (size_t i = 0; i < 3; ++i)
+    if (!limits::position_plausible(v[i]))
+      fail(fmt::format("{} {} m is outside the plausible range +-{} m (docs/tracker-log.md \"Limits\"): is the "
+                       "position in metres? Fix or drop the line, or mark the sample invalid (valid 0)",
+                       kFieldNames[3 + i], v[i], limits::kMaxAbsPositionM));
   s.position_m = Vec3(v[0], v[1], v[2]);
   const Quat q(v[6], v[3], v[4], v[5]);  // Eigen's constructor takes (w, x, y, z)
   const double norm = q.norm();
@@ -269,15 +267,24 @@ void append_tracker_sample(std::string& out, const TrackerSample& s) {
   if (static_cast<int>(s.role) >= kRoleCount)
     throw TrackerLogError(fmt::format("cannot write tracker log: sample at t_ns {} has no valid role", s.t_ns));
   auto it = std::back_inserter(out);
+  if (!limits::time_plausible(s.t_ns))
+    throw TrackerLogError(fmt::format("cannot write tracker log: {} sample t_ns {} is outside the plausible range "
+                                      "+-{} ns",
+                                      role_name(s.role), s.t_ns, limits::kMaxAbsTimeNs));
   if (!s.valid) {
     fmt::format_to(it, "{},{},0,,,,,,,\n", s.t_ns, role_name(s.role));
     return;
   }
   const Vec3& p = s.position_m;
   const Quat& q = s.rotation;
-  if (!p.allFinite() || !q.coeffs().allFinite() || !(std::abs(q.norm() - 1.0) <= kTrackerLogQuatNormTolerance))
+  if (!limits::position_plausible(p.x()) || !limits::position_plausible(p.y()) ||
+      !limits::position_plausible(p.z()))
+    throw TrackerLogError(fmt::format("cannot write tracker log: {} sample at t_ns {} has position ({}, {}, {}) m, "
+                                      "outside the plausible range +-{} m per coordinate",
+                                      role_name(s.role), s.t_ns, p.x(), p.y(), p.z(), limits::kMaxAbsPositionM));
+  if (!q.coeffs().allFinite() || !(std::abs(q.norm() - 1.0) <= kTrackerLogQuatNormTolerance))
     throw TrackerLogError(fmt::format(
-        "cannot write tracker log: {} sample at t_ns {} has a non-finite position or a non-unit quaternion",
+        "cannot write tracker log: {} sample at t_ns {} has a non-finite or non-unit quaternion",
         role_name(s.role), s.t_ns));
   fmt::format_to(it, "{},{},1,{},{},{},{},{},{},{}\n", s.t_ns, role_name(s.role), p.x(), p.y(), p.z(), q.x(), q.y(),
                  q.z(), q.w());

@@ -1,5 +1,7 @@
 #include "bodyd/simulators/tracker_sim.h"
 
+#include "bodyd/motion/limits.h"
+
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -123,6 +125,15 @@ TrackerTrajectory::TrackerTrajectory(const Motion& motion) {
       if (!global.positions[j].allFinite() || !global.rotations[j].coeffs().allFinite())
         throw SimError(fmt::format("cannot simulate trackers: joint '{}' is not finite in frame {}",
                                    role_joint_name(r), f));
+      // A tracker log holds positions within limits::kMaxAbsPositionM; a clip whose joints lie
+      // beyond (a BVH value the reader let through, or a skeleton built in code) is refused here
+      // rather than written as a log no reader accepts.
+      const Vec3& p = global.positions[j];
+      if (!limits::position_plausible(p.x()) || !limits::position_plausible(p.y()) ||
+          !limits::position_plausible(p.z()))
+        throw SimError(fmt::format("cannot simulate trackers: joint '{}' is at ({:.6g}, {:.6g}, {:.6g}) m in frame "
+                                   "{}, outside the plausible range +-{} m of a tracker position",
+                                   role_joint_name(r), p.x(), p.y(), p.z(), f, limits::kMaxAbsPositionM));
       positions_m_[ri].push_back(global.positions[j]);
       rotations_[ri].push_back(global.rotations[j].normalized());
     }

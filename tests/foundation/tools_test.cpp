@@ -138,6 +138,53 @@ TEST_F(ToolsTest, BvhReportsADamagedFileWithItsLineAndStillTheGoodOnes) {
   EXPECT_NE(dir.err.find("is a directory"), std::string::npos) << dir.err;
 }
 
+// Issue 11: a clip with a finite absurd value (1e300) loaded, and bodyd-sim wrote 9e292 positions.
+// Now bodyd-bvh and bodyd-sim refuse it with the file and line, and write nothing.
+TEST_F(ToolsTest, AbsurdBvhValuesAreRefusedWithTheLine) {
+  std::string text = slurp(kWalk);
+  size_t pos = 0;
+  for (int line = 1; line < 140; ++line) pos = text.find('\n', pos) + 1;
+  text.replace(pos, text.find(' ', pos) - pos, "1e300");  // frame 5's root Xposition
+  const fs::path bad = dir_ / "absurd.bvh";
+  std::ofstream(bad, std::ios::binary) << text;
+
+  const ProcessResult b = run("bodyd-bvh", {bad.string()});
+  EXPECT_EQ(b.exit_code, 1);
+  EXPECT_NE(b.err.find(bad.string() + ":140: frame 5: joint 'joint_Root' Xposition 1e+300"), std::string::npos)
+      << b.err;
+  const ProcessResult s = run("bodyd-sim", {"--bvh", bad.string(), "--out", (dir_ / "t.csv").string()});
+  EXPECT_EQ(s.exit_code, 1);
+  EXPECT_NE(s.err.find(bad.string() + ":140:"), std::string::npos) << s.err;
+  EXPECT_NE(s.err.find("outside the plausible range"), std::string::npos) << s.err;
+  EXPECT_FALSE(fs::exists(dir_ / "t.csv"));
+}
+
+// bodyd-bvh never passes raw control bytes from a file (or a file name) to the terminal.
+TEST_F(ToolsTest, BvhEscapesControlBytesFromTheFile) {
+  std::string text = slurp(kWalk);
+  const size_t motion = text.find("MOTION");
+  ASSERT_NE(motion, std::string::npos);
+  text.replace(motion, 6, "\x1b]0;owned\x07\x1b[2J\x9b");
+  const fs::path bad = dir_ / "esc\x1b[31m.bvh";
+  std::ofstream(bad, std::ios::binary) << text;
+  for (const auto& args : {std::vector<std::string>{bad.string()}, std::vector<std::string>{"--json", bad.string()}}) {
+    const ProcessResult r = run("bodyd-bvh", args);
+    EXPECT_EQ(r.exit_code, 1);
+    for (char c : {'\x1b', '\x07', '\x9b'}) {
+      EXPECT_EQ(r.err.find(c), std::string::npos) << r.err;
+      EXPECT_EQ(r.out.find(c), std::string::npos) << r.out;
+    }
+    EXPECT_NE(r.err.find("found '\\x1b]0;owned\\x07\\x1b[2J\\x9b'"), std::string::npos) << r.err;
+  }
+  // A good file whose name holds an escape byte: the name is escaped on stdout too.
+  const fs::path good = dir_ / "good\x1b[2J.bvh";
+  fs::copy_file(kWalk, good);
+  const ProcessResult g = run("bodyd-bvh", {good.string()});
+  EXPECT_EQ(g.exit_code, 0) << g.err;
+  EXPECT_EQ(g.out.find('\x1b'), std::string::npos) << g.out;
+  EXPECT_NE(g.out.find("good\\x1b[2J.bvh: 60 frames"), std::string::npos) << g.out;
+}
+
 // Every file of the shared data set: frames agree with each file's own "Frames:" line.
 TEST_F(ToolsTest, BvhOnEveryBandaiFile) {
   if (!test::have_bandai()) GTEST_SKIP() << "no " << test::bandai();

@@ -33,14 +33,16 @@ std::vector<TrackerSample> awkward_samples() {
   std::normal_distribution<double> n(0.0, 1.0);
   v.push_back(make(-5'000'000, Role::Head, true, Vec3(-0.0, 1e-300, 4.9e-324), Quat(0, 1, 0, 0)));
   v.push_back(make(-5'000'000, Role::LeftHand, false));
-  v.push_back(make(0, Role::RightHand, true, Vec3(1e9, -123456.789, 0.1), Quat(1e-12, 0.6, 0.8, 0).normalized()));
+  // The edges of the plausible range (limits.h) are accepted.
+  v.push_back(make(0, Role::RightHand, true, Vec3(limits::kMaxAbsPositionM, -99.999999999, 0.1),
+                   Quat(1e-12, 0.6, 0.8, 0).normalized()));
   for (int i = 1; i < 200; ++i) {
     const Role r = kRoles[static_cast<size_t>(i % 3)];
     Quat q(n(rng), n(rng), n(rng), n(rng));
     q.normalize();
     v.push_back(make(std::int64_t{11'111'111} * i + (i % 7), r, i % 5 != 0, Vec3(n(rng), 1.5 + n(rng), n(rng)), q));
   }
-  v.push_back(make(std::numeric_limits<std::int64_t>::max(), Role::Head, true, Vec3(1, 2, 3), Quat::Identity()));
+  v.push_back(make(limits::kMaxAbsTimeNs, Role::Head, true, Vec3(1, 2, -limits::kMaxAbsPositionM), Quat::Identity()));
   return v;
 }
 
@@ -215,6 +217,24 @@ TEST(TrackerLog, RejectsBadRowsWithTheirLineNumber) {
   (void)parse_tracker_log(with_line(4, "0,head,1,0,1.6,0,0,0,0,1.0009"), "near-unit is accepted");
 }
 
+// Finite but absurd values (issue 11: one 1e300 broke the diffusion stream until restart) are
+// rejected at the reader, with the line, the field and what to do; the limits are limits.h's.
+TEST(TrackerLog, RejectsValuesOutsideThePlausibleRanges) {
+  expect_error(with_line(5, "0,left_hand,1,1e300,1.2,0.1,0,0,0,1"), 5, "px 1e+300 m is outside the plausible range");
+  expect_error(with_line(5, "0,left_hand,1,1e300,1.2,0.1,0,0,0,1"), 5, "is the position in metres?");
+  expect_error(with_line(4, "0,head,1,0,-100.000001,0,0,0,0,1"), 4, "py -100.000001 m is outside");
+  expect_error(with_line(4, "0,head,1,0,1.6,1e5,0,0,0,1"), 4, "pz 100000 m is outside");
+  (void)parse_tracker_log(with_line(4, "0,head,1,100,-100,1.6,0,0,0,1"), "the edge is inside");
+  // Times: |t_ns| <= 2^62 (limits::kMaxAbsTimeNs); int64's own edges are outside.
+  expect_error(with_line(4, "9223372036854775807,head,1,0,1.6,0,0,0,0,1"), 4,
+               "t_ns 9223372036854775807 is outside the plausible range");
+  expect_error(with_line(4, "-9223372036854775808,head,1,0,1.6,0,0,0,0,1"), 4, "is outside the plausible range");
+  expect_error(with_line(6, "4611686018427387905,right_hand,0,,,,,,,"), 6, "Rebase the log's times");
+  (void)parse_tracker_log(with_line(7, "4611686018427387904,head,1,0,1.6,0,0,0,0,1"), "2^62 is inside");
+  // An invalid sample's ignored pose fields need only be finite numbers.
+  (void)parse_tracker_log(with_line(6, "0,right_hand,0,1e300,0,0,0,0,0,0"), "ignored");
+}
+
 TEST(TrackerLog, RejectsTimeGoingBackwardsWithinARole) {
   expect_error(with_line(7, "-1,head,1,0.01,1.6,0,0,0,0,1"), 7, "t_ns -1 is not after the previous head sample's t_ns 0");
   expect_error(with_line(7, "0,head,1,0.01,1.6,0,0,0,0,1"), 7, "is not after");  // repeated time
@@ -255,6 +275,9 @@ TEST(TrackerLog, WriterRefusesWhatTheReaderWouldReject) {
                TrackerLogError);
   EXPECT_THROW((void)format_tracker_log({make(5, Role::Head, true), make(5, Role::Head, true)}), TrackerLogError);
   EXPECT_THROW((void)format_tracker_log({make(0, static_cast<Role>(9), true)}), TrackerLogError);
+  EXPECT_THROW((void)format_tracker_log({make(0, Role::Head, true, Vec3(9e292, 0, 0))}), TrackerLogError);
+  EXPECT_THROW((void)format_tracker_log({make(0, Role::Head, true, Vec3(0, -100.5, 0))}), TrackerLogError);
+  EXPECT_THROW((void)format_tracker_log({make(limits::kMaxAbsTimeNs + 1, Role::Head, false)}), TrackerLogError);
   EXPECT_THROW((void)tracker_log_preamble({{"bad key", "v"}}), TrackerLogError);
   EXPECT_THROW((void)tracker_log_preamble({{"k", "two\nlines"}}), TrackerLogError);
   EXPECT_NO_THROW((void)format_tracker_log({make(5, Role::Head, true), make(5, Role::LeftHand, false)}));
@@ -273,6 +296,7 @@ TEST(TrackerLog, FuzzPrefixesAndGarbageNeverCrash) {
       for (const auto& s : log.samples)
         if (s.valid) {
           ASSERT_NEAR(s.rotation.norm(), 1.0, 1e-12);
+          ASSERT_LE(s.position_m.cwiseAbs().maxCoeff(), limits::kMaxAbsPositionM);
         }
       ++parsed;
     } catch (const TrackerLogError&) {

@@ -352,6 +352,28 @@ TEST(TrackerSim, RejectsBadOptionsAndClips) {
   EXPECT_EQ(simulate_trackers(one, SimOptions{}).size(), 3u);
 }
 
+// Issue 11: bodyd-sim wrote positions of 9e292 from a clip with a finite absurd value. The BVH
+// reader now refuses such values; a clip whose joints still end up beyond the tracker range
+// (offsets each within range, summed beyond it) is refused by the simulator with the joint
+// and frame, and never becomes samples.
+TEST(TrackerSim, RefusesJointsBeyondThePlausibleTrackerRange) {
+  Motion far = walk();
+  far.frames[7].local_translations[0].x() = 99.0;  // the root at 99 m: the head is beyond 100 m
+  far.frames[7].local_translations[0].z() = 99.0;
+  far.frames[7].local_translations[0].y() = 99.5;
+  try {
+    (void)simulate_trackers(far, SimOptions{});
+    FAIL() << "no error";
+  } catch (const SimError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("joint 'Head' is at ("), std::string::npos) << msg;
+    EXPECT_NE(msg.find("in frame 7, outside the plausible range +-100 m"), std::string::npos) << msg;
+  }
+  Motion huge = walk();
+  huge.frames[2].local_translations[0].y() = 1e300;  // what the old reader let through
+  EXPECT_THROW((void)simulate_trackers(huge, SimOptions{}), SimError);
+}
+
 // Real clips: the no-noise error against independent FK, reported and bounded.
 TEST(TrackerSim, NoNoiseMatchesFkOnRealClips) {
   if (!test::have_bandai()) GTEST_SKIP() << "no " << test::bandai();

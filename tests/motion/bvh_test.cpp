@@ -83,6 +83,58 @@ TEST(Bvh, MalformedInputsNameTheLine) {
   expect_error("", "1", "expected 'HIERARCHY'");
 }
 
+// Issue 11: a finite but absurd value (1e300) loaded, and forward kinematics then gave inf/NaN
+// to every metric and 9e292 to simulated trackers. Lengths (OFFSET, End Site, position
+// channels) must lie within +-limits::kMaxAbsPositionM metres after the unit conversion.
+TEST(Bvh, RejectsFiniteAbsurdValuesWithTheLine) {
+  const std::string ok = kSmall;
+  expect_error(replace(ok, "1.5 90", "1e300 90"), "20", "frame 1: joint 'hips' Xposition 1e+300 is 1e+298 m, outside");
+  expect_error(replace(ok, "1.5 90", "1e300 90"), "20", "is the file in centimetres?");
+  expect_error(replace(ok, "1.5 90", "-10000.5 90"), "20", "outside the plausible range +-100 m");
+  expect_error(replace(ok, "OFFSET 0 -40 0", "OFFSET 0 -40 1e300"), "8", "OFFSET value 1e+300 is 1e+298 m");
+  expect_error(replace(ok, "OFFSET 0 -4.5e1 0", "OFFSET 0 -4.5e9 0"), "12", "End Site OFFSET value -4500000000 is -4.5e+07 m");
+  expect_error(replace(ok, "1.5 90 0 90", "1.5 90 0 1e6"), "20", "Zrotation 1000000 degrees is outside");
+  // The edges are inside: 10000 cm is 100 m.
+  const Motion edge = parse_bvh(replace(replace(ok, "1.5 90", "-10000 10000"), "OFFSET 0 -40 0", "OFFSET 0 -40 10000"),
+                                "edge.bvh");
+  EXPECT_DOUBLE_EQ(edge.frames[1].local_translations[0].x(), -100.0);
+  EXPECT_DOUBLE_EQ(edge.skeleton.offsets[1].z(), 100.0);
+  // A unit that turns sane numbers into absurd ones is refused too.
+  EXPECT_THROW((void)parse_bvh(ok, "units.bvh", BvhReadOptions{1e9}), BvhError);
+  EXPECT_THROW((void)parse_bvh(ok, "units.bvh", BvhReadOptions{-0.01}), BvhError);
+}
+
+// Messages that quote the file escape control and non-ASCII bytes, so a file cannot send
+// terminal escape sequences through an error; joint names with control bytes are refused.
+TEST(Bvh, MessagesEscapeBytesFromTheFile) {
+  const std::string ok = kSmall;
+  auto message = [](const std::string& text) -> std::string {
+    try {
+      (void)parse_bvh(text, "esc.bvh");
+    } catch (const BvhError& e) {
+      return e.what();
+    }
+    ADD_FAILURE() << "no error";
+    return {};
+  };
+  const std::string raw = "\x1b]0;owned\x07\x1b[2J";
+  for (const std::string& bad : {replace(ok, "MOTION", "M" + std::string("\x1b[2J")),
+                                 replace(ok, "JOINT knee", "JOINT kn\x1b[31mee"),
+                                 replace(ok, "1.5 90", "1.5\x1b[2J 90"),
+                                 replace(ok, "Xrotation Yrotation Zrotation\n", "Xrotation Yrotation \x9b" "31m\n"),
+                                 replace(ok, "Frame Time: 0.0333333", "Frame Time: 0.0333333 \x1b[2J"),
+                                 replace(ok, "OFFSET 0 -40 0", "OFFSET 0 -40 0 " + raw)}) {
+    const std::string msg = message(bad);
+    SCOPED_TRACE(msg);
+    EXPECT_EQ(msg.find('\x1b'), std::string::npos);
+    EXPECT_EQ(msg.find('\x9b'), std::string::npos);
+    EXPECT_EQ(msg.find('\x07'), std::string::npos);
+    EXPECT_TRUE(msg.find("\\x1b") != std::string::npos || msg.find("\\x9b") != std::string::npos);
+  }
+  EXPECT_NE(message(replace(ok, "JOINT knee", "JOINT kn\x1b[31mee")).find("holds a control character"),
+            std::string::npos);
+}
+
 TEST(Bvh, NeverCrashesOnTruncations) {
   // Every prefix of a valid file is either valid or a clean BvhError.
   const std::string ok = kSmall;

@@ -14,6 +14,7 @@
 // renormalised on read, so they agree to a few ulp).
 #pragma once
 
+#include "bodyd/motion/limits.h"
 #include "bodyd/motion/tracker.h"
 
 #include <array>
@@ -37,7 +38,10 @@ class TrackerLogError : public std::runtime_error {
 inline constexpr std::string_view kTrackerLogVersionLine = "# bodyd-tracker-log v1";
 inline constexpr std::string_view kTrackerLogHeader = "t_ns,role,valid,px,py,pz,qx,qy,qz,qw";
 // A valid sample's quaternion must have | |q| - 1 | <= this; it is then renormalised.
-inline constexpr double kTrackerLogQuatNormTolerance = 1e-3;
+inline constexpr double kTrackerLogQuatNormTolerance = limits::kQuatNormTolerance;
+// Plausible ranges (docs/tracker-log.md "Limits"): each position coordinate within
+// +-limits::kMaxAbsPositionM metres, |t_ns| <= limits::kMaxAbsTimeNs. The reader rejects
+// a line outside them, the writer refuses to write one.
 
 // "# key: value" lines between the version line and the header, in file order.
 // A '#' line without "key:" is kept with an empty key and the text as value.
