@@ -1,0 +1,339 @@
+// bodyd-ctl: the command-line client of bodyd's control socket (docs/ctl.md, docs/control.md).
+//
+//   bodyd-ctl status [--json]
+//   bodyd-ctl calibrate --head-height-m 1.62 | --height-m 1.80 | --from-head
+//   bodyd-ctl reset
+//   bodyd-ctl reload-model [PATH]
+//   bodyd-ctl shutdown
+//
+// One REQ request, one reply, with a timeout: a daemon that does not answer is reported with
+// the endpoint tried and how to start one, never waited for forever.
+// Exit codes: 0 done; 1 bodyd answered with an error; 2 bad command line; 3 no answer.
+#include "bodyd/daemon/endpoint.h"
+#include "bodyd/paths/data_files.h"
+
+#include <CLI/CLI.hpp>
+#include <fmt/core.h>
+#include <nlohmann/json.hpp>
+#include <zmq.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <optional>
+#include <sstream>
+#include <string>
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+constexpr int kExitError = 1, kExitUsage = 2, kExitNoAnswer = 3;
+constexpr const char* kDefaultControl = "ipc:///tmp/bodyd/control";
+
+std::string read_text(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return {};
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+// Where to send requests, and why there (for the message when nobody answers).
+struct Target {
+  std::string endpoint;
+  std::string from;
+};
+
+// --control, else --endpoints-file, else the "control" key of the user's config file (what the
+// systemd unit runs with), else bodyd's default.
+std::optional<Target> choose_target(const std::string& control_flag, const std::string& endpoints_file,
+                                    std::string& error) {
+  if (!control_flag.empty()) return Target{control_flag, "--control"};
+  if (!endpoints_file.empty()) {
+    const json j = json::parse(read_text(endpoints_file), nullptr, false);
+    if (j.is_discarded() || !j.is_object() || !j.contains("control") || !j["control"].is_string() ||
+        j["control"].get<std::string>().empty()) {
+      error = endpoints_file + ": not a bodyd endpoints file with a \"control\" endpoint (bodyd --endpoints-file)";
+      return std::nullopt;
+    }
+    return Target{j["control"].get<std::string>(), "--endpoints-file " + endpoints_file};
+  }
+  const fs::path config = bodyd::paths::user_config_file();
+  std::error_code ec;
+  if (!config.empty() && fs::exists(config, ec)) {
+    const json j = json::parse(read_text(config), nullptr, /*allow_exceptions=*/false, /*ignore_comments=*/true);
+    if (!j.is_discarded() && j.is_object() && j.contains("control") && j["control"].is_string()) {
+      const std::string c = j["control"].get<std::string>();
+      if (c == "none" || c.empty()) {
+        error = config.string() + " sets \"control\": \"" + c + "\": that bodyd has no control socket";
+        return std::nullopt;
+      }
+      return Target{c, "\"control\" in " + config.string()};
+    }
+  }
+  return Target{kDefaultControl, "bodyd's default"};
+}
+
+struct Curve {
+  std::string server_public, client_public, client_secret;
+};
+
+std::optional<Curve> load_curve(const std::string& server_key_file, const std::string& client_key_file,
+                                std::string& error) {
+  if (server_key_file.empty()) {
+    if (!client_key_file.empty()) error = "--curve-client-key needs --curve-server-key (the server's public key file)";
+    return std::nullopt;
+  }
+  Curve c;
+  if (std::string e = bodyd::daemon::read_curve_key_file(server_key_file, c.server_public); !e.empty()) {
+    error = e;
+    return std::nullopt;
+  }
+  if (client_key_file.empty()) {
+    // No key of our own: a fresh pair (enough when bodyd has no --curve-allow list).
+    char pub[41] = {}, sec[41] = {};
+    if (zmq_curve_keypair(pub, sec) != 0) {
+      error = std::string("cannot make a CURVE key pair: ") + zmq_strerror(zmq_errno());
+      return std::nullopt;
+    }
+    c.client_public = pub;
+    c.client_secret = sec;
+    return c;
+  }
+  if (std::string e = bodyd::daemon::read_curve_key_file(client_key_file, c.client_secret); !e.empty()) {
+    error = e;
+    return std::nullopt;
+  }
+  c.client_public = bodyd::daemon::curve_public_from_secret(c.client_secret);
+  if (c.client_public.empty()) {
+    error = client_key_file + ": not a CURVE secret key (bodyd --gen-keys DIR --client NAME writes DIR/NAME.secret)";
+    return std::nullopt;
+  }
+  return c;
+}
+
+std::string no_answer_message(const Target& target, double timeout_s, bool curve) {
+  std::string m = fmt::format("bodyd-ctl: no answer from bodyd on {} ({}) within {:g} s.\n", target.endpoint,
+                              target.from, timeout_s);
+  if (target.endpoint.rfind("ipc://", 0) == 0) {
+    const fs::path socket = target.endpoint.substr(6);
+    std::error_code ec;
+    if (!fs::exists(socket, ec)) m += fmt::format("  Nothing listens there: {} does not exist.\n", socket.string());
+  }
+  m += "  Is bodyd running? Start it with `systemctl --user start bodyd` (the installed service) or run `bodyd`;\n"
+       "  `systemctl --user status bodyd` and `journalctl --user -u bodyd` say why it stopped.\n"
+       "  bodyd on another endpoint: bodyd-ctl --control ENDPOINT (bodyd's --control flag or \"control\" config key).\n";
+  if (curve)
+    m += "  With CURVE: is --curve-server-key bodyd's server.public, and is this client's key in bodyd's --curve-allow "
+         "directory?\n";
+  return m;
+}
+
+// One request; nullopt when no reply came within the timeout.
+std::optional<json> request(const Target& target, const json& req, double timeout_s, const std::optional<Curve>& curve) {
+  zmq::context_t ctx;
+  zmq::socket_t sock(ctx, zmq::socket_type::req);
+  sock.set(zmq::sockopt::linger, 0);
+  sock.set(zmq::sockopt::rcvtimeo, static_cast<int>(std::lround(timeout_s * 1000)));
+  sock.set(zmq::sockopt::sndtimeo, static_cast<int>(std::lround(timeout_s * 1000)));
+  if (curve) {
+    sock.set(zmq::sockopt::curve_serverkey, curve->server_public);
+    sock.set(zmq::sockopt::curve_publickey, curve->client_public);
+    sock.set(zmq::sockopt::curve_secretkey, curve->client_secret);
+  }
+  sock.connect(target.endpoint);
+  const std::string text = req.dump();
+  if (!sock.send(zmq::buffer(text), zmq::send_flags::none)) return std::nullopt;
+  zmq::message_t reply;
+  if (!sock.recv(reply)) return std::nullopt;
+  json j = json::parse(reply.to_string(), nullptr, false);
+  if (j.is_discarded() || !j.is_object()) return json{{"ok", false}, {"error", "the reply is not a JSON object: " + reply.to_string()}};
+  return j;
+}
+
+// ------------------------------------------------------------------ human-readable replies
+
+std::string duration_text(double s) {
+  const auto total = static_cast<long long>(s);
+  if (total < 60) return fmt::format("{:.1f} s", s);
+  if (total < 3600) return fmt::format("{}m {:02}s", total / 60, total % 60);
+  return fmt::format("{}h {:02}m {:02}s", total / 3600, (total / 60) % 60, total % 60);
+}
+
+std::string ms(const json& us) { return us.is_number() ? fmt::format("{:.2f} ms", us.get<double>() / 1000.0) : "-"; }
+
+std::string percentiles(const json& t) {
+  if (!t.is_object() || t.value("count", 0) == 0) return "none yet";
+  std::string s = fmt::format("p50 {}", ms(t.value("p50", json())));
+  if (t.contains("p90")) s += ", p90 " + ms(t["p90"]);
+  s += fmt::format(", p99 {}, max {}", ms(t.value("p99", json())), ms(t.value("max", json())));
+  if (t.contains("window")) s += fmt::format(" (last {} poses)", t["window"].dump());
+  return s;
+}
+
+std::string calibration_text(const json& r) {
+  std::string s;
+  const double head = r.value("head_height_m", 0.0);
+  if (r.value("height_calibrated", false))
+    s = fmt::format("head height {:.3f} m (body about {:.2f} m), calibrated", head, r.value("user_height_m", 0.0));
+  else
+    s = fmt::format("head height {:.3f} m: the model's own size, not calibrated (bodyd-ctl calibrate)", head);
+  if (r.contains("offsets_configured"))
+    s += r["offsets_configured"].get<bool>() ? "; device offsets configured" : "; no device offsets";
+  if (r.contains("recentred")) s += r["recentred"].get<bool>() ? "; re-centred" : "; not re-centred";
+  return s;
+}
+
+void print_status(const json& r) {
+  std::cout << fmt::format("bodyd: up {}, method {}", duration_text(r.value("uptime_s", 0.0)), r.value("method", std::string("?")));
+  const std::string model = r.value("model", std::string());
+  if (!model.empty()) std::cout << " (" << model << ")";
+  std::cout << "\n";
+  std::cout << "sources:";
+  const json sources = r.value("sources", json::array());
+  if (sources.empty()) std::cout << " none";
+  std::cout << "\n";
+  for (const auto& s : sources) {
+    std::string state = s.value("finished", false) ? "finished" : s.value("connected", false) ? "connected" : "not connected";
+    std::cout << fmt::format("  {}: {}, {:.1f} Hz, {} samples", s.value("name", std::string("?")), state,
+                             s.value("rate_hz", 0.0), s.value("samples", json(0)).dump());
+    const std::string err = s.value("last_error", std::string());
+    if (!err.empty()) std::cout << ", last error: " << err;
+    std::cout << "\n";
+  }
+  if (!r.value("sources_started", true)) std::cout << "  (sources wait for a subscriber: --wait-for-subscriber)\n";
+  const json by_role = r.value("samples_by_role", json::object());
+  std::cout << fmt::format("samples: {} in (head {}, left hand {}, right hand {}), {} dropped, queue {}/{}\n",
+                           r.value("samples_in", json(0)).dump(), by_role.value("head", json(0)).dump(),
+                           by_role.value("left_hand", json(0)).dump(), by_role.value("right_hand", json(0)).dump(),
+                           r.value("samples_dropped", json(0)).dump(), r.value("queue_depth", json(0)).dump(),
+                           r.value("queue_capacity", json(0)).dump());
+  std::cout << fmt::format("poses: {} out", r.value("frames_out", json(0)).dump());
+  if (r.contains("poses_per_s")) std::cout << fmt::format(" ({:.1f}/s)", r["poses_per_s"].get<double>());
+  std::cout << fmt::format(", {} not ready, {} skipped by rate_hz, {} send failures; {} subscriptions\n",
+                           r.value("frames_not_ready", json(0)).dump(), r.value("frames_skipped_by_rate", json(0)).dump(),
+                           r.value("sends_failed", json(0)).dump(), r.value("subscriptions", json(0)).dump());
+  std::cout << "reconstruction: " << percentiles(r.value("reconstruct_us", json())) << "\n";
+  std::cout << "latency (sample arrival -> pose sent): " << percentiles(r.value("latency_us", json())) << "\n";
+  std::cout << "calibration: " << calibration_text(r) << "\n";
+  if (r.contains("outputs") && r["outputs"].is_array() && !r["outputs"].empty()) {
+    std::cout << "outputs:\n";
+    for (const auto& o : r["outputs"]) std::cout << "  " << o.dump() << "\n";
+  }
+  std::cout << fmt::format("endpoints: poses {}, control {}{}\n", r.value("pub", std::string("?")),
+                           r.value("control", std::string("?")), r.value("curve", false) ? ", CURVE on" : "");
+}
+
+void print_reply(const std::string& cmd, const json& r) {
+  if (cmd == "status") return print_status(r);
+  if (cmd == "calibrate") std::cout << "calibrated: " << calibration_text(r) << "\n";
+  else if (cmd == "reset") {
+    std::cout << "re-centred: the current facing is forward";
+    if (r.contains("heading_deg")) std::cout << fmt::format(" (turned by {:.1f} degrees)", r["heading_deg"].get<double>());
+    std::cout << "\n";
+  } else if (cmd == "reload-model") {
+    std::cout << "model reloaded: method " << r.value("method", std::string("?"));
+    if (r.contains("model")) std::cout << ", " << r["model"].get<std::string>();
+    std::cout << "\n";
+  } else if (cmd == "shutdown") std::cout << "bodyd is shutting down\n";
+  else std::cout << r.dump(2) << "\n";
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"bodyd-ctl: ask a running bodyd for its status, calibrate, re-centre, reload the model, stop it "
+               "(docs/ctl.md)"};
+  app.set_version_flag("--version", "bodyd-ctl 0.1.0");
+  app.require_subcommand(1);
+  std::string control, endpoints_file, server_key, client_key;
+  double timeout_s = 3.0;
+  bool as_json = false;
+  app.add_option("--control", control, "bodyd's control endpoint (default: \"control\" in the user config, else " +
+                                           std::string(kDefaultControl) + ")");
+  app.add_option("--endpoints-file", endpoints_file, "read the control endpoint from bodyd's --endpoints-file");
+  app.add_option("--timeout-s", timeout_s, "how long to wait for the answer")->check(CLI::PositiveNumber);
+  app.add_option("--curve-server-key", server_key, "bodyd's server.public (when bodyd uses CURVE)");
+  app.add_option("--curve-client-key", client_key,
+                 "this client's secret key file (bodyd --gen-keys DIR --client NAME), when bodyd has --curve-allow");
+  app.add_flag("--json", as_json, "print bodyd's reply as JSON");
+
+  auto* status = app.add_subcommand("status", "sources and rates, poses out, drops, timing, calibration");
+  status->add_flag("--json", as_json, "print the raw JSON reply");
+
+  auto* calibrate = app.add_subcommand("calibrate", "set the user's size (exactly one option)");
+  double head_height_m = 0.0, height_m = 0.0;
+  bool from_head = false;
+  auto* o_head = calibrate->add_option("--head-height-m", head_height_m, "standing head height, metres (exact)");
+  auto* o_height = calibrate->add_option("--height-m", height_m, "body height, metres (head height = 0.90 x this)");
+  auto* o_from = calibrate->add_flag("--from-head", from_head, "take the current head tracker height (stand up straight)");
+  o_head->excludes(o_height)->excludes(o_from);
+  o_height->excludes(o_from);
+
+  app.add_subcommand("reset", "re-centre: the user's current facing becomes forward");
+  auto* reload = app.add_subcommand("reload-model", "load the model file again, or another one");
+  std::string model_path;
+  reload->add_option("PATH", model_path, "model file (default: the one in use)");
+  app.add_subcommand("shutdown", "stop bodyd");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);
+    return code == 0 ? 0 : kExitUsage;
+  }
+
+  const std::string cmd = app.get_subcommands().front()->get_name();
+  json req{{"cmd", cmd}};
+  if (cmd == "calibrate") {
+    const int given = int(o_head->count() > 0) + int(o_height->count() > 0) + int(from_head);
+    if (given != 1) {
+      std::cerr << "bodyd-ctl calibrate: give exactly one of --head-height-m H, --height-m H or --from-head\n";
+      return kExitUsage;
+    }
+    if (from_head) req["from"] = "head";
+    else if (o_head->count() > 0) req["head_height_m"] = head_height_m;
+    else req["user_height_m"] = height_m;
+  } else if (cmd == "reload-model" && !model_path.empty()) {
+    // bodyd resolves a relative path against its own working directory, not ours.
+    std::error_code ec;
+    const fs::path absolute = fs::absolute(model_path, ec);
+    req["path"] = ec ? model_path : absolute.lexically_normal().string();
+  }
+
+  std::string error;
+  const auto target = choose_target(control, endpoints_file, error);
+  if (!target) {
+    std::cerr << "bodyd-ctl: " << error << "\n";
+    return kExitUsage;
+  }
+  const auto curve = load_curve(server_key, client_key, error);
+  if (!error.empty()) {
+    std::cerr << "bodyd-ctl: " << error << "\n";
+    return kExitUsage;
+  }
+  std::optional<json> reply;
+  try {
+    reply = request(*target, req, timeout_s, curve);
+  } catch (const zmq::error_t& e) {
+    std::cerr << "bodyd-ctl: " << target->endpoint << " (" << target->from << "): " << e.what()
+              << " (write ipc:///PATH or tcp://HOST:PORT)\n";
+    return kExitUsage;
+  }
+  if (!reply) {
+    std::cerr << no_answer_message(*target, timeout_s, curve.has_value());
+    return kExitNoAnswer;
+  }
+  if (!reply->value("ok", false)) {
+    if (as_json) std::cout << reply->dump(2) << "\n";
+    std::cerr << "bodyd-ctl " << cmd << ": bodyd says: " << reply->value("error", reply->dump()) << "\n";
+    return kExitError;
+  }
+  if (as_json) std::cout << reply->dump(2) << "\n";
+  else print_reply(cmd, *reply);
+  return 0;
+}
