@@ -18,7 +18,7 @@ constexpr double kNsPerS = 1e9;
 DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::Model> model,
                                                const DiffusionOptions& options)
     : model_(std::move(model)),
-      network_(std::make_shared<const inference::Network>(*model_)),
+      network_(inference::make_denoiser(*model_)),
       options_(options),
       sampler_(network_, inference::SamplerOptions{options.steps, options.guidance, 0.0f}, options.seed),
       skeleton_(model_->skeleton),

@@ -1,6 +1,7 @@
 // Model-file container decoder and model loader (docs/model-file.md).
 #include "bodyd/inference/model_file.h"
 
+#include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/features.h"
 
 #include <fmt/format.h>
@@ -314,8 +315,10 @@ Model parse_model(std::span<const std::byte> bytes, const std::string& source) {
                              version, kModelFormatVersion));
   }
   const std::string& arch = require_meta(source, file, "architecture");
-  if (arch != kArchitectureMlpWin) {
-    fail(source, fmt::format("architecture \"{}\" is unknown (this build runs \"{}\")", arch, kArchitectureMlpWin));
+  const Architecture* architecture = find_architecture(arch);
+  if (architecture == nullptr) {
+    fail(source, fmt::format("architecture \"{}\" is unknown (this build runs: {}); use a bodyd that knows it or a model "
+                             "of a known architecture", arch, architecture_names()));
   }
   m.feature_version = parse_int_meta(source, "feature_version", require_meta(source, file, "feature_version"));
   if (m.feature_version != features::kVersion) {
@@ -333,7 +336,7 @@ Model parse_model(std::span<const std::byte> bytes, const std::string& source) {
   }
 
   // Tensors: exactly the expected set, with exactly the expected shapes, all finite.
-  const auto expected = expected_tensors(m.config);
+  const auto expected = architecture->expected_tensors(m.config);
   std::set<std::string, std::less<>> expected_names;
   for (const auto& [name, shape] : expected) {
     expected_names.insert(name);
@@ -352,7 +355,7 @@ Model parse_model(std::span<const std::byte> bytes, const std::string& source) {
   for (const auto& [name, t] : file.tensors) {
     if (!expected_names.contains(name)) {
       fail(source, fmt::format("unexpected tensor \"{}\" (shape {}) for architecture {} with L={}", name, shape_str(t.shape),
-                               kArchitectureMlpWin, m.config.L));
+                               arch, m.config.L));
     }
   }
 

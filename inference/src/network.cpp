@@ -111,6 +111,17 @@ NetworkScratch::NetworkScratch(const Network& network, int max_batch) : config_(
   d_.resize(c.E, c.W * max_batch);
 }
 
+std::unique_ptr<DenoiserScratch> Network::make_scratch(int max_batch) const {
+  return std::make_unique<NetworkScratch>(*this, max_batch);
+}
+
+void Network::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+                      DenoiserScratch& scratch) const {
+  auto* s = dynamic_cast<NetworkScratch*>(&scratch);
+  BODYD_REQUIRE(s != nullptr, "Network::forward needs a NetworkScratch (made by Network::make_scratch)");
+  forward(x, m, t, out, *s);
+}
+
 void Network::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                       NetworkScratch& s) const {
   const NetConfig& c = config_;

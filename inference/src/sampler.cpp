@@ -71,12 +71,12 @@ float Rng::normal() {
   return static_cast<float>(r * std::cos(phi));
 }
 
-Sampler::Sampler(std::shared_ptr<const Network> network, const SamplerOptions& options, std::uint64_t seed)
+Sampler::Sampler(std::shared_ptr<const Denoiser> network, const SamplerOptions& options, std::uint64_t seed)
     : network_(network ? std::move(network) : throw std::invalid_argument("Sampler needs a network")),
       options_(options),
       timesteps_(ddim_timesteps(network_->steps(), options.steps)),
       rng_(seed),
-      scratch_(*network_, options.guidance == 1.0f ? 1 : 2) {
+      scratch_(network_->make_scratch(options.guidance == 1.0f ? 1 : 2)) {
   if (!std::isfinite(options.guidance)) throw std::invalid_argument("sampler guidance scale must be finite");
   if (!std::isfinite(options.eta) || options.eta < 0.0f) {
     throw std::invalid_argument(fmt::format("sampler eta must be finite and >= 0, got {}", options.eta));
@@ -122,7 +122,7 @@ void Sampler::run(std::span<const float> obs, std::span<const float> mask, std::
     for (std::size_t i = 0; i < window; ++i) x[i] = mask[i] * obs[i] + (1.0f - mask[i]) * x[i];
     if (guided) std::copy(x.begin(), x.end(), x_uncond.begin());
     network_->forward(std::span<const float>(x_in_.data(), batch_size), std::span<const float>(m_in_.data(), batch_size),
-                      tau, std::span<float>(x0_.data(), batch_size), scratch_);
+                      tau, std::span<float>(x0_.data(), batch_size), *scratch_);
     if (guided) {
       for (std::size_t i = 0; i < window; ++i) x0[i] = x0_uncond[i] + s * (x0[i] - x0_uncond[i]);
     }

@@ -1,6 +1,7 @@
 // DDIM sampler: step schedule, PyTorch parity (given the initial noise), imputation exactness,
 // determinism, and the generator.
 #include "bodyd/inference/sampler.h"
+#include "bodyd/inference/network.h"
 #include "test_util.h"
 
 #include <gtest/gtest.h>

@@ -71,7 +71,7 @@ class DiffusionReconstructor final : public Reconstructor {
   }
 
   std::shared_ptr<const inference::Model> model_;
-  std::shared_ptr<const inference::Network> network_;
+  std::shared_ptr<const inference::Denoiser> network_;  // picked by the model's architecture
   DiffusionOptions options_;
   inference::Sampler sampler_;
   Skeleton skeleton_;       // model scale

@@ -11,6 +11,7 @@
 // allocate. Windows are frame-major: element (w, d) of a window is at index w * D + d.
 #pragma once
 
+#include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/model_file.h"
 
 #include <Eigen/Core>
@@ -22,22 +23,20 @@ namespace bodyd::inference {
 
 class NetworkScratch;
 
-class Network {
+// The Denoiser of architecture "mlpwin-v1" (denoiser.h).
+class Network final : public Denoiser {
  public:
   // Copies the weights out of a checked model and precomputes the time embedding of every step.
   explicit Network(const Model& model);
 
-  [[nodiscard]] const NetConfig& config() const { return config_; }
-  [[nodiscard]] int frames() const { return config_.W; }
-  [[nodiscard]] int dim() const { return config_.D; }
-  [[nodiscard]] int steps() const { return config_.T; }
-  // Floats in one window: W * D.
-  [[nodiscard]] int window_size() const { return config_.W * config_.D; }
+  [[nodiscard]] std::string_view architecture() const override { return kArchitectureMlpWin; }
+  [[nodiscard]] const NetConfig& config() const override { return config_; }
   // diffusion.alpha_bar[t], t in [0, T).
-  [[nodiscard]] std::span<const float> alpha_bar() const { return alpha_bar_; }
+  [[nodiscard]] std::span<const float> alpha_bar() const override { return alpha_bar_; }
   // Feature normalisation (D each): the network works on (f - mean) / std.
-  [[nodiscard]] std::span<const float> norm_mean() const { return norm_mean_; }
-  [[nodiscard]] std::span<const float> norm_std() const { return norm_std_; }
+  [[nodiscard]] std::span<const float> norm_mean() const override { return norm_mean_; }
+  [[nodiscard]] std::span<const float> norm_std() const override { return norm_std_; }
+  [[nodiscard]] std::unique_ptr<DenoiserScratch> make_scratch(int max_batch) const override;
 
   // Evaluates `batch` windows at the same step t. x, m: batch * W * D floats (window after
   // window, each frame-major); out: the same size (may not alias x or m). Requirements (a bug
@@ -46,6 +45,9 @@ class Network {
   // network's config. Does not allocate.
   void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                NetworkScratch& scratch) const;
+  // The Denoiser entry point: `scratch` must be a NetworkScratch (a bug otherwise: abort).
+  void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+               DenoiserScratch& scratch) const override;
 
  private:
   using RowMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
@@ -81,10 +83,10 @@ class Network {
 };
 
 // Per-session buffers for Network::forward, for up to max_batch windows per call.
-class NetworkScratch {
+class NetworkScratch final : public DenoiserScratch {
  public:
   explicit NetworkScratch(const Network& network, int max_batch = 1);
-  [[nodiscard]] int max_batch() const { return max_batch_; }
+  [[nodiscard]] int max_batch() const override { return max_batch_; }
 
  private:
   friend class Network;

@@ -13,10 +13,11 @@
 // The same algorithm is training/model_net.py's ddim_sample. Deterministic for a seed.
 //
 // A Sampler is one session's state (noise, x_t, x0, network scratch), all allocated at
-// construction; sample() does not allocate. The Network it uses is shared and immutable.
+// construction; sample() does not allocate. The Denoiser it uses (any architecture, denoiser.h)
+// is shared and immutable.
 #pragma once
 
-#include "bodyd/inference/network.h"
+#include "bodyd/inference/denoiser.h"
 
 #include <cstdint>
 #include <memory>
@@ -56,9 +57,9 @@ class Sampler {
  public:
   // Throws std::invalid_argument if options are out of range (steps not in [1, T], guidance
   // not finite, eta negative or not finite) or network is null.
-  Sampler(std::shared_ptr<const Network> network, const SamplerOptions& options = {}, std::uint64_t seed = 0);
+  Sampler(std::shared_ptr<const Denoiser> network, const SamplerOptions& options = {}, std::uint64_t seed = 0);
 
-  [[nodiscard]] const Network& network() const { return *network_; }
+  [[nodiscard]] const Denoiser& network() const { return *network_; }
   [[nodiscard]] const SamplerOptions& options() const { return options_; }
   [[nodiscard]] std::span<const int> timesteps() const { return timesteps_; }
   void reseed(std::uint64_t seed) { rng_.reseed(seed); }
@@ -74,11 +75,11 @@ class Sampler {
  private:
   void run(std::span<const float> obs, std::span<const float> mask, std::span<float> out);
 
-  std::shared_ptr<const Network> network_;
+  std::shared_ptr<const Denoiser> network_;
   SamplerOptions options_;
   std::vector<int> timesteps_;
   Rng rng_;
-  NetworkScratch scratch_;
+  std::unique_ptr<DenoiserScratch> scratch_;
   // Network input: [x; x] for two windows (conditional, unconditional), and [m; 0].
   std::vector<float> x_in_;
   std::vector<float> m_in_;

@@ -1,0 +1,49 @@
+// The architecture table (denoiser.h): one row per network this build runs.
+#include "bodyd/inference/denoiser.h"
+
+#include "bodyd/inference/network.h"
+
+#include <fmt/format.h>
+
+#include <array>
+
+namespace bodyd::inference {
+namespace {
+
+std::shared_ptr<const Denoiser> make_mlpwin(const Model& model) { return std::make_shared<const Network>(model); }
+
+constexpr std::array kArchitectures = {
+    Architecture{kArchitectureMlpWin, &expected_tensors, &make_mlpwin},
+};
+
+}  // namespace
+
+std::span<const Architecture> architectures() { return kArchitectures; }
+
+const Architecture* find_architecture(std::string_view name) {
+  for (const Architecture& a : kArchitectures)
+    if (a.name == name) return &a;
+  return nullptr;
+}
+
+std::string architecture_names() {
+  std::string out;
+  for (const Architecture& a : kArchitectures) {
+    if (!out.empty()) out += ", ";
+    out += a.name;
+  }
+  return out;
+}
+
+std::shared_ptr<const Denoiser> make_denoiser(const Model& model) {
+  const auto it = model.metadata.find("architecture");
+  const std::string name = it == model.metadata.end() ? std::string() : it->second;
+  const Architecture* arch = find_architecture(name);
+  if (arch == nullptr) {
+    throw ModelFileError(fmt::format("model file '{}': architecture \"{}\" is unknown (this build runs: {})", model.source,
+                                     name, architecture_names()));
+  }
+  return arch->make(model);
+}
+
+}  // namespace bodyd::inference
