@@ -134,6 +134,44 @@ std::string apply_sim(const json& j, const std::string& where, SimOptions& sim) 
   return {};
 }
 
+// "outputs": a list of specs ("vrchat:127.0.0.1:9000?slots=hip,feet") or objects
+// {"type": "vrchat", "target": "127.0.0.1:9000", "slots": ["hip", "feet"], "rate": 60}
+// (docs/outputs.md). Objects become specs; the output checks its options when it is made.
+std::string apply_outputs(const json& j, const std::string& where, DaemonConfig& config) {
+  if (!j.is_array()) return where + ": expected an array of output specs (\"vrchat:127.0.0.1:9000\") or objects";
+  config.outputs.clear();
+  for (std::size_t i = 0; i < j.size(); ++i) {
+    const json& item = j[i];
+    const std::string w = where + "[" + std::to_string(i) + "]";
+    if (item.is_string()) {
+      config.outputs.push_back(item.get<std::string>());
+      continue;
+    }
+    if (!item.is_object() || !item.contains("type") || !item["type"].is_string())
+      return w + ": expected a spec string or an object with \"type\" (e.g. {\"type\": \"vrchat\"}; docs/outputs.md)";
+    std::string spec = item["type"].get<std::string>() + ":", query;
+    for (const auto& [key, value] : item.items()) {
+      if (key == "type") continue;
+      std::string text;
+      if (value.is_string()) text = value.get<std::string>();
+      else if (value.is_number()) text = value.dump();
+      else if (value.is_array()) {
+        for (const auto& v : value) {
+          if (!v.is_string()) return w + "." + key + ": expected an array of strings";
+          text += (text.empty() ? "" : ",") + v.get<std::string>();
+        }
+      } else {
+        return w + "." + key + ": expected a string, a number or an array of strings";
+      }
+      if (text.find_first_of("&?") != std::string::npos) return w + "." + key + ": must not contain '&' or '?'";
+      if (key == "target") spec += text;
+      else query += (query.empty() ? "?" : "&") + key + "=" + text;
+    }
+    config.outputs.push_back(spec + query);
+  }
+  return {};
+}
+
 }  // namespace
 
 std::filesystem::path bundled_recording_path() { return std::filesystem::path(BODYD_DATA_DIR) / "demo" / "walk.csv"; }
@@ -158,6 +196,8 @@ std::string apply_config_json(const json& j, const std::string& source, DaemonCo
         if (!get_value(s, w, spec, error)) return error;
         config.sources.push_back(spec);
       }
+    } else if (key == "outputs") {
+      if (std::string e = apply_outputs(value, w, config); !e.empty()) return e;
     } else if (key == "fast") ok = get_value(value, w, config.fast, error);
     else if (key == "replay_speed") ok = get_value(value, w, config.replay_speed, error);
     else if (key == "loop") ok = get_value(value, w, config.loop, error);
@@ -297,6 +337,7 @@ json config_to_json(const DaemonConfig& c) {
       {"send_hwm", c.send_hwm},
       {"wait_for_subscriber", c.wait_for_subscriber},
       {"endpoints_file", c.endpoints_file},
+      {"outputs", c.outputs},
       {"rate_hz", c.rate_hz},
       {"queue_capacity", c.queue_capacity},
       {"method", c.method},
@@ -343,6 +384,10 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
   app.add_flag("--exit-at-end", config.exit_at_end, "exit when every replay has been published");
   app.add_option("--sim-seed", config.sim.seed, "random seed of the simulated trackers");
   app.add_option("--pub", config.pub_endpoint, "pose stream endpoint (PUB), e.g. tcp://127.0.0.1:5570");
+  std::vector<std::string> output_flags;
+  app.add_option("--output", output_flags,
+                 "another output, SCHEME:TARGET[?KEY=VALUE&...], e.g. vrchat:127.0.0.1:9000?slots=hip,feet "
+                 "(docs/outputs.md); repeatable");
   app.add_option("--control", config.control_endpoint, "control endpoint (REP, JSON), or \"none\"");
   app.add_flag("--allow-remote", config.allow_remote, "allow binding to non-loopback addresses (use CURVE!)");
   app.add_option("--curve-secret-key", config.curve_secret_key_file,
@@ -381,6 +426,7 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
   for (const auto& r : replay_flags) sources.push_back("replay:" + r);
   for (const auto& s : sim_flags) sources.push_back("sim:" + s);
   if (!sources.empty()) config.sources = sources;
+  if (!output_flags.empty()) config.outputs = output_flags;
   for (const auto& o : offset_flags) {
     if (std::string e = parse_offset_flag(o, config); !e.empty()) {
       std::cerr << "bodyd: " << e << "\n";

@@ -53,6 +53,10 @@ struct DaemonConfig {
   int send_hwm = 1000;                // messages queued per subscriber before ZeroMQ drops
   bool wait_for_subscriber = false;   // start sources when the first subscription arrives
   std::string endpoints_file;         // write the bound endpoints as JSON here (tests, scripts)
+  // Outputs besides --pub (docs/outputs.md): specs SCHEME:TARGET?KEY=VALUE&..., e.g.
+  // "vrchat:127.0.0.1:9000?slots=hip,feet". The config file's "outputs" list may also hold
+  // objects {"type": SCHEME, "target": TARGET, KEY: VALUE...}, converted to this form.
+  std::vector<std::string> outputs;
 
   double rate_hz = 0.0;      // 0: one pose per head sample; > 0: at most this many per second
   std::size_t queue_capacity = 1024;

@@ -4,7 +4,8 @@
 // Threads:
 //   source threads  -> SampleQueue (bounded, drop-oldest)  -> reconstruction thread, which
 //   reconstructs one pose per new head sample (or at most rate_hz), encodes it (protocol/)
-//   and sends it on the XPUB socket without blocking;
+//   and hands it to every output (output.h: the --pub ZeroMQ stream first, then each
+//   --output), none of which blocks;
 //   control thread: the REP socket (docs/control.md); it hands calibration and model changes
 //   to the reconstruction thread, which applies them between two frames.
 // The caller's thread runs run(), which only watches for the stop conditions.
@@ -47,8 +48,9 @@ struct FrameTiming {
   std::int64_t arrival_ns = 0;        // when the head sample was pushed into the queue
   std::int64_t reconstruct_start_ns = 0;
   std::int64_t reconstruct_end_ns = 0;
-  std::int64_t published_ns = 0;      // after zmq_send returned
-  bool sent = false;                  // false: the send failed (counted)
+  std::int64_t published_ns = 0;      // after the --pub pose stream's zmq_send returned
+  std::int64_t outputs_sent_ns = 0;   // after every output (--pub and --output) was sent
+  bool sent = false;                  // false: the --pub send failed (counted)
 };
 
 class Daemon {

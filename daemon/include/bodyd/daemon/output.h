@@ -1,0 +1,133 @@
+// Outputs: where the daemon sends each reconstructed pose (docs/outputs.md).
+//
+// Every output implements the narrow Output interface below, as every tracker source
+// implements drivers::TrackerSource. The ZeroMQ pose stream (--pub, docs/protocol.md) is one
+// output; `bodyd --output SPEC` (repeatable) and the config file's "outputs" list add others.
+// A spec is SCHEME:TARGET?KEY=VALUE&KEY=VALUE, e.g. "vrchat:127.0.0.1:9000?slots=hip,feet&rate=60".
+//
+// Threading and timing: open() and close() run on the thread that starts and stops the
+// daemon; send(), poll() and set_skeleton() on the reconstruction thread, right after each
+// pose (send) or between poses (poll, at least every 20 ms). They must never block and never
+// retry: a send that fails is reported (false), the daemon counts it and logs it at a limited
+// rate, and the next pose is the retry. status() is called from the control thread.
+// Each output has its own rate limit (the `rate` option, Hz; the daemon applies it, the
+// output never sees the poses it skips).
+//
+// How to add an output (one new file plus one registration):
+//   1. daemon/src/output_NAME.cpp: a class deriving from Output, and a factory
+//        std::unique_ptr<Output> make_NAME_output(const OutputSpec&, const OutputEnv&, std::string& error);
+//      that checks spec.target and spec.options (unknown option: an error naming it) and
+//      returns nullptr with `error` set (what is wrong, what to do) when the spec is bad.
+//      Sending OSC over UDP: daemon/src/osc_sender.h (liblo messages, a non-blocking socket).
+//   2. One line in the table of daemon/src/outputs.cpp: {"NAME", make_NAME_output, "help"}.
+//   3. The file in daemon/CMakeLists.txt; the scheme, its options and its conversions in
+//      docs/outputs.md.
+#pragma once
+
+#include "bodyd/inference/reconstructor.h"
+#include "bodyd/motion/skeleton.h"
+#include "bodyd/motion/tracker.h"
+#include "bodyd/protocol/pose_message.h"
+
+#include <nlohmann/json_fwd.hpp>
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace bodyd::daemon {
+
+struct DaemonConfig;
+
+// One pose, as every output receives it. All references stay valid only during send().
+struct OutputFrame {
+  std::uint64_t seq = 0;
+  std::int64_t t_ns = 0;        // the pose's time (its head sample's t_ns)
+  std::int64_t arrival_ns = 0;  // host monotonic time the head sample reached the daemon
+  const BodyPose& body;         // global joint poses, bodyd space (docs/conventions.md), metres at calibrated size
+  const Skeleton& skeleton;     // the skeleton of `body` (names, parents, rest offsets at calibrated size)
+  const protocol::PoseMessage& message;            // the pose stream message (docs/protocol.md)
+  const std::vector<std::uint8_t>& message_bytes;  // ... encoded
+  // The head sample that triggered this pose, as its source delivered it: BEFORE the device
+  // offset (the headset's own pose, e.g. for VRChat's alignment). May be invalid.
+  const TrackerSample& head_as_received;
+};
+
+// A parsed output spec: SCHEME:TARGET?KEY=VALUE&... (docs/outputs.md).
+struct OutputSpec {
+  std::string text;     // as given, for messages and status
+  std::string scheme;   // "zmq", "vrchat", ...
+  std::string target;   // after "SCHEME:" up to "?" (may be empty: the output's default)
+  std::map<std::string, std::string> options;  // the query; "rate" is taken out by the daemon
+};
+
+// Parses a spec; false with `error` set when malformed (no scheme, empty key, key twice).
+[[nodiscard]] bool parse_output_spec(std::string_view text, OutputSpec& out, std::string& error);
+
+// What an output factory may need from the daemon's configuration.
+struct OutputEnv {
+  const DaemonConfig& config;
+};
+
+class Output {
+ public:
+  virtual ~Output() = default;
+  // The spec it was made from, resolved ("vrchat:127.0.0.1:9000"): logs and status.
+  [[nodiscard]] virtual std::string name() const = 0;
+  // Opens sockets. Empty, or what is wrong and what to do.
+  [[nodiscard]] virtual std::string open() = 0;
+  // Sends one pose without blocking. False (and `out_error` set) when it could not be sent.
+  [[nodiscard]] virtual bool send(const OutputFrame& frame, std::string& out_error) = 0;
+  // Between poses: housekeeping (subscriptions, periodic messages). Never blocks.
+  virtual void poll(std::int64_t now_ns) { (void)now_ns; }
+  // The skeleton changed (start, before open(); calibration; model reload); `bytes` is the
+  // encoded skeleton message (docs/protocol.md).
+  virtual void set_skeleton(const Skeleton& skeleton, const std::vector<std::uint8_t>& bytes) {
+    (void)skeleton, (void)bytes;
+  }
+  // Output-specific status keys (thread-safe), merged into the output's entry in `status`.
+  [[nodiscard]] virtual nlohmann::json status() const;
+  // Closes sockets (idempotent).
+  virtual void close() {}
+};
+
+using OutputFactory = std::unique_ptr<Output> (*)(const OutputSpec& spec, const OutputEnv& env, std::string& error);
+
+struct OutputKind {
+  std::string_view scheme;
+  OutputFactory factory;
+  std::string_view help;  // one line: "vrchat:[HOST:PORT] VRChat OSC trackers ..."
+};
+
+// The registered outputs (daemon/src/outputs.cpp).
+[[nodiscard]] const std::vector<OutputKind>& output_kinds();
+
+// Makes an output from a spec (the daemon takes the "rate" option out first). nullptr and
+// `error` (naming the spec) when the scheme is unknown or the factory refuses the spec.
+[[nodiscard]] std::unique_ptr<Output> make_output(const OutputSpec& spec, const OutputEnv& env, std::string& error);
+
+// Takes option `key` out of `spec.options` as a rate in Hz (0 = every pose). False with
+// `error` set when it is not a finite number >= 0.
+[[nodiscard]] bool take_rate_option(OutputSpec& spec, double& out_rate_hz, std::string& error);
+
+// "KEY (unknown option of SCHEME outputs: expected A, B)" if spec has an option not in
+// `known`; empty when all are known.
+[[nodiscard]] std::string check_options(const OutputSpec& spec, const std::vector<std::string_view>& known);
+
+// A rate limit in pose time: with rate_hz > 0, a pose at t_ns passes only if t_ns has reached
+// the next due time (a quarter period early is fine, so jitter does not halve the rate).
+class RateGate {
+ public:
+  explicit RateGate(double rate_hz = 0.0) : rate_hz_(rate_hz) {}
+  [[nodiscard]] bool due(std::int64_t t_ns);
+  [[nodiscard]] double rate_hz() const { return rate_hz_; }
+
+ private:
+  double rate_hz_ = 0.0;
+  std::int64_t next_due_ns_ = INT64_MIN;
+};
+
+}  // namespace bodyd::daemon

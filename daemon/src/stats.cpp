@@ -1,0 +1,37 @@
+#include "stats.h"
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+namespace bodyd::daemon {
+
+nlohmann::json TimingRing::summary_us() const {
+  const std::uint64_t n = count_.load(std::memory_order_acquire);
+  const std::size_t m = static_cast<std::size_t>(std::min<std::uint64_t>(n, kSize));
+  if (m == 0) return nlohmann::json{{"count", 0}};
+  std::vector<std::int64_t> v(m);
+  for (std::size_t i = 0; i < m; ++i) v[i] = values_[i].load(std::memory_order_relaxed);
+  std::sort(v.begin(), v.end());
+  auto pct = [&](double p) {
+    const std::size_t k = std::min(m - 1, static_cast<std::size_t>(std::ceil(p * static_cast<double>(m))) - (p > 0 ? 1 : 0));
+    return static_cast<double>(v[k]) / 1000.0;
+  };
+  return nlohmann::json{
+      {"count", n}, {"window", m}, {"p50", pct(0.5)}, {"p99", pct(0.99)}, {"max", static_cast<double>(v.back()) / 1000.0}};
+}
+
+void PipelineStats::to_json(nlohmann::json& j) const {
+  j["samples_in"] = samples_in.get();
+  j["samples_by_role"] = {
+      {"head", role_samples[0].get()}, {"left_hand", role_samples[1].get()}, {"right_hand", role_samples[2].get()}};
+  j["frames_out"] = frames_out.get();
+  j["frames_not_ready"] = not_ready.get();
+  j["frames_skipped_by_rate"] = skipped_by_rate.get();
+  j["sends_failed"] = sends_failed.get();
+  j["encode_failed"] = encode_failed.get();
+  j["reconstruct_us"] = reconstruct.summary_us();
+  j["latency_us"] = latency.summary_us();
+}
+
+}  // namespace bodyd::daemon

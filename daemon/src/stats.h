@@ -1,0 +1,51 @@
+// The daemon's statistics for the status command (docs/control.md): counters written by the
+// reconstruction thread and read, approximately, by the control thread.
+#pragma once
+
+#include "bodyd/motion/tracker.h"
+
+#include <nlohmann/json.hpp>
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+
+namespace bodyd::daemon {
+
+// The last N durations, written by one thread, read (approximately) by others.
+class TimingRing {
+ public:
+  static constexpr std::size_t kSize = 4096;
+  void add(std::int64_t value_ns) {
+    const std::uint64_t i = count_.load(std::memory_order_relaxed);
+    values_[i % kSize].store(value_ns, std::memory_order_relaxed);
+    count_.store(i + 1, std::memory_order_release);
+  }
+  // {count, window, p50, p99, max} in microseconds over the retained values.
+  [[nodiscard]] nlohmann::json summary_us() const;
+
+ private:
+  std::array<std::atomic<std::int64_t>, kSize> values_{};
+  std::atomic<std::uint64_t> count_{0};
+};
+
+// A relaxed counter (statistics only: no ordering with other memory).
+struct Counter {
+  std::atomic<std::uint64_t> value{0};
+  void add(std::uint64_t n = 1) { value.fetch_add(n, std::memory_order_relaxed); }
+  [[nodiscard]] std::uint64_t get() const { return value.load(std::memory_order_relaxed); }
+};
+
+struct PipelineStats {
+  Counter samples_in, frames_out, sends_failed, not_ready, encode_failed, skipped_by_rate;
+  std::array<Counter, kRoleCount> role_samples;
+  TimingRing reconstruct, latency;
+  // The last valid head sample (after its device offset), for calibrate-from-head.
+  std::atomic<double> last_head_y_m{0.0};
+  std::atomic<std::int64_t> last_head_arrival_ns{0};
+
+  // Writes the pipeline keys of the status reply into `out`.
+  void to_json(nlohmann::json& out) const;
+};
+
+}  // namespace bodyd::daemon

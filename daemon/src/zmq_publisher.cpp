@@ -1,0 +1,105 @@
+#include "zmq_publisher.h"
+
+#include "bodyd/daemon/config.h"
+
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+#include <zmq.h>
+
+#include <algorithm>
+#include <array>
+
+namespace bodyd::daemon {
+namespace {
+constexpr std::int64_t kSkeletonPeriodNs = 1'000'000'000;  // docs/protocol.md: once per second
+}
+
+ZmqPublisher::ZmqPublisher(std::string endpoint, std::string what, const DaemonConfig& config)
+    : endpoint_(std::move(endpoint)),
+      what_(std::move(what)),
+      curve_secret_file_(config.curve_secret_key_file),
+      allow_remote_(config.allow_remote),
+      send_hwm_(config.send_hwm) {}
+
+std::string ZmqPublisher::open() {
+  if (std::string e = socket_.open(ZMQ_XPUB, "XPUB"); !e.empty()) return e;
+  void* pub = socket_.get();
+  const int verboser = 1, linger_ms = 500;
+  zmq_setsockopt(pub, ZMQ_SNDHWM, &send_hwm_, sizeof(send_hwm_));
+  // Every subscribe and unsubscribe reaches us: subscriber counting, --wait-for-subscriber,
+  // and the skeleton sent to each new subscriber.
+  zmq_setsockopt(pub, ZMQ_XPUB_VERBOSER, &verboser, sizeof(verboser));
+  zmq_setsockopt(pub, ZMQ_LINGER, &linger_ms, sizeof(linger_ms));
+  if (std::string e = set_curve_server(pub, curve_secret_file_, curve_public_); !e.empty()) return e;
+  return bind_socket(pub, endpoint_, what_, allow_remote_, !curve_public_.empty(), bound_);
+}
+
+bool ZmqPublisher::send(const OutputFrame& frame, std::string& out_error) {
+  const auto topic = protocol::kPoseTopic;
+  // Never blocks: PUB drops for a subscriber whose queue (send_hwm) is full.
+  if (zmq_send(socket_.get(), topic.data(), topic.size(), ZMQ_SNDMORE | ZMQ_DONTWAIT) >= 0 &&
+      zmq_send(socket_.get(), frame.message_bytes.data(), frame.message_bytes.size(), ZMQ_DONTWAIT) >= 0)
+    return true;
+  out_error = "zmq_send: " + zmq_error_text();
+  return false;
+}
+
+void ZmqPublisher::poll(std::int64_t now_ns) {
+  read_subscriptions(now_ns);
+  if (now_ns - last_skeleton_ns_ >= kSkeletonPeriodNs) publish_skeleton(now_ns);
+}
+
+void ZmqPublisher::set_skeleton(const Skeleton&, const std::vector<std::uint8_t>& bytes) { skeleton_bytes_ = bytes; }
+
+void ZmqPublisher::publish_skeleton(std::int64_t now_ns) {
+  if (skeleton_bytes_.empty() || !socket_.get()) return;
+  const auto topic = protocol::kSkeletonTopic;
+  if (zmq_send(socket_.get(), topic.data(), topic.size(), ZMQ_SNDMORE | ZMQ_DONTWAIT) < 0 ||
+      zmq_send(socket_.get(), skeleton_bytes_.data(), skeleton_bytes_.size(), ZMQ_DONTWAIT) < 0)
+    skeleton_failed_.fetch_add(1, std::memory_order_relaxed);
+  last_skeleton_ns_ = now_ns;
+}
+
+bool ZmqPublisher::read_subscriptions(std::int64_t now_ns) {
+  bool any = false;
+  std::array<char, 256> buffer{};
+  for (;;) {
+    const int n = zmq_recv(socket_.get(), buffer.data(), buffer.size(), ZMQ_DONTWAIT);
+    if (n < 1) break;
+    any = true;
+    const std::string_view topic(buffer.data() + 1, std::min<std::size_t>(static_cast<std::size_t>(n), buffer.size()) - 1);
+    if (buffer[0] == 1) {
+      subscriptions_.fetch_add(1, std::memory_order_relaxed);
+      spdlog::debug("new subscription \"{}\"", topic);
+      // Whoever subscribes to the skeleton topic gets it at once (otherwise within a second).
+      if (protocol::kSkeletonTopic.substr(0, topic.size()) == topic) publish_skeleton(now_ns);
+    } else if (buffer[0] == 0 && subscriptions_.load(std::memory_order_relaxed) > 0) {
+      subscriptions_.fetch_sub(1, std::memory_order_relaxed);
+    }
+  }
+  return any;
+}
+
+bool ZmqPublisher::wait_for_subscription(int timeout_ms, std::int64_t now_ns) {
+  zmq_pollitem_t item{socket_.get(), 0, ZMQ_POLLIN, 0};
+  return zmq_poll(&item, 1, timeout_ms) > 0 && read_subscriptions(now_ns);
+}
+
+nlohmann::json ZmqPublisher::status() const {
+  return {{"subscriptions", subscriptions()}, {"skeleton_sends_failed", skeleton_sends_failed()},
+          {"curve", !curve_public_.empty()}};
+}
+
+std::unique_ptr<Output> make_zmq_output(const OutputSpec& spec, const OutputEnv& env, std::string& error) {
+  if (std::string e = check_options(spec, {}); !e.empty()) {
+    error = e;
+    return nullptr;
+  }
+  if (spec.target.empty()) {
+    error = "--output " + spec.text + ": expected zmq:ENDPOINT, e.g. zmq:tcp://127.0.0.1:5571";
+    return nullptr;
+  }
+  return std::make_unique<ZmqPublisher>(spec.target, "--output zmq:", env.config);
+}
+
+}  // namespace bodyd::daemon

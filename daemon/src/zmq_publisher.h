@@ -1,0 +1,57 @@
+// The ZeroMQ pose stream (docs/protocol.md) as an output: an XPUB socket that sends each
+// pose and, once a second and to every new subscriber of the skeleton topic, the skeleton.
+// The daemon's --pub endpoint is one; `--output zmq:ENDPOINT` adds more.
+#pragma once
+
+#include "bodyd/daemon/output.h"
+#include "zmq_util.h"
+
+#include <atomic>
+#include <mutex>
+#include <string>
+#include <vector>
+
+namespace bodyd::daemon {
+
+class ZmqPublisher final : public Output {
+ public:
+  // `what` names the endpoint's flag in messages ("--pub", "--output zmq:...").
+  ZmqPublisher(std::string endpoint, std::string what, const DaemonConfig& config);
+  ~ZmqPublisher() override { close(); }
+
+  [[nodiscard]] std::string name() const override { return "zmq:" + (bound_.empty() ? endpoint_ : bound_); }
+  [[nodiscard]] std::string open() override;
+  [[nodiscard]] bool send(const OutputFrame& frame, std::string& out_error) override;
+  void poll(std::int64_t now_ns) override;
+  void set_skeleton(const Skeleton& skeleton, const std::vector<std::uint8_t>& bytes) override;
+  [[nodiscard]] nlohmann::json status() const override;
+  void close() override { socket_.close(); }
+
+  // Sends the skeleton message now (after a calibration or model change). Counted as a
+  // failed send when ZeroMQ refuses it.
+  void publish_skeleton(std::int64_t now_ns);
+  // Reads subscription messages without blocking; true if one arrived.
+  bool read_subscriptions(std::int64_t now_ns);
+  // Waits up to timeout_ms for a subscription message; true if one arrived.
+  bool wait_for_subscription(int timeout_ms, std::int64_t now_ns);
+
+  [[nodiscard]] const std::string& bound() const { return bound_; }
+  [[nodiscard]] const std::string& curve_public_key() const { return curve_public_; }
+  [[nodiscard]] std::uint64_t subscriptions() const { return subscriptions_.load(std::memory_order_relaxed); }
+  // Skeleton messages ZeroMQ refused to queue.
+  [[nodiscard]] std::uint64_t skeleton_sends_failed() const { return skeleton_failed_.load(std::memory_order_relaxed); }
+
+ private:
+  std::string endpoint_, what_, curve_secret_file_, bound_, curve_public_;
+  bool allow_remote_ = false;
+  int send_hwm_ = 1000;
+  ZmqSocket socket_;
+  std::vector<std::uint8_t> skeleton_bytes_;  // reconstruction thread only
+  std::int64_t last_skeleton_ns_ = 0;
+  std::atomic<std::uint64_t> subscriptions_{0}, skeleton_failed_{0};
+};
+
+// The "zmq" row of outputs.cpp.
+std::unique_ptr<Output> make_zmq_output(const OutputSpec& spec, const OutputEnv& env, std::string& error);
+
+}  // namespace bodyd::daemon

@@ -1,0 +1,68 @@
+#include "zmq_util.h"
+
+#include "bodyd/daemon/endpoint.h"
+
+#include <spdlog/spdlog.h>
+#include <zmq.h>
+
+#include <cerrno>
+
+namespace bodyd::daemon {
+
+std::string zmq_error_text() { return zmq_strerror(zmq_errno()); }
+
+std::string ZmqSocket::open(int type, const char* type_name) {
+  context_ = zmq_ctx_new();
+  if (!context_) return "zmq_ctx_new: " + zmq_error_text();
+  socket_ = zmq_socket(context_, type);
+  if (!socket_) return std::string("zmq_socket(") + type_name + "): " + zmq_error_text();
+  return {};
+}
+
+void ZmqSocket::close() {
+  if (socket_) zmq_close(socket_);
+  socket_ = nullptr;
+  if (context_) zmq_ctx_term(context_);
+  context_ = nullptr;
+}
+
+std::string set_curve_server(void* socket, const std::string& secret_key_file, std::string& out_public_key) {
+  if (secret_key_file.empty()) return {};
+  std::string secret;
+  if (std::string e = read_curve_key_file(secret_key_file, secret); !e.empty()) return e;
+  const int one = 1;
+  if (zmq_setsockopt(socket, ZMQ_CURVE_SERVER, &one, sizeof(one)) != 0 ||
+      zmq_setsockopt(socket, ZMQ_CURVE_SECRETKEY, secret.c_str(), 40) != 0)
+    return "CURVE: " + zmq_error_text() + " (is libzmq built with CURVE?)";
+  out_public_key = curve_public_from_secret(secret);
+  return {};
+}
+
+std::string bind_socket(void* socket, const std::string& endpoint, const std::string& what, bool allow_remote, bool curve_on,
+                        std::string& out_bound) {
+  if (std::string e = check_bind_endpoint(endpoint, allow_remote, what); !e.empty()) return e;
+  if (std::string e = prepare_ipc_endpoint(endpoint, what); !e.empty()) return e;
+  if (zmq_bind(socket, endpoint.c_str()) != 0) {
+    const int err = zmq_errno();
+    if (err == EADDRINUSE)
+      return what + " " + endpoint + ": address in use (another bodyd running? stop it, or choose another " + what +
+             " endpoint)";
+    return what + " " + endpoint + ": cannot bind: " + zmq_strerror(err) +
+           (err == EINVAL || err == EPROTONOSUPPORT ? " (write ipc:///PATH or tcp://127.0.0.1:PORT)" : "");
+  }
+  char last[512] = {};
+  size_t size = sizeof(last);
+  if (zmq_getsockopt(socket, ZMQ_LAST_ENDPOINT, last, &size) == 0) out_bound = last;
+  else out_bound = endpoint;
+  if (!is_local_endpoint(endpoint)) {
+    if (!curve_on)
+      spdlog::warn("{} {}: bound to a non-loopback address WITHOUT encryption: anyone on the network can {}. "
+                   "Configure CURVE (bodyd --gen-keys DIR; --curve-secret-key DIR/server.secret)",
+                   what, endpoint, what == "--control" ? "control bodyd" : "watch this body's motion");
+    else
+      spdlog::info("{} {}: reachable from other machines; CURVE encryption is on", what, endpoint);
+  }
+  return {};
+}
+
+}  // namespace bodyd::daemon

@@ -1,0 +1,39 @@
+// ZeroMQ pieces the pose publisher and the control socket share: an owned context and
+// socket (RAII), binding with bodyd's endpoint policy (endpoint.h), and CURVE server keys.
+#pragma once
+
+#include <string>
+
+namespace bodyd::daemon {
+
+std::string zmq_error_text();
+
+// A ZeroMQ context and one socket of it, closed (socket, then context) on destruction.
+class ZmqSocket {
+ public:
+  ZmqSocket() = default;
+  ~ZmqSocket() { close(); }
+  ZmqSocket(const ZmqSocket&) = delete;
+  ZmqSocket& operator=(const ZmqSocket&) = delete;
+
+  // Creates the context and a socket of `type` (ZMQ_XPUB, ZMQ_REP). Empty or the error.
+  [[nodiscard]] std::string open(int type, const char* type_name);
+  void close();
+  [[nodiscard]] void* get() const { return socket_; }
+
+ private:
+  void* context_ = nullptr;
+  void* socket_ = nullptr;
+};
+
+// Makes `socket` a CURVE server with the secret key in `secret_key_file` ("" = no CURVE).
+// Sets out_public_key (Z85) when on. Empty or the error.
+[[nodiscard]] std::string set_curve_server(void* socket, const std::string& secret_key_file, std::string& out_public_key);
+
+// Binds with bodyd's policy (loopback unless allow_remote; ipc directory 0700) and warns when
+// a non-loopback endpoint has no CURVE. `what` names the flag ("--pub", "--control").
+// out_bound: the endpoint as bound (a port of * resolved). Empty or the error.
+[[nodiscard]] std::string bind_socket(void* socket, const std::string& endpoint, const std::string& what, bool allow_remote,
+                                      bool curve_on, std::string& out_bound);
+
+}  // namespace bodyd::daemon
