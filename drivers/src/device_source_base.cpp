@@ -129,6 +129,7 @@ SourceStatus DeviceSourceBase::status() const {
   s.name = name_;
   s.connected = ctx_.devices_open.load() > 0;
   s.samples = ctx_.pushed.load(std::memory_order_relaxed);
+  s.rejected = ctx_.decode_errors.load(std::memory_order_relaxed);
   std::lock_guard lock(ctx_.mutex);
   s.rate_hz = s.connected ? ctx_.rate.rate_hz() : 0.0;
   s.last_error = ctx_.last_error;

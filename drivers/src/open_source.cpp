@@ -1,6 +1,7 @@
 #include "bodyd/drivers/open_source.h"
 
 #include "bodyd/drivers/device_list.h"
+#include "bodyd/drivers/network_source.h"
 #include "bodyd/drivers/sim_source.h"
 
 namespace bodyd::drivers {
@@ -13,11 +14,16 @@ std::optional<SourceSpec> parse_source_spec(std::string_view text, std::string& 
   static constexpr Prefix kPrefixes[] = {{"replay:", SourceKind::Replay},
                                          {"sim:", SourceKind::Sim},
                                          {"hid:", SourceKind::Hid},
-                                         {"usb:", SourceKind::Usb}};
+                                         {"usb:", SourceKind::Usb},
+                                         {"vrchat:", SourceKind::Vrchat},
+                                         {"vmc:", SourceKind::Vmc},
+                                         {"udp:", SourceKind::Udp}};
   for (const Prefix& p : kPrefixes) {
     if (text.substr(0, p.text.size()) != p.text) continue;
     SourceSpec spec{p.kind, std::string(text.substr(p.text.size()))};
-    if (spec.argument.empty()) {
+    // vrchat: and vmc: have a default address; udp: says itself what it misses.
+    const bool network = p.kind == SourceKind::Vrchat || p.kind == SourceKind::Vmc || p.kind == SourceKind::Udp;
+    if (spec.argument.empty() && !network) {
       error = "source \"" + std::string(text) + "\": missing " +
               (p.kind == SourceKind::Replay || p.kind == SourceKind::Sim ? "file" : "VID:PID") + " after '" +
               std::string(p.text) + "'";
@@ -26,7 +32,8 @@ std::optional<SourceSpec> parse_source_spec(std::string_view text, std::string& 
     return spec;
   }
   error = "source \"" + std::string(text) +
-          "\": unknown kind; expected replay:FILE, sim:FILE.bvh, hid:VID:PID or usb:VID:PID";
+          "\": unknown kind; expected replay:FILE, sim:FILE.bvh, hid:VID:PID, usb:VID:PID, vrchat:[HOST:]PORT, "
+          "vmc:[HOST:]PORT or udp:[HOST:]PORT";
   return std::nullopt;
 }
 
@@ -39,6 +46,17 @@ std::unique_ptr<TrackerSource> open_source(std::string_view text, const SourceOp
     case SourceKind::Sim: return open_sim_source(spec->argument, options.sim, options.replay, error);
     case SourceKind::Hid:
     case SourceKind::Usb: return open_device_source(text, spec->kind == SourceKind::Usb, spec->argument, error);
+    case SourceKind::Vrchat:
+    case SourceKind::Vmc:
+    case SourceKind::Udp: {
+      const NetworkKind kind = spec->kind == SourceKind::Vrchat ? NetworkKind::Vrchat
+                               : spec->kind == SourceKind::Vmc  ? NetworkKind::Vmc
+                                                                : NetworkKind::Udp;
+      std::optional<NetworkSourceOptions> network = parse_network_spec(kind, text, spec->argument, error);
+      if (!network) return nullptr;
+      network->allow_remote = options.allow_remote;
+      return open_network_source(*network, error);
+    }
   }
   error = "source \"" + std::string(text) + "\": unknown kind";
   return nullptr;

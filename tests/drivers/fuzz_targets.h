@@ -7,6 +7,7 @@
 #pragma once
 
 #include "bodyd/drivers/hydra.h"
+#include "bodyd/drivers/osc_decode.h"
 #include "bodyd/drivers/report.h"
 
 #include <cmath>
@@ -14,6 +15,8 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <string>
+#include <vector>
 
 namespace bodyd::test {
 
@@ -60,6 +63,47 @@ inline void fuzz_hydra_report(const std::uint8_t* data, std::size_t size) {
     fuzz_check(std::abs(c.rotation.norm() - 1.0) < 1e-9, "Hydra rotation not unit length");
     fuzz_check((c.position_m - options.base_position_m).norm() < 60.0, "Hydra position beyond int16 mm");
   }
+}
+
+// The network inputs' decode path (vrchat:, vmc:, udp:): the same bytes through the OSC packet
+// decoder, the VRChat and VMC message decoders and the tracker-line decoder. Whatever is
+// accepted is finite, within the limits, and unit length.
+inline void fuzz_osc_input(const std::uint8_t* data, std::size_t size) {
+  using namespace bodyd::drivers;
+  auto check_sample = [](const Vec3& p, const Quat& q) {
+    fuzz_check(p.allFinite() && p.cwiseAbs().maxCoeff() <= limits::kMaxAbsPositionM, "accepted position out of range");
+    fuzz_check(std::abs(q.norm() - 1.0) < 1e-9, "accepted rotation not unit length");
+  };
+  std::vector<OscMessage> messages;
+  std::string detail;
+  const OscLimits limits;
+  const InputReject r = decode_osc_packet(data, size, messages, detail, limits);
+  if (r != InputReject::None) {
+    fuzz_check(messages.empty(), "a rejected packet left messages behind");
+    fuzz_check(!detail.empty(), "a rejected packet without a reason");
+  }
+  fuzz_check(messages.size() <= limits.max_messages, "more messages than the limit");
+  for (const OscMessage& m : messages) {
+    fuzz_check(!m.address.empty() && m.address[0] == '/', "a message without an address");
+    fuzz_check(m.args.size() == m.type_tags.size(), "arguments and type tags disagree");
+    InputReject why = InputReject::None;
+    VrchatPose vrchat;
+    const MessageUse vu = decode_vrchat_message(m, vrchat, why);
+    fuzz_check((vu == MessageUse::Reject) == (why != InputReject::None), "VRChat reject without a reason");
+    if (vu == MessageUse::Use) {
+      const TrackerSample s = sample_from_vrchat(vrchat, 0);
+      check_sample(s.position_m, s.rotation);
+    }
+    VmcPose vmc;
+    const MessageUse mu = decode_vmc_message(m, vmc, why);
+    fuzz_check((mu == MessageUse::Reject) == (why != InputReject::None), "VMC reject without a reason");
+    if (mu == MessageUse::Use) check_sample(vmc.position_m, vmc.rotation);
+  }
+  TrackerSample s;
+  std::int64_t sender_t_ns = 0;
+  InputReject why = InputReject::None;
+  if (decode_tracker_line(data, size, s, sender_t_ns, why, detail) == MessageUse::Use && s.valid)
+    check_sample(s.position_m, s.rotation);
 }
 
 }  // namespace bodyd::test

@@ -5,6 +5,9 @@
 //   hid:VID:PID      HID tracker device(s) via hidapi (docs/drivers.md; VID:PID[,VID:PID...])
 //   usb:VID:PID      USB tracker device(s) via libusb (docs/drivers.md)
 //                    (with BODYD_FAKE_DEVICES=clip.bvh: simulated devices, fake_devices.h)
+//   vrchat:[HOST:]PORT   VRChat's head and wrist poses over OSC, with OSCQuery (network_source.h)
+//   vmc:[HOST:]PORT      VMC protocol HMD/controller/tracker poses (network_source.h)
+//   udp:[HOST:]PORT      one tracker-log line per datagram (network_source.h)
 //
 // A spec without a known "kind:" prefix is an error (so "C:\x" or a typo is never guessed).
 #pragma once
@@ -20,11 +23,11 @@
 
 namespace bodyd::drivers {
 
-enum class SourceKind { Replay, Sim, Hid, Usb };
+enum class SourceKind { Replay, Sim, Hid, Usb, Vrchat, Vmc, Udp };
 
 struct SourceSpec {
   SourceKind kind = SourceKind::Replay;
-  std::string argument;   // the file, or "VID:PID"
+  std::string argument;   // the file, "VID:PID", or "[HOST:]PORT[?options]" (may be empty for vrchat:, vmc:)
 };
 
 // Parses a spec; on failure returns nullopt and says what is wrong in `error`.
@@ -33,6 +36,7 @@ struct SourceSpec {
 struct SourceOptions {
   ReplayOptions replay;  // replay: and sim:
   SimOptions sim;        // sim:
+  bool allow_remote = false;  // vrchat:, vmc:, udp: may bind to a non-loopback address (--allow-remote)
 };
 
 // Opens (does not start) the source a spec names. nullptr and `error` on failure.

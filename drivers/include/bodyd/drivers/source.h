@@ -17,6 +17,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <string>
 
@@ -54,6 +55,11 @@ struct SourceStatus {
   std::uint64_t samples = 0; // samples pushed since start
   double rate_hz = 0.0;      // samples per second over the last full second (all roles)
   std::string last_error;    // empty when none
+  // Malformed input rejected before it reached the reconstruction (a device's bad reports, a
+  // network input's bad packets), in total and, where the source tells them apart, by reason.
+  std::uint64_t rejected = 0;
+  std::map<std::string, std::uint64_t> rejected_by_reason;
+  std::map<std::string, std::uint64_t> counters;  // other source-specific counts (network inputs: datagrams, ignored)
 };
 
 class TrackerSource {

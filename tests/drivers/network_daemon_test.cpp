@@ -1,0 +1,265 @@
+// End to end: bodyd with the network inputs (vrchat:, vmc:, udp:). Good VRChat poses at
+// 90 Hz keep the daemon publishing while every malformed kind of packet is sent to each
+// input; the daemon must keep publishing finite poses, count each bad packet under its
+// reason in `status`, and say so in its log (rate-limited).
+#include "bodyd/protocol/pose_message.h"
+
+#include "../test_paths.h"
+
+#include <gtest/gtest.h>
+#include <lo/lo.h>
+#include <nlohmann/json.hpp>
+#include <zmq.hpp>
+
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <optional>
+#include <sstream>
+#include <thread>
+
+extern char** environ;
+
+namespace bodyd {
+namespace {
+
+namespace fs = std::filesystem;
+using Bytes = std::vector<std::uint8_t>;
+
+std::string read_file(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+class Daemon {
+ public:
+  Daemon(std::vector<std::string> args, const fs::path& dir) : dir_(dir) {
+    args.insert(args.begin(), BODYD_EXE);
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_addopen(&actions, 1, (dir / "stdout").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_addopen(&actions, 2, (dir / "stderr").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (posix_spawn(&pid_, argv[0], &actions, nullptr, argv.data(), environ) != 0) pid_ = -1;
+    posix_spawn_file_actions_destroy(&actions);
+  }
+  ~Daemon() {
+    if (pid_ > 0 && !code_) {
+      kill(pid_, SIGKILL);
+      int status = 0;
+      waitpid(pid_, &status, 0);
+    }
+  }
+  std::optional<int> stop(int timeout_ms) {
+    if (pid_ > 0 && !code_) kill(pid_, SIGTERM);
+    const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+    while (!code_ && std::chrono::steady_clock::now() < end) {
+      int status = 0;
+      if (waitpid(pid_, &status, WNOHANG) == pid_) code_ = WIFEXITED(status) ? WEXITSTATUS(status) : 128;
+      else std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return code_;
+  }
+  std::string err() const { return read_file(dir_ / "stderr"); }
+
+ private:
+  fs::path dir_;
+  pid_t pid_ = -1;
+  std::optional<int> code_;
+};
+
+// A UDP port free right now (bound, read, released): the daemon binds it a moment later.
+int free_udp_port() {
+  const int fd = socket(AF_INET, SOCK_DGRAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+  socklen_t len = sizeof a;
+  getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
+  close(fd);
+  return ntohs(a.sin_port);
+}
+
+Bytes serialise(lo_message m, const char* path) {
+  std::size_t n = 0;
+  void* data = lo_message_serialise(m, path, nullptr, &n);
+  Bytes out(static_cast<std::uint8_t*>(data), static_cast<std::uint8_t*>(data) + n);
+  std::free(data);
+  lo_message_free(m);
+  return out;
+}
+
+Bytes floats(const char* path, std::initializer_list<float> values) {
+  lo_message m = lo_message_new();
+  for (float v : values) lo_message_add_float(m, v);
+  return serialise(m, path);
+}
+
+Bytes vmc(const char* path, const char* serial, std::initializer_list<float> values) {
+  lo_message m = lo_message_new();
+  lo_message_add_string(m, serial);
+  for (float v : values) lo_message_add_float(m, v);
+  return serialise(m, path);
+}
+
+Bytes wrap_in_bundle(const std::vector<Bytes>& elements) {
+  Bytes out{'#', 'b', 'u', 'n', 'd', 'l', 'e', 0, 0, 0, 0, 0, 0, 0, 0, 1};
+  for (const Bytes& e : elements) {
+    const auto n = static_cast<std::uint32_t>(e.size());
+    for (int s = 24; s >= 0; s -= 8) out.push_back(static_cast<std::uint8_t>(n >> s));
+    out.insert(out.end(), e.begin(), e.end());
+  }
+  return out;
+}
+
+struct Bad {
+  int port_index;  // 0 vrchat, 1 vmc, 2 udp
+  Bytes bytes;
+  const char* reason;
+};
+
+std::vector<Bad> bad_packets() {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const Bytes good = floats("/tracking/vrsystem/head/pose", {0, 1.6f, 0, 0, 0, 0});
+  std::vector<Bad> b;
+  b.push_back({0, Bytes(good.begin(), good.end() - 5), "truncated"});
+  b.push_back({0, Bytes{'G', 'E', 'T', ' ', '/', 0, 0, 0}, "not_osc"});
+  {
+    lo_message m = lo_message_new();
+    for (int i = 0; i < 6; ++i) lo_message_add_int32(m, 1);
+    b.push_back({0, serialise(m, "/tracking/vrsystem/head/pose"), "bad_type_tags"});
+  }
+  b.push_back({0, floats("/tracking/vrsystem/head/pose", {0, 1.6f, 0}), "wrong_arg_count"});
+  b.push_back({0, floats("/tracking/vrsystem/head/pose", {nan, 1.6f, 0, 0, 0, 0}), "non_finite"});
+  b.push_back({0, floats("/tracking/vrsystem/head/pose", {0, 3e8f, 0, 0, 0, 0}), "absurd_value"});
+  b.push_back({0, wrap_in_bundle(std::vector<Bytes>(600, good)), "oversized"});
+  b.push_back({1, vmc("/VMC/Ext/Hmd/Pos", "H", {0, 1.6f, 0, 0, 0, 0, 5}), "absurd_value"});
+  b.push_back({1, vmc("/VMC/Ext/Con/Pos", "C", {0, 1, 0, nan, 0, 0, 1}), "non_finite"});
+  b.push_back({1, floats("/VMC/Ext/Con/Pos", {0, 1, 0, 0, 0, 0, 1}), "wrong_arg_count"});
+  const std::string lines[] = {"1,head,1,0,1.6,0,0,0,0", "not a tracker-log line"};
+  for (const std::string& l : lines) b.push_back({2, Bytes(l.begin(), l.end()), "bad_line"});
+  return b;
+}
+
+TEST(DaemonNetworkInputs, BadPacketsAreCountedWhilePosesKeepComing) {
+  const fs::path dir = fs::temp_directory_path() / ("bodyd-net-e2e-" + std::to_string(getpid()));
+  fs::create_directories(dir);
+  const int ports[3] = {free_udp_port(), free_udp_port(), free_udp_port()};
+  Daemon daemon({"--method", "ik", "--pub", "tcp://127.0.0.1:*", "--control", "tcp://127.0.0.1:*", "--endpoints-file",
+                 (dir / "endpoints.json").string(), "--source",
+                 "vrchat:127.0.0.1:" + std::to_string(ports[0]) + "?oscquery=off", "--source",
+                 "vmc:127.0.0.1:" + std::to_string(ports[1]), "--source", "udp:127.0.0.1:" + std::to_string(ports[2])},
+                dir);
+  nlohmann::json endpoints;
+  for (int i = 0; i < 500 && !endpoints.contains("control"); ++i) {
+    endpoints = nlohmann::json::parse(read_file(dir / "endpoints.json"), nullptr, false);
+    if (endpoints.is_discarded()) endpoints = nlohmann::json::object();
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_TRUE(endpoints.contains("control")) << daemon.err();
+  zmq::context_t ctx;
+  zmq::socket_t sub(ctx, zmq::socket_type::sub);
+  sub.set(zmq::sockopt::linger, 0);
+  sub.set(zmq::sockopt::subscribe, "");
+  sub.connect(endpoints["pub"].get<std::string>());
+
+  // The sender: good VRChat poses at 90 Hz for 2 s; the bad packets in the middle second.
+  const std::vector<Bad> bad = bad_packets();
+  std::atomic<bool> bad_sent{false};
+  std::thread sender([&] {
+    const int fd = socket(AF_INET, SOCK_DGRAM, 0);
+    auto send_to = [&](int port, const Bytes& b) {
+      sockaddr_in a{};
+      a.sin_family = AF_INET;
+      a.sin_port = htons(static_cast<std::uint16_t>(port));
+      a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+      sendto(fd, b.data(), b.size(), 0, reinterpret_cast<sockaddr*>(&a), sizeof a);
+    };
+    std::size_t next_bad = 0;
+    for (int frame = 0; frame < 180; ++frame) {
+      const float t = static_cast<float>(frame) / 90.0f;
+      const float sway = 0.05f * std::sin(t * 3.0f);
+      send_to(ports[0], wrap_in_bundle({floats("/tracking/vrsystem/head/pose", {sway, 1.6f, 0, 0, 0, 0}),
+                                        floats("/tracking/vrsystem/leftwrist/pose", {-0.35f + sway, 1.0f, 0.1f, 0, 0, 0}),
+                                        floats("/tracking/vrsystem/rightwrist/pose", {0.35f + sway, 1.0f, 0.1f, 0, 0, 0})}));
+      if (frame >= 45 && next_bad < bad.size() && frame % 4 == 0) {
+        send_to(ports[bad[next_bad].port_index], bad[next_bad].bytes);
+        if (++next_bad == bad.size()) bad_sent.store(true);
+      }
+      std::this_thread::sleep_for(std::chrono::microseconds(11111));
+    }
+    close(fd);
+  });
+
+  int poses = 0, poses_after_bad = 0, non_finite = 0;
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(4);
+  while (std::chrono::steady_clock::now() < end) {
+    zmq::pollitem_t item{sub.handle(), 0, ZMQ_POLLIN, 0};
+    if (zmq::poll(&item, 1, std::chrono::milliseconds(50)) == 0) continue;
+    zmq::message_t topic, payload;
+    if (!sub.recv(topic, zmq::recv_flags::dontwait) || !topic.more()) continue;
+    (void)sub.recv(payload);
+    while (payload.more()) (void)sub.recv(payload);
+    if (topic.to_string_view() != protocol::kPoseTopic) continue;
+    protocol::PoseMessage pose;
+    const auto* p = static_cast<const std::uint8_t*>(payload.data());
+    if (!protocol::decode_pose(std::vector<std::uint8_t>(p, p + payload.size()), pose).ok()) continue;
+    ++poses;
+    if (bad_sent.load()) ++poses_after_bad;
+    for (const auto& j : pose.joints)
+      for (float v : j.position_m) non_finite += !std::isfinite(v);
+  }
+  sender.join();
+  EXPECT_GT(poses, 60) << daemon.err();
+  EXPECT_GT(poses_after_bad, 10) << "the daemon stopped publishing after the bad packets\n" << daemon.err();
+  EXPECT_EQ(non_finite, 0);
+
+  zmq::socket_t req(ctx, zmq::socket_type::req);
+  req.set(zmq::sockopt::linger, 0);
+  req.set(zmq::sockopt::rcvtimeo, 5000);
+  req.connect(endpoints["control"].get<std::string>());
+  req.send(zmq::buffer(std::string(R"({"cmd":"status"})")));
+  zmq::message_t reply;
+  ASSERT_TRUE(req.recv(reply)) << daemon.err();
+  const auto status = nlohmann::json::parse(reply.to_string(), nullptr, false);
+  ASSERT_TRUE(status.contains("sources")) << reply.to_string();
+  ASSERT_EQ(status["sources"].size(), 3u) << status.dump(2);
+  std::map<std::string, int> expected[3];
+  for (const Bad& b : bad) ++expected[b.port_index][b.reason];
+  for (int i = 0; i < 3; ++i) {
+    const auto& s = status["sources"][i];
+    SCOPED_TRACE(s.dump());
+    EXPECT_EQ(s["rejected"], [&] {
+      int n = 0;
+      for (const auto& [k, v] : expected[i]) n += v;
+      return n;
+    }());
+    for (const auto& [reason, count] : s["rejected_by_reason"].items())
+      EXPECT_EQ(count.get<int>(), expected[i].count(reason) ? expected[i][reason] : 0) << reason;
+  }
+  EXPECT_EQ(status["sources"][0]["samples"].get<int>(), 3 * 180);
+  EXPECT_EQ(daemon.stop(5000), 0) << daemon.err();
+  const std::string log = daemon.err();
+  EXPECT_NE(log.find("rejected a packet from 127.0.0.1"), std::string::npos) << log;
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace bodyd
