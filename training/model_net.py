@@ -18,11 +18,14 @@ Only this module's public API is used by train.py:
 
 Command line (a random-initialised model for benchmarks, no training):
   python3 training/model_net.py --random-model OUT.safetensors --W 20 --E 64 --H 512 --L 2
+Adding the checksum to a model file written before it (docs/model-file.md, "Checksum"):
+  python3 training/model_net.py --restamp FILE...
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import os
@@ -37,6 +40,9 @@ import torch.nn.functional as F
 ARCHITECTURE = "mlpwin-v1"
 FORMAT = "bodyd-model"
 FORMAT_VERSION = "1"
+# Checksum metadata keys (docs/model-file.md, "Checksum"); the C++ loader requires them in a model.
+CHECKSUM_KEY = "checksum"
+TENSOR_CHECKSUMS_KEY = "tensor_checksums"
 # Mirror of bodyd::features::kVersion (inference/include/bodyd/inference/features.h); the C++ loader
 # rejects a model whose feature_version differs. Pass metadata["feature_version"] to override.
 FEATURE_VERSION = 1
@@ -205,23 +211,60 @@ def write_tensor_file(path: str, tensors: Mapping[str, torch.Tensor], metadata: 
     8 so the data starts aligned), then the tensors' raw little-endian bytes, back to back in the
     order given.
     """
-    header: dict[str, Any] = {"__metadata__": {str(k): str(v) for k, v in metadata.items()}}
-    blobs = []
+    _write_container(path, [(name, [int(s) for s in t.shape], _tensor_bytes(t)) for name, t in tensors.items()], metadata)
+
+
+def _write_container(path: str, blobs: list[tuple[str, list[int], bytes]], metadata: Mapping[str, str]) -> None:
+    """The writer behind write_tensor_file: (name, shape, raw F32 bytes) in file order.
+
+    Adds the checksum (docs/model-file.md, "Checksum"): metadata "tensor_checksums" (JSON object,
+    tensor name -> "sha256:" + hex of its bytes) and "checksum" ("sha256:" + hex of the 8-byte
+    length, the header with the checksum's 64 digits written as '0', and the data).
+    """
+    meta = {str(k): str(v) for k, v in metadata.items() if k not in (CHECKSUM_KEY, TENSOR_CHECKSUMS_KEY)}
+    meta[TENSOR_CHECKSUMS_KEY] = json.dumps({name: "sha256:" + hashlib.sha256(b).hexdigest() for name, _, b in blobs},
+                                            separators=(",", ":"))
+    placeholder = "sha256:" + "0" * 64
+    meta[CHECKSUM_KEY] = placeholder
+    header: dict[str, Any] = {"__metadata__": meta}
     offset = 0
-    for name, t in tensors.items():
-        b = _tensor_bytes(t)
-        header[name] = {"dtype": "F32", "shape": [int(s) for s in t.shape], "data_offsets": [offset, offset + len(b)]}
-        blobs.append(b)
+    for name, shape, b in blobs:
+        header[name] = {"dtype": "F32", "shape": shape, "data_offsets": [offset, offset + len(b)]}
         offset += len(b)
     hjson = json.dumps(header, separators=(",", ":")).encode("utf-8")
     hjson += b" " * ((-len(hjson)) % 8)
+    length = struct.pack("<Q", len(hjson))
+    digest = hashlib.sha256(length + hjson)
+    for _, _, b in blobs:
+        digest.update(b)
+    quoted = f'"{placeholder}"'.encode()
+    assert hjson.count(quoted) == 1
+    hjson = hjson.replace(quoted, f'"sha256:{digest.hexdigest()}"'.encode())
     tmp = path + ".tmp"
     with open(tmp, "wb") as f:
-        f.write(struct.pack("<Q", len(hjson)))
+        f.write(length)
         f.write(hjson)
-        for b in blobs:
+        for _, _, b in blobs:
             f.write(b)
     os.replace(tmp, path)
+
+
+def restamp(path: str) -> None:
+    """Rewrites a container written before checksums with the checksum; tensors and metadata are
+    kept byte for byte (the header is re-serialised compactly, in the same order)."""
+    with open(path, "rb") as f:
+        raw = f.read()
+    (n,) = struct.unpack("<Q", raw[:8])
+    header = json.loads(raw[8:8 + n].decode("utf-8"))
+    meta = header.pop("__metadata__", {})
+    data = raw[8 + n:]
+    blobs = []
+    for name, info in header.items():
+        if info["dtype"] != "F32":
+            raise ValueError(f"{path}: tensor {name}: dtype {info['dtype']} not supported")
+        b, e = info["data_offsets"]
+        blobs.append((name, list(info["shape"]), data[b:e]))
+    _write_container(path, blobs, meta)
 
 
 def read_tensor_file(path: str) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
@@ -366,8 +409,10 @@ def _git_commit() -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--random-model", metavar="OUT", required=True,
+    ap.add_argument("--random-model", metavar="OUT",
                     help="write a random-initialised model (identity normalisation) for benchmarks")
+    ap.add_argument("--restamp", metavar="FILE", nargs="+",
+                    help="add the checksum to model files written before it (tensors and metadata unchanged)")
     ap.add_argument("--W", type=int, default=20)
     ap.add_argument("--D", type=int, default=191)
     ap.add_argument("--E", type=int, default=64)
@@ -378,6 +423,13 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--skeleton-bvh", default=os.path.join(_repo_root(), "tests", "data", "walk_60.bvh"))
     a = ap.parse_args()
+    if a.restamp:
+        for path in a.restamp:
+            restamp(path)
+            print(f"stamped {path}")
+        return
+    if not a.random_model:
+        ap.error("give --random-model OUT or --restamp FILE...")
     torch.manual_seed(a.seed)
     net = MlpWin(a.W, a.D, a.E, a.H, a.L, a.TE, a.T)
     skeleton = skeleton_from_bvh(a.skeleton_bvh)

@@ -7,12 +7,26 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 namespace bodyd {
 
 namespace {
 constexpr double kNsPerS = 1e9;
+
+// push() checks positions against the user's bound before scaling them into the model's
+// size; the history, holding scaled positions, only needs them finite.
+TrackerHistoryOptions model_scale_history(TrackerHistoryOptions options) {
+  options.max_abs_position_m = std::numeric_limits<double>::max();
+  return options;
+}
+
+bool finite(const GlobalPose& g) {
+  for (size_t j = 0; j < g.positions.size(); ++j)
+    if (!g.positions[j].allFinite() || !g.rotations[j].coeffs().allFinite()) return false;
+  return true;
+}
 }
 
 DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::Model> model,
@@ -23,7 +37,7 @@ DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::
       sampler_(network_, inference::SamplerOptions{options.steps, options.guidance, 0.0f}, options.seed),
       skeleton_(model_->skeleton),
       user_skeleton_(model_->skeleton),
-      history_(options.history) {
+      history_(model_scale_history(options.history)) {
   if (std::string err = features::check_skeleton(skeleton_); !err.empty())
     throw std::invalid_argument(fmt::format("{}: model skeleton: {}", model_->source, err));
   if (network_->dim() != features::kDim)
@@ -58,9 +72,15 @@ DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::
 }
 
 void DiffusionReconstructor::push(const TrackerSample& sample) {
+  // The second wall (issue 11): check the values as the user gave them; once scaled into the
+  // model's size they are bounded, so the history only re-checks finiteness.
+  if (!tracker_sample_plausible(sample, options_.history.max_abs_position_m)) {
+    history_.note_refused();
+    return;
+  }
   TrackerSample s = sample;
   s.position_m *= scale_;  // into the model's body size
-  history_.push(s);
+  (void)history_.push(s);
 }
 
 void DiffusionReconstructor::reset() {
@@ -299,6 +319,17 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
       target.pole_m = out_global_.positions[elbow] + options_.elbow_pole_bias_m * hint;
     }
     (void)solve_two_bone_ik(skeleton_, *arms_[side], target, scratch_pose_, out_global_);
+  }
+
+  // A non-finite pose (from inputs within limits this would be a network bug) is dropped, never
+  // remembered: fed back as an observation it would poison every later window. The per-frame
+  // state it may have touched starts over.
+  if (!finite(out_global_)) {
+    ++refused_outputs_;
+    hand_was_valid_ = {};
+    foot_locked_ = {};
+    foot_release_offset_ = {Vec3::Zero(), Vec3::Zero()};
+    return false;
   }
 
   // Remember what was emitted (model scale) for the next windows.

@@ -7,6 +7,7 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 #include <nlohmann/json.hpp>
+#include <openssl/evp.h>
 
 #include <algorithm>
 #include <bit>
@@ -26,11 +27,40 @@ static_assert(std::endian::native == std::endian::little, "model files are littl
 constexpr std::uint64_t kMaxHeaderBytes = 100u * 1024u * 1024u;
 // Upper bound on any single config entry: keeps every size product far from overflow.
 constexpr int kMaxConfigValue = 1 << 16;
+constexpr std::string_view kSha256Prefix = "sha256:";
+constexpr std::size_t kSha256HexChars = 64;
+// No model comes near this (the default is about 11 MB); a larger file is not read at all.
+constexpr std::uint64_t kMaxModelFileBytes = std::uint64_t{2} << 30;
 
 using Json = nlohmann::json;
 
 [[noreturn]] void fail(const std::string& source, const std::string& what) {
   throw ModelFileError(fmt::format("model file '{}': {}", source, what));
+}
+
+// SHA-256 of the concatenated parts, as 64 lower-case hex digits.
+std::string sha256_hex(std::initializer_list<std::span<const std::byte>> parts) {
+  EVP_MD_CTX* ctx = EVP_MD_CTX_new();
+  unsigned char digest[EVP_MAX_MD_SIZE];
+  unsigned int length = 0;
+  bool ok = ctx != nullptr && EVP_DigestInit_ex(ctx, EVP_sha256(), nullptr) == 1;
+  for (const auto& part : parts) ok = ok && EVP_DigestUpdate(ctx, part.data(), part.size()) == 1;
+  ok = ok && EVP_DigestFinal_ex(ctx, digest, &length) == 1;
+  EVP_MD_CTX_free(ctx);
+  if (!ok || length != 32) throw std::logic_error("model file: SHA-256 from OpenSSL failed");
+  std::string hex;
+  for (unsigned int i = 0; i < length; ++i) hex += fmt::format("{:02x}", digest[i]);
+  return hex;
+}
+
+// "sha256:" + 64 lower-case hex digits -> the hex digits, or empty.
+std::string_view sha256_digits(std::string_view text) {
+  if (text.size() != kSha256Prefix.size() + kSha256HexChars || text.substr(0, kSha256Prefix.size()) != kSha256Prefix)
+    return {};
+  const std::string_view hex = text.substr(kSha256Prefix.size());
+  for (char c : hex)
+    if (!((c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'))) return {};
+  return hex;
 }
 
 std::string shape_str(const std::vector<std::int64_t>& shape) { return fmt::format("[{}]", fmt::join(shape, ",")); }
@@ -151,6 +181,10 @@ double parse_double_meta(const std::string& source, std::string_view key, const 
   fail(source, fmt::format("metadata \"{}\" must be a finite number, got \"{}\"", key, text));
 }
 
+// Checks metadata "checksum" (docs/model-file.md, "Checksum"); throws ModelFileError naming what differs.
+void verify_checksum(std::span<const std::byte> length_and_header, std::span<const std::byte> data, const TensorFile& file,
+                     const std::string& checksum, const std::string& source);
+
 }  // namespace
 
 TensorFile parse_tensor_file(std::span<const std::byte> bytes, const std::string& source) {
@@ -159,7 +193,9 @@ TensorFile parse_tensor_file(std::span<const std::byte> bytes, const std::string
   }
   const std::uint64_t n = read_u64_le(bytes.data());
   if (n < 2 || n > kMaxHeaderBytes) {
-    fail(source, fmt::format("header length {} is absurd (expected 2..{} bytes); not a model file or corrupt", n, kMaxHeaderBytes));
+    // The value is not printed: it is the file's first 8 bytes, whatever the file is.
+    fail(source, fmt::format("its first 8 bytes are not a header length in 2..{}; not a bodyd model file, or corrupt",
+                             kMaxHeaderBytes));
   }
   if (n > bytes.size() - 8) {
     fail(source, fmt::format("truncated: header length {} but only {} bytes follow the length field", n, bytes.size() - 8));
@@ -169,7 +205,9 @@ TensorFile parse_tensor_file(std::span<const std::byte> bytes, const std::string
   try {
     header = Json::parse(header_begin, header_begin + n);
   } catch (const Json::parse_error& e) {
-    fail(source, fmt::format("header JSON is malformed ({})", e.what()));
+    // Only the position: the parser's message quotes the text it read.
+    fail(source, fmt::format("header JSON is malformed at byte {} of the header; not a bodyd model file, or corrupt",
+                             e.byte));
   }
   if (!header.is_object()) fail(source, "header JSON must be an object");
 
@@ -230,28 +268,118 @@ TensorFile parse_tensor_file(std::span<const std::byte> bytes, const std::string
     }
     if (furthest == nullptr || e > std::get<1>(*furthest)) furthest = &r;
   }
+  const std::uint64_t data_end = furthest != nullptr ? std::get<1>(*furthest) : 0;
+  if (data_end != data.size()) {
+    fail(source, fmt::format("{} bytes after the end of the last tensor (byte {} of the data); the file has trailing "
+                             "bytes or gaps the header does not describe",
+                             data.size() - data_end, data_end));
+  }
+  if (auto it = out.metadata.find(kChecksumKey); it != out.metadata.end())
+    verify_checksum(bytes.first(8 + n), data, out, it->second, source);
   return out;
 }
 
 namespace {
+void verify_checksum(std::span<const std::byte> length_and_header, std::span<const std::byte> data, const TensorFile& file,
+                     const std::string& checksum, const std::string& source) {
+  const std::string_view expected = sha256_digits(checksum);
+  if (expected.empty()) {
+    fail(source, fmt::format("metadata \"{}\" must be \"sha256:\" and 64 lower-case hex digits", kChecksumKey));
+  }
+  // The digest covers the length field, the header with the checksum's digits as '0's (it was
+  // computed before they were written), and the data.
+  std::string header(reinterpret_cast<const char*>(length_and_header.data()), length_and_header.size());
+  const std::string quoted = fmt::format("\"{}\"", checksum);
+  const auto at = header.find(quoted);
+  if (at == std::string::npos || header.find(quoted, at + 1) != std::string::npos) {
+    fail(source, fmt::format("metadata \"{}\" is not written as one plain JSON string in the header", kChecksumKey));
+  }
+  std::fill_n(header.begin() + static_cast<std::ptrdiff_t>(at + 1 + kSha256Prefix.size()), kSha256HexChars, '0');
+  const std::string actual =
+      sha256_hex({std::as_bytes(std::span<const char>(header.data(), header.size())), data});
+  if (actual == expected) return;
+  // Name what differs: a tensor whose bytes no longer match their own digest, else the header.
+  std::string what = "the header (metadata such as fps or config, or the tensor table)";
+  if (auto it = file.metadata.find(kTensorChecksumsKey); it != file.metadata.end()) {
+    Json sums;
+    try {
+      sums = Json::parse(it->second);
+    } catch (const Json::parse_error&) {
+    }
+    if (sums.is_object()) {
+      for (const auto& [name, t] : file.tensors) {
+        const auto entry = sums.find(name);
+        if (entry == sums.end() || !entry->is_string()) continue;
+        const std::string stored = entry->get<std::string>();
+        const std::string_view want = sha256_digits(stored);
+        const auto bytes = std::as_bytes(std::span<const float>(t.data));
+        if (!want.empty() && sha256_hex({bytes}) != want) {
+          what = fmt::format("the data of tensor \"{}\"", name);
+          break;
+        }
+      }
+    }
+  }
+  fail(source, fmt::format("checksum mismatch: {} changed after the file was written (stored sha256:{}..., "
+                           "contents hash to sha256:{}...); the file is corrupt: copy or export it again",
+                           what, expected.substr(0, 12), actual.substr(0, 12)));
+}
+}  // namespace
+
+namespace {
+// Reads a container, checking its size against its header before reading the tensor data: a
+// file that is not a model costs 8 bytes of reading, and one whose size differs from what its
+// header describes (truncated, or with trailing bytes) is refused before its data is read.
 std::vector<std::byte> read_file_bytes(const std::filesystem::path& path) {
+  const std::string source = path.string();
   std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) {
-    throw ModelFileError(fmt::format("model file '{}': does not exist (pass a model with --model, or train one: docs/model-file.md)", path.string()));
-  }
-  if (!std::filesystem::is_regular_file(path, ec)) {
-    throw ModelFileError(fmt::format("model file '{}': is not a regular file", path.string()));
-  }
+  const auto status = std::filesystem::status(path, ec);
+  if (!std::filesystem::exists(status)) fail(source, "does not exist");
+  if (std::filesystem::is_directory(status)) fail(source, "is a directory, not a model file");
+  if (!std::filesystem::is_regular_file(status)) fail(source, "is not a regular file");
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw ModelFileError(fmt::format("model file '{}': cannot be opened for reading", path.string()));
-  in.seekg(0, std::ios::end);
-  const std::streamoff size = in.tellg();
-  if (size < 0) throw ModelFileError(fmt::format("model file '{}': cannot determine its size", path.string()));
-  in.seekg(0, std::ios::beg);
-  std::vector<std::byte> bytes(static_cast<std::size_t>(size));
-  if (size > 0 && !in.read(reinterpret_cast<char*>(bytes.data()), size)) {
-    throw ModelFileError(fmt::format("model file '{}': read error", path.string()));
+  if (!in) fail(source, "cannot be opened for reading (permissions?)");
+  const std::uintmax_t size = std::filesystem::file_size(path, ec);
+  if (ec) fail(source, "cannot determine its size");
+  if (size > kMaxModelFileBytes) {
+    fail(source, fmt::format("{} bytes, more than the {} a model file may have; not a bodyd model file", size,
+                             kMaxModelFileBytes));
   }
+  std::vector<std::byte> bytes(std::min<std::uintmax_t>(size, 8));
+  auto read = [&](std::size_t from, std::size_t count) {
+    if (count > 0 && !in.read(reinterpret_cast<char*>(bytes.data() + from), static_cast<std::streamsize>(count)))
+      fail(source, "read error (the file changed while it was read?)");
+  };
+  read(0, bytes.size());
+  if (size < 8) return bytes;  // parse_tensor_file names the problem
+  const std::uint64_t n = read_u64_le(bytes.data());
+  if (n < 2 || n > kMaxHeaderBytes || n > size - 8) return bytes;  // likewise, from these 8 bytes only
+  bytes.resize(8 + n);
+  read(8, n);
+  // The data size the header describes: the largest end offset. A header the decoder would
+  // refuse anyway is left to it (it reads no further).
+  const Json header = Json::parse(reinterpret_cast<const char*>(bytes.data() + 8),
+                                  reinterpret_cast<const char*>(bytes.data() + 8 + n), nullptr, false);
+  if (!header.is_object()) return bytes;
+  std::uint64_t data_end = 0;
+  for (const auto& [name, entry] : header.items()) {
+    if (name == "__metadata__" || !entry.is_object() || !entry.contains("data_offsets")) continue;
+    const Json& o = entry["data_offsets"];
+    if (!o.is_array() || o.size() != 2) return bytes;
+    const auto e = json_uint(o[1], kMaxModelFileBytes);
+    if (!e) return bytes;
+    data_end = std::max(data_end, *e);
+  }
+  const std::uint64_t expected = 8 + n + data_end;
+  if (size > expected) {
+    fail(source, fmt::format("{} bytes after the end of the last tensor (the header describes {} bytes, the file has "
+                             "{}); the file has trailing bytes",
+                             size - expected, expected, size));
+  }
+  // A shorter file is read whole (it is no larger than its header says): the decoder names the
+  // tensor that runs past its end.
+  bytes.resize(size);
+  read(8 + n, size - 8 - n);
   return bytes;
 }
 }  // namespace
@@ -308,6 +436,12 @@ Model parse_model(std::span<const std::byte> bytes, const std::string& source) {
   const std::string& format = require_meta(source, file, "format");
   if (format != kModelFormat) {
     fail(source, fmt::format("metadata \"format\" is \"{}\", expected \"{}\"; not a bodyd model", format, kModelFormat));
+  }
+  // parse_tensor_file verified the checksum if there is one; a model file must have one.
+  if (!file.metadata.contains(kChecksumKey)) {
+    fail(source, fmt::format("metadata \"{}\" is missing (written before checksums were added); stamp it with "
+                             "python3 training/model_net.py --restamp FILE",
+                             kChecksumKey));
   }
   const std::string& version = require_meta(source, file, "format_version");
   if (version != kModelFormatVersion) {

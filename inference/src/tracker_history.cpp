@@ -1,6 +1,7 @@
 #include "bodyd/inference/tracker_history.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <stdexcept>
 #include <string>
@@ -11,6 +12,8 @@ TrackerHistory::TrackerHistory(const TrackerHistoryOptions& options) : options_(
   if (options_.capacity < 2)
     throw std::invalid_argument("TrackerHistory: capacity must be at least 2 samples, got " +
                                 std::to_string(options_.capacity));
+  if (!(options_.max_abs_position_m > 0))
+    throw std::invalid_argument("TrackerHistory: max_abs_position_m must be > 0");
   if (options_.timeout_ns < 0)
     throw std::invalid_argument("TrackerHistory: timeout_ns must not be negative, got " +
                                 std::to_string(options_.timeout_ns));
@@ -34,7 +37,23 @@ int TrackerHistory::last_at_or_before(const Ring& ring, std::int64_t t_ns) const
   return lo - 1;
 }
 
+bool tracker_sample_plausible(const TrackerSample& sample, double max_abs_position_m) {
+  if (!limits::time_plausible(sample.t_ns)) return false;
+  if (!sample.valid) return true;
+  for (int k = 0; k < 3; ++k) {
+    const double x = sample.position_m[k];
+    if (!std::isfinite(x) || std::fabs(x) > max_abs_position_m) return false;
+  }
+  const auto& c = sample.rotation.coeffs();
+  if (!(std::isfinite(c[0]) && std::isfinite(c[1]) && std::isfinite(c[2]) && std::isfinite(c[3]))) return false;
+  return std::fabs(sample.rotation.norm() - 1.0) <= limits::kQuatNormTolerance;
+}
+
 bool TrackerHistory::push(const TrackerSample& sample) {
+  if (!tracker_sample_plausible(sample, options_.max_abs_position_m)) {
+    ++refused_;
+    return false;
+  }
   Ring& ring = rings_[index(sample.role)];
   if (ring.count > 0 && sample.t_ns < at(ring, ring.count - 1).t_ns) {
     ++ignored_;

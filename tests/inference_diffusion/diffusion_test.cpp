@@ -211,3 +211,76 @@ TEST_F(DefaultModel, UserHeightScalesTheBody) {
                               run.poses.back().global.positions[features::kToesR].y());
   EXPECT_LT(toe, 0.12);
 }
+
+namespace {
+
+// A synthetic stream long enough for 1,100 poses at 30 Hz: the head sways, the hands swing.
+std::vector<TrackerSample> long_stream(int frames, std::int64_t dt_ns) {
+  std::vector<TrackerSample> out;
+  for (int f = 0; f < frames; ++f) {
+    const double t = f * static_cast<double>(dt_ns) * 1e-9;
+    for (Role role : kRoles) {
+      TrackerSample s;
+      s.t_ns = f * dt_ns;
+      s.role = role;
+      s.valid = true;
+      const double side = role == Role::LeftHand ? 1.0 : -1.0;
+      s.position_m = role == Role::Head ? Vec3(0.05 * std::sin(t), 1.55, 0.4 * t)
+                                        : Vec3(0.25 * side, 0.9 + 0.1 * std::sin(2 * t + side), 0.4 * t + 0.2 * std::cos(2 * t));
+      s.rotation = quat_from_yaw(0.2 * std::sin(0.5 * t));
+      out.push_back(s);
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+// Issue 11, item 1: one extreme but finite (or non-finite) tracker value used to break the stream
+// until restart. Now it is refused and counted, and the next 1,000 poses equal a run without it.
+TEST(Diffusion, ABadSampleMidStreamNeverPoisonsLaterPoses) {
+  constexpr std::int64_t kDt = 33'333'333;
+  constexpr int kFrames = 1100;
+  const auto clean = long_stream(kFrames, kDt);
+  std::vector<TrackerSample> dirty;
+  const double nan = std::nan("");
+  for (const TrackerSample& s : clean) {
+    dirty.push_back(s);
+    if (s.t_ns == 50 * kDt && s.role == Role::RightHand) {
+      // Between frames 50 and 51, one bad sample per kind.
+      TrackerSample b = s;
+      b.t_ns = s.t_ns + kDt / 3;
+      b.role = Role::LeftHand;
+      b.position_m = Vec3(1e300, 0.9, 0);  // the issue's sed: left hand x = 1e300
+      dirty.push_back(b);
+      b.role = Role::Head;
+      b.position_m = Vec3(0, nan, 0);
+      dirty.push_back(b);
+      b.role = Role::RightHand;
+      b.position_m = Vec3(0, 1e5, 0);
+      dirty.push_back(b);
+      b.t_ns += 1;
+      b.position_m = Vec3(0, 1, 0);
+      b.rotation = Quat(0, 0, 0, 7);  // not unit length
+      dirty.push_back(b);
+    }
+  }
+  std::vector<std::int64_t> times;
+  for (int f = 0; f < kFrames; ++f) times.push_back(f * kDt);
+  const auto model = tiny_model();
+  DiffusionReconstructor a(model), b(model);
+  const Outputs ra = feed_and_reconstruct(a, clean, times);
+  const Outputs rb = feed_and_reconstruct(b, dirty, times);
+  EXPECT_EQ(a.refused_samples(), 0);
+  EXPECT_EQ(b.refused_samples(), 4);
+  EXPECT_EQ(b.refused_outputs(), 0);
+  ASSERT_EQ(ra.poses.size(), rb.poses.size());
+  int compared = 0;
+  for (size_t f = 51; f < ra.poses.size(); ++f, ++compared)
+    for (size_t j = 0; j < ra.poses[f].global.positions.size(); ++j) {
+      ASSERT_TRUE(rb.poses[f].global.positions[j].allFinite()) << "frame " << f << " joint " << j;
+      ASSERT_NEAR((ra.poses[f].global.positions[j] - rb.poses[f].global.positions[j]).norm(), 0.0, 1e-6)
+          << "frame " << f << " joint " << j;
+    }
+  EXPECT_GE(compared, 1000);
+}

@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+#include <openssl/evp.h>
+#include <sys/stat.h>
 
 #include <cstring>
 #include <fstream>
@@ -28,6 +30,19 @@ std::vector<std::byte> read_bytes(const std::filesystem::path& p) {
   return b;
 }
 
+std::string sha256_hex(const std::vector<std::byte>& bytes) {
+  unsigned char digest[32];
+  unsigned int length = 0;
+  EVP_Digest(bytes.data(), bytes.size(), digest, &length, EVP_sha256(), nullptr);
+  std::string hex;
+  for (unsigned char c : digest) {
+    static const char* kDigits = "0123456789abcdef";
+    hex += kDigits[c >> 4];
+    hex += kDigits[c & 15];
+  }
+  return hex;
+}
+
 // The fixture split into its header JSON and data bytes, edited, and put back together.
 struct Parts {
   Json header;
@@ -41,13 +56,27 @@ struct Parts {
     p.data.assign(bytes.begin() + 8 + static_cast<std::ptrdiff_t>(n), bytes.end());
     return p;
   }
-  [[nodiscard]] std::vector<std::byte> bytes() const {
-    const std::string h = header.dump();
-    std::vector<std::byte> out(8 + h.size() + data.size());
-    const std::uint64_t n = h.size();
+  // Re-encodes the file. With `restamp` (the default) and a "checksum" in the metadata, the
+  // checksum is computed again for the edited file (docs/model-file.md, "Checksum"), so a test
+  // reaches the check it is about rather than the checksum.
+  [[nodiscard]] std::vector<std::byte> bytes(bool restamp = true) const {
+    Json h = header;
+    const bool stamp = restamp && h.is_object() && h.contains("__metadata__") && h["__metadata__"].is_object() &&
+                       h["__metadata__"].contains("checksum");
+    const std::string zeros = "sha256:" + std::string(64, '0');
+    if (stamp) h["__metadata__"]["checksum"] = zeros;
+    std::string text = h.dump();
+    std::vector<std::byte> out(8 + text.size() + data.size());
+    const std::uint64_t n = text.size();
     std::memcpy(out.data(), &n, 8);
-    std::memcpy(out.data() + 8, h.data(), h.size());
-    std::memcpy(out.data() + 8 + h.size(), data.data(), data.size());
+    if (stamp) {
+      std::vector<std::byte> all = out;
+      std::memcpy(all.data() + 8, text.data(), text.size());
+      std::memcpy(all.data() + 8 + text.size(), data.data(), data.size());
+      text.replace(text.find(zeros), zeros.size(), "sha256:" + sha256_hex(all));
+    }
+    std::memcpy(out.data() + 8, text.data(), text.size());
+    std::memcpy(out.data() + 8 + text.size(), data.data(), data.size());
     return out;
   }
   Json& meta() { return header["__metadata__"]; }
@@ -178,10 +207,10 @@ TEST_F(ModelFileTest, AbsurdHeaderLength) {
   auto b = valid_;
   const std::uint64_t huge = std::uint64_t{1} << 40;
   std::memcpy(b.data(), &huge, 8);
-  expect_error(b, {"header length", "absurd"});
+  expect_error(b, {"header length", "not a bodyd model file"});
   const std::uint64_t tiny = 0;
   std::memcpy(b.data(), &tiny, 8);
-  expect_error(b, {"header length", "absurd"});
+  expect_error(b, {"header length", "not a bodyd model file"});
 }
 
 TEST_F(ModelFileTest, MalformedJson) {
@@ -363,6 +392,98 @@ TEST_F(ModelFileTest, BadValues) {
   p = parts();
   std::swap(p.floats("diffusion.alpha_bar")[2], p.floats("diffusion.alpha_bar")[3]);
   expect_error(p, {"alpha_bar", "increase"});
+}
+
+// Issue 11, item 5: silent corruption is caught by the checksum, and the error names what changed.
+TEST_F(ModelFileTest, ChecksumNamesTheTensorWhoseBytesChanged) {
+  Parts p = parts();
+  const auto offset = 8 + (valid_.size() - p.data.size() - 8) + p.header["inp.weight"]["data_offsets"][0].get<std::size_t>();
+  auto b = valid_;
+  b[offset + 4 * 5 + 3] ^= std::byte{0x20};  // one exponent bit of inp.weight[5]: still finite
+  expect_error(b, {"checksum mismatch", "tensor \"inp.weight\"", "corrupt"});
+}
+
+TEST_F(ModelFileTest, ChecksumNamesTheHeaderWhenMetadataChanged) {
+  // fps "30" -> "90" in place: same length, valid JSON, a plausible value.
+  auto b = valid_;
+  const std::string needle = "\"fps\":\"30\"";
+  const std::string text(reinterpret_cast<const char*>(b.data()), b.size());
+  const auto at = text.find(needle);
+  ASSERT_NE(at, std::string::npos);
+  b[at + needle.size() - 3] = std::byte{'9'};
+  expect_error(b, {"checksum mismatch", "header", "fps"});
+}
+
+TEST_F(ModelFileTest, ModelWithoutChecksumIsRefusedWithTheFix) {
+  Parts p = parts();
+  p.meta().erase("checksum");
+  p.meta().erase("tensor_checksums");
+  expect_error(p.bytes(false), {"\"checksum\" is missing", "--restamp"});
+  p = parts();
+  p.meta()["checksum"] = "md5:1234";
+  expect_error(p.bytes(false), {"\"checksum\" must be"});
+}
+
+TEST_F(ModelFileTest, TrailingBytesAreRefused) {
+  auto b = valid_;
+  b.resize(b.size() + 600, std::byte{0});
+  expect_error(b, {"600 bytes after the end of the last tensor", "trailing"});
+  // The same through the pure decoder (bytes in memory).
+  try {
+    (void)inference::parse_model(b, "mem");
+    ADD_FAILURE();
+  } catch (const ModelFileError& e) {
+    EXPECT_NE(std::string(e.what()).find("trailing"), std::string::npos) << e.what();
+  }
+}
+
+// Issue 11, item 4: a file that is not a model is refused from its first 8 bytes, its size is
+// checked before anything else is read, and no error quotes the file's bytes.
+TEST_F(ModelFileTest, NotAModelNeverEchoesItsBytesAndHugeFilesAreNotRead) {
+  const std::string secret = "root:$6$Xsecretsalt$hash:19000:0:99999:7:::\n";
+  std::vector<std::byte> b(secret.size());
+  std::memcpy(b.data(), secret.data(), secret.size());
+  const auto p = write(b, "shadow");
+  std::uint64_t as_length = 0;
+  std::memcpy(&as_length, secret.data(), 8);
+  try {
+    (void)inference::load_model(p);
+    ADD_FAILURE();
+  } catch (const ModelFileError& e) {
+    const std::string msg = e.what();
+    EXPECT_EQ(msg.find("root"), std::string::npos) << msg;
+    EXPECT_EQ(msg.find("secret"), std::string::npos) << msg;
+    EXPECT_EQ(msg.find(std::to_string(as_length)), std::string::npos) << msg;
+    EXPECT_NE(msg.find("not a bodyd model file"), std::string::npos) << msg;
+  }
+  // A JSON-looking header is not quoted either.
+  const std::string json_like = std::string("\x10\0\0\0\0\0\0\0{\"pw\":hunter2!!}");
+  b.assign(json_like.size(), std::byte{0});
+  std::memcpy(b.data(), json_like.data(), json_like.size());
+  try {
+    (void)inference::load_model(write(b, "json_like"));
+    ADD_FAILURE();
+  } catch (const ModelFileError& e) {
+    EXPECT_EQ(std::string(e.what()).find("hunter2"), std::string::npos) << e.what();
+  }
+  // A sparse 3 GiB file (no disk space used) is refused by its size, not read.
+  const auto big = dir_ / "big";
+  { std::ofstream(big, std::ios::binary) << "x"; }
+  std::filesystem::resize_file(big, std::uintmax_t{3} << 30);
+  try {
+    (void)inference::load_model(big);
+    ADD_FAILURE();
+  } catch (const ModelFileError& e) {
+    EXPECT_NE(std::string(e.what()).find("more than"), std::string::npos) << e.what();
+  }
+  // A directory says so.
+  try {
+    (void)inference::load_model(dir_);
+    ADD_FAILURE();
+  } catch (const ModelFileError& e) {
+    EXPECT_NE(std::string(e.what()).find("is a directory"), std::string::npos) << e.what();
+    EXPECT_EQ(std::string(e.what()).find("train"), std::string::npos) << e.what();
+  }
 }
 
 TEST_F(ModelFileTest, ContainerDecoderReadsAnyNames) {

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 using namespace bodyd;
@@ -166,4 +167,31 @@ TEST(TrackerHistory, PushAndQueryDoNotAllocate) {
     allocations = counter.count();
   }
   EXPECT_EQ(allocations, 0);
+}
+
+// Issue 11, second wall: a sample with non-finite or absurd values is refused and counted, and
+// queries see only the good samples around it.
+TEST(TrackerHistory, RefusesNonFiniteAndAbsurdSamplesAndCountsThem) {
+  TrackerHistory h;
+  ASSERT_TRUE(h.push(sample(Role::Head, 100 * kMs, true, Vec3(0, 1.6, 0))));
+  const double nan = std::nan("");
+  EXPECT_FALSE(h.push(sample(Role::Head, 110 * kMs, true, Vec3(1e300, 1.6, 0))));
+  EXPECT_FALSE(h.push(sample(Role::Head, 120 * kMs, true, Vec3(0, nan, 0))));
+  EXPECT_FALSE(h.push(sample(Role::Head, 130 * kMs, true, Vec3(0, 0, -101.0))));
+  EXPECT_FALSE(h.push(sample(Role::Head, 140 * kMs, true, Vec3(0, 1.6, 0), Quat(5, 0, 0, 0))));
+  EXPECT_FALSE(h.push(sample(Role::Head, 150 * kMs, true, Vec3(0, 1.6, 0), Quat(nan, 0, 0, 1))));
+  EXPECT_FALSE(h.push(sample(Role::Head, std::numeric_limits<std::int64_t>::max(), false)));
+  EXPECT_EQ(h.refused_count(), 6);
+  EXPECT_EQ(h.ignored_count(), 0);
+  EXPECT_EQ(h.size(Role::Head), 1);
+  // At the limit is still accepted; an invalid sample's (unused) pose is not checked.
+  EXPECT_TRUE(h.push(sample(Role::Head, 200 * kMs, true, Vec3(100.0, 1.6, -100.0))));
+  EXPECT_TRUE(h.push(sample(Role::LeftHand, 200 * kMs, false, Vec3(nan, nan, nan))));
+  TrackerSample out;
+  ASSERT_TRUE(h.query(Role::Head, 150 * kMs, 200 * kMs, out));
+  EXPECT_TRUE(out.position_m.allFinite());
+  EXPECT_NEAR(out.position_m.x(), 50.0, 1e-9);
+  // clear() keeps the running count.
+  h.clear();
+  EXPECT_EQ(h.refused_count(), 6);
 }

@@ -47,6 +47,10 @@ class DiffusionReconstructor final : public Reconstructor {
   [[nodiscard]] std::string_view name() const override { return "diffusion"; }
   [[nodiscard]] const Skeleton& skeleton() const override { return user_skeleton_; }
   void push(const TrackerSample& sample) override;
+  // Samples refused for their values (see Reconstructor::push) plus reconstructions whose
+  // output was not finite (dropped, never fed back into later windows).
+  [[nodiscard]] std::int64_t refused_samples() const override { return history_.refused_count(); }
+  [[nodiscard]] std::int64_t refused_outputs() const { return refused_outputs_; }
   [[nodiscard]] bool reconstruct(std::int64_t t_ns, BodyPose& out) override;
   void reset() override;
   void set_user_height(double height_m) override;
@@ -91,6 +95,7 @@ class DiffusionReconstructor final : public Reconstructor {
   bool emitted_dropped_ = false;  // the ring has overwritten frames (no start-of-stream padding any more)
   std::int64_t last_t_ns_ = 0;
   bool have_last_ = false;
+  std::int64_t refused_outputs_ = 0;
 
   // Hand easing after a tracking loss: offset (model scale) decaying to zero.
   std::array<bool, 2> hand_was_valid_{};

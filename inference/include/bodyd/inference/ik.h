@@ -65,7 +65,8 @@ class IkReconstructor final : public Reconstructor {
 
   [[nodiscard]] std::string_view name() const override { return "ik"; }
   [[nodiscard]] const Skeleton& skeleton() const override { return user_skeleton_; }
-  void push(const TrackerSample& sample) override { history_.push(sample); }
+  void push(const TrackerSample& sample) override { (void)history_.push(sample); }
+  [[nodiscard]] std::int64_t refused_samples() const override { return history_.refused_count(); }
   [[nodiscard]] bool reconstruct(std::int64_t t_ns, BodyPose& out) override;
   void reset() override;
   void set_user_height(double height_m) override;

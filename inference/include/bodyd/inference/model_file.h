@@ -39,6 +39,11 @@ inline constexpr std::string_view kModelFormat = "bodyd-model";
 inline constexpr std::string_view kModelFormatVersion = "1";
 inline constexpr std::string_view kArchitectureMlpWin = "mlpwin-v1";
 inline constexpr int kModelSkeletonJoints = 22;
+// Metadata keys of the checksum (docs/model-file.md, "Checksum"): "sha256:" and 64 hex digits
+// of the length field, the header (with those digits as '0's) and the data; and a JSON object
+// tensor name -> "sha256:..." of that tensor's bytes, to name the tensor that changed.
+inline constexpr std::string_view kChecksumKey = "checksum";
+inline constexpr std::string_view kTensorChecksumsKey = "tensor_checksums";
 
 // One tensor of the container, row-major, float32.
 struct TensorF32 {
@@ -53,8 +58,12 @@ struct TensorFile {
 };
 
 // Pure decoder. Checks: header length, JSON syntax, each entry's dtype ("F32" only), shape,
-// offsets (inside the data, length = 4 * product(shape), no two tensors overlapping), metadata
-// being string -> string. `source_name` is used in messages. Throws ModelFileError.
+// offsets (inside the data, length = 4 * product(shape), no two tensors overlapping, no bytes
+// after the last tensor), metadata being string -> string, and the checksum when the metadata
+// has one (a mismatch names the tensor or the header that changed). Messages never quote the
+// file's bytes beyond its JSON header's fields. `source_name` is used in messages. Throws
+// ModelFileError. read_tensor_file checks the file's size against its header before reading
+// the data (at most 2 GiB).
 [[nodiscard]] TensorFile parse_tensor_file(std::span<const std::byte> bytes, const std::string& source_name);
 [[nodiscard]] TensorFile read_tensor_file(const std::filesystem::path& path);
 
@@ -91,8 +100,8 @@ struct Model {
   [[nodiscard]] const TensorF32& tensor(std::string_view name) const;
 };
 
-// Decodes and checks a model file (see docs/model-file.md, "What the loader checks"). Throws
-// ModelFileError naming `source_name` and the first problem found.
+// Decodes and checks a model file (see docs/model-file.md, "What the loader checks"); a model
+// must carry a checksum. Throws ModelFileError naming `source_name` and the first problem found.
 [[nodiscard]] Model parse_model(std::span<const std::byte> bytes, const std::string& source_name);
 // Reads `path` and parses it; a missing or unreadable file is a ModelFileError too.
 [[nodiscard]] std::shared_ptr<const Model> load_model(const std::filesystem::path& path);

@@ -33,7 +33,13 @@ class Reconstructor {
 
   // Feeds one sample. Within one role, t_ns must not decrease (older samples are ignored
   // and counted); roles may interleave freely. Does not allocate once warmed up.
+  // A sample with non-finite or implausible values (tracker_sample_plausible() in
+  // tracker_history.h: positions beyond limits::kMaxAbsPositionM, a quaternion that is not
+  // unit length, a time beyond limits::kMaxAbsTimeNs) is refused and counted, never stored:
+  // one bad sample cannot poison later poses.
   virtual void push(const TrackerSample& sample) = 0;
+  // Samples push() refused for their values, since construction (reset() keeps the count).
+  [[nodiscard]] virtual std::int64_t refused_samples() const { return 0; }
 
   // The pose at t_ns from samples with time <= t_ns. Successive calls must have increasing t_ns.
   // Returns false (and leaves `out` unchanged) until a valid head sample has been seen.

@@ -19,6 +19,7 @@
 // Not thread-safe: one thread drives one object.
 #pragma once
 
+#include "bodyd/motion/limits.h"
 #include "bodyd/motion/tracker.h"
 
 #include <array>
@@ -30,7 +31,17 @@ namespace bodyd {
 struct TrackerHistoryOptions {
   int capacity = 512;                      // samples kept per role (>= 2)
   std::int64_t timeout_ns = 250'000'000;   // a valid sample older than this no longer counts
+  // Valid samples with a position coordinate beyond this (metres, in the units pushed) are
+  // refused (see TrackerHistory::push).
+  double max_abs_position_m = limits::kMaxAbsPositionM;
 };
+
+// The second wall (issue 11): whether a sample may enter a reconstructor's history. Its time
+// must be within limits::kMaxAbsTimeNs; a valid sample also needs finite position coordinates
+// with |x| <= max_abs_position_m and a finite quaternion with | |q| - 1 | <=
+// limits::kQuatNormTolerance. Invalid samples carry no pose, so only their time is checked.
+[[nodiscard]] bool tracker_sample_plausible(const TrackerSample& sample,
+                                            double max_abs_position_m = limits::kMaxAbsPositionM);
 
 class TrackerHistory {
  public:
@@ -39,7 +50,11 @@ class TrackerHistory {
 
   // Stores a sample. A sample older than its role's newest is ignored and counted
   // (returns false); equal times are kept in arrival order (the later one wins queries).
+  // A sample that is not tracker_sample_plausible() (non-finite or absurd values) is refused
+  // and counted in refused_count() (returns false), so it can never reach a query.
   bool push(const TrackerSample& sample);
+  // Counts a sample the owner refused before pushing it (same counter as push's refusals).
+  void note_refused() { ++refused_; }
 
   // The pose of `role` at `t_ns` from samples with time <= t_ns (see the header comment).
   // `out` is always written: out.t_ns = t_ns, out.role = role; returns out.valid.
@@ -61,8 +76,11 @@ class TrackerHistory {
   [[nodiscard]] const TrackerHistoryOptions& options() const { return options_; }
   // Samples ignored by push() for being older than their role's newest, since construction.
   [[nodiscard]] std::int64_t ignored_count() const { return ignored_; }
+  // Samples refused for non-finite or implausible values, since construction (not reset
+  // by clear(): a running count for the daemon's status).
+  [[nodiscard]] std::int64_t refused_count() const { return refused_; }
 
-  // Forgets every sample (the ignored counter too). Keeps the buffers.
+  // Forgets every sample (the ignored counter too, not the refused one). Keeps the buffers.
   void clear();
 
  private:
@@ -82,6 +100,7 @@ class TrackerHistory {
   TrackerHistoryOptions options_;
   std::array<Ring, kRoleCount> rings_;
   std::int64_t ignored_ = 0;
+  std::int64_t refused_ = 0;
 };
 
 }  // namespace bodyd

@@ -21,11 +21,12 @@ inline constexpr double kMaxAbsPositionM = 100.0;
 // Device-to-joint offsets (--offset, config "offsets"), each coordinate, metres.
 inline constexpr double kMaxAbsOffsetM = 2.0;
 
-// Body height (stature) and standing head height, metres.
+// Body height (stature) and standing head height, metres (0 in the config means "the
+// model's size"); the same range for both, as the config has always checked.
 inline constexpr double kMinUserHeightM = 0.5;
-inline constexpr double kMaxUserHeightM = 3.0;
-inline constexpr double kMinHeadHeightM = 0.4;
-inline constexpr double kMaxHeadHeightM = 2.8;
+inline constexpr double kMaxUserHeightM = 2.6;
+inline constexpr double kMinHeadHeightM = kMinUserHeightM;
+inline constexpr double kMaxHeadHeightM = kMaxUserHeightM;
 
 // Rates (pose rate, sample rates), Hz.
 inline constexpr double kMaxRateHz = 10000.0;
