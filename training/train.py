@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from model_net import MlpWin, cosine_alpha_bars, ddim_sample, write_model  # noqa: E402
+from model_net import MlpWin, cosine_alpha_bars, ddim_sample, load_model, write_model  # noqa: E402
 
 
 def parse_args():
@@ -36,6 +36,7 @@ def parse_args():
     p.add_argument("--batch", type=int, default=256)
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--weight-decay", type=float, default=1e-4)
+    p.add_argument("--warmup", type=int, default=500, help="linear learning-rate warm-up steps")
     p.add_argument("--E", type=int, default=64)
     p.add_argument("--H", type=int, default=512)
     p.add_argument("--L", type=int, default=2)
@@ -53,6 +54,18 @@ def parse_args():
     p.add_argument("--device", default="auto")
     p.add_argument("--ckpt-every", type=int, default=1000)
     p.add_argument("--eval-every", type=int, default=1000)
+    p.add_argument("--init-from", default="",
+                   help="start from this model file's weights and normalisation (fine-tuning); a run's checkpoint wins when resuming")
+    p.add_argument("--window", type=int, default=0,
+                   help="model window W in frames (0 = the dataset's); a dataset with longer windows allows --time-warp")
+    p.add_argument("--balance", type=float, default=0.0,
+                   help="fraction of each batch drawn from dataset-1 clips (0 = uniform over windows)")
+    p.add_argument("--mirror", type=float, default=0.0, help="probability of a left/right mirrored sample")
+    p.add_argument("--time-warp", type=float, default=1.0,
+                   help="playback-rate range [1/R, R] (log-uniform) of a resampled window; 1 = off")
+    p.add_argument("--time-warp-prob", type=float, default=0.5, help="probability that a sample is time-warped")
+    p.add_argument("--scale-aug", type=float, default=0.0,
+                   help="body-scale augmentation: positions scaled by a factor uniform in [1-S, 1+S]")
     p.add_argument("--export-only", action="store_true",
                    help="write --out from the run's latest checkpoint (EMA weights) and exit, without training")
     return p.parse_args()
@@ -100,6 +113,69 @@ class Masker:
         return m, prefix
 
 
+# Left/right pairs of the skeleton (features::kJointNames).
+MIRROR_PAIRS = [("Shoulder_L", "Shoulder_R"), ("UpperArm_L", "UpperArm_R"), ("LowerArm_L", "LowerArm_R"),
+                ("Hand_L", "Hand_R"), ("UpperLeg_L", "UpperLeg_R"), ("LowerLeg_L", "LowerLeg_R"),
+                ("Foot_L", "Foot_R"), ("Toes_L", "Toes_R")]
+# Mirroring in global space (canonical frame, x -> -x): position p' = M p, rotation R' = M R C_j with
+# M = diag(-1, 1, 1) and C_j = diag(c0, c1, c2) (det -1) the map between joint j's local axes and its
+# mirror joint's. In 6D (the first two columns of R): col0' = c0 M col0, col1' = c1 M col1. The signs
+# follow from this data's rig: the body's lateral axis is local Z for Spine..Head (Shoulders at +/-Z in the
+# Chest's frame), local Y for Hips (legs at -/+Y), and a left limb's bones point along +X where the
+# right limb's point along -X. With --mirror the signs are fitted on the data (fit_mirror_signs) and
+# compared with these; on this data every joint's fit agrees (limbs: c0 = c1 = -1, i.e. C = -I).
+MIRROR_SIGNS = {
+    "Hips": (1, -1), "Spine": (1, 1), "Chest": (1, 1), "Neck": (1, 1), "Head": (1, 1),
+}
+
+
+def mirror_tables(meta, D, signs):
+    """(perm, sign) with mirrored[..., i] = x[..., perm[i]] * sign[i] for one frame of D features."""
+    names = list(meta["joint_position_entries"].keys())
+    off = {n: meta["joint_position_entries"][n][0] for n in names}
+    other = {n: n for n in names}
+    for l_, r_ in MIRROR_PAIRS:
+        other[l_], other[r_] = r_, l_
+    perm = torch.arange(D)
+    sign = torch.ones(D)
+    for n in names:
+        c0, c1 = signs[n]
+        dst, src = off[other[n]], off[n]
+        for k in range(9):
+            perm[dst + k] = src + k
+        sign[dst:dst + 9] = torch.tensor([-1, 1, 1, -c0, c0, c0, -c1, c1, c1], dtype=torch.float32)
+    c = meta["contact_entries"]
+    perm[c[0]], perm[c[1]] = c[1], c[0]
+    return perm, sign
+
+
+def fit_mirror_signs(meta, raw, D):
+    """For each joint, the (c0, c1) whose mirrored mean rotation is closest to its mirror joint's mean rotation
+    (the data holds left- and right-handed versions of most motions, so the two distributions agree)."""
+    names = list(meta["joint_position_entries"].keys())
+    off = {n: meta["joint_position_entries"][n][0] for n in names}
+    other = {n: n for n in names}
+    for l_, r_ in MIRROR_PAIRS:
+        other[l_], other[r_] = r_, l_
+    frames = torch.from_numpy(np.ascontiguousarray(raw[::50, -1])).double()  # newest frames of a subset
+    mean = frames.mean(0)
+    M = torch.tensor([-1.0, 1.0, 1.0], dtype=torch.float64)
+    out, report = {}, []
+    for n in names:
+        src, dst = off[n], off[other[n]]
+        best = None
+        for c0 in (1, -1):
+            for c1 in (1, -1):
+                m0 = c0 * M * mean[src + 3:src + 6]
+                m1 = c1 * M * mean[src + 6:src + 9]
+                d = float((m0 - mean[dst + 3:dst + 6]).norm() + (m1 - mean[dst + 6:dst + 9]).norm())
+                if best is None or d < best[0]:
+                    best = (d, (c0, c1))
+        out[n] = best[1]
+        report.append(f"{n}:{best[1]} d={best[0]:.3f}")
+    return out, report
+
+
 def main():
     a = parse_args()
     torch.manual_seed(a.seed)
@@ -111,22 +187,91 @@ def main():
 
     meta = json.load(open(a.data + ".json"))
     data = np.load(a.data + ".npy", mmap_mode="r")
-    N, W, D = data.shape
+    N, Ws, D = data.shape
+    W = a.window or Ws
     assert D == meta["dim"], "dataset dim disagrees with its metadata"
+    assert W <= Ws, f"--window {W} is longer than the dataset's windows ({Ws})"
     # Hold out every Nth clip (by clip order) for monitoring; the validation split is never touched here.
     clip_of_window = np.repeat(np.arange(len(meta["clips"])), [c["windows"] for c in meta["clips"]])
     hold = (clip_of_window % a.holdout_every) == (a.holdout_every - 1)
     train_idx, hold_idx = np.nonzero(~hold)[0], np.nonzero(hold)[0]
-    x_all = torch.from_numpy(np.ascontiguousarray(data))
-    mean = x_all[torch.from_numpy(train_idx)].reshape(-1, D).mean(0)
-    std = x_all[torch.from_numpy(train_idx)].reshape(-1, D).std(0).clamp_min(0.01)
-    x_all = ((x_all - mean) / std).to(dev)
+    # Raw features stay in memory (augmentations act on them); each batch is normalised when drawn.
+    x_raw = torch.from_numpy(np.ascontiguousarray(data)).to(dev)
+    init = None
+    if a.init_from:
+        init = load_model(a.init_from)
+        cfg = init[0].config()
+        if (cfg["W"], cfg["D"]) != (W, D):
+            sys.exit(f"--init-from {a.init_from}: model W={cfg['W']} D={cfg['D']}, data/--window W={W} D={D}")
+        a.E, a.H, a.L, a.T = cfg["E"], cfg["H"], cfg["L"], cfg["T"]
+        mean, std = init[1]["norm.mean"], init[1]["norm.std"]
+    else:
+        newest = x_raw[torch.from_numpy(train_idx).to(dev), Ws - W:].reshape(-1, D)
+        mean = newest.mean(0).cpu()
+        std = newest.std(0).clamp_min(0.01).cpu()
+        del newest
+    mean_d, std_d = mean.to(dev), std.to(dev)
     train_idx_t = torch.from_numpy(train_idx).to(dev)
     hold_idx_t = torch.from_numpy(hold_idx).to(dev)
-    print(f"data: {N} windows of {W}x{D} ({len(train_idx)} train, {len(hold_idx)} held out) on {dev}", flush=True)
+    print(f"data: {N} windows of {Ws}x{D}, model window {W} ({len(train_idx)} train, {len(hold_idx)} held out) on {dev}",
+          flush=True)
+
+    # Sampling weights: with --balance, dataset-1 windows make up that fraction of each batch.
+    is_d1 = np.array(["dataset-1" in os.path.basename(c["path"]) for c in meta["clips"]])[clip_of_window]
+    sample_p = None
+    if a.balance > 0:
+        d1 = is_d1[train_idx]
+        w_ = np.where(d1, a.balance / max(1, d1.sum()), (1 - a.balance) / max(1, (~d1).sum()))
+        sample_p = torch.from_numpy(w_ / w_.sum()).to(dev)
+        print(f"balance: dataset-1 {d1.sum()} of {len(d1)} windows ({d1.mean():.1%}), drawn with p = {a.balance}",
+              flush=True)
+    mirror_perm = mirror_sign = None
+    if a.mirror > 0:
+        signs, report = fit_mirror_signs(meta, data, D)
+        for n_, sg in MIRROR_SIGNS.items():
+            if signs[n_] != sg:
+                print(f"warning: fitted mirror signs of {n_} {signs[n_]} differ from the rig's {sg}", flush=True)
+        print("mirror signs (fitted on the data): " + ", ".join(report), flush=True)
+        mirror_perm, mirror_sign = (t.to(dev) for t in mirror_tables(meta, D, signs))
+    pos_cols = torch.tensor(sorted(i for v in meta["joint_position_entries"].values() for i in v), device=dev)
+    contact_cols = torch.tensor(meta["contact_entries"], device=dev)
+
+    def draw(idx, g, augment):
+        """Normalised (B, W, D) windows of dataset windows idx, augmented when `augment`."""
+        B = idx.shape[0]
+        raw = x_raw[idx]                                                      # (B, Ws, D)
+        if augment and a.time_warp > 1.0:
+            # Resample the window at rate r ending at its newest frame (the canonical frame's): frame w is
+            # at source frame Ws-1 - r*(W-1-w), linearly interpolated (6D columns too; decoding re-orthonormalises).
+            lr = math.log(a.time_warp)
+            r = torch.exp((torch.rand(B, generator=g, device=dev) * 2 - 1) * lr)
+            r = torch.where(torch.rand(B, generator=g, device=dev) < a.time_warp_prob, r, torch.ones_like(r))
+            f = (Ws - 1) - r.view(B, 1) * torch.arange(W - 1, -1, -1, device=dev).view(1, W)
+            f = f.clamp(0, Ws - 1)
+            lo = f.floor().long()
+            hi = (lo + 1).clamp(max=Ws - 1)
+            u = (f - lo).unsqueeze(-1)
+            ar = torch.arange(B, device=dev).view(B, 1)
+            x = (1 - u) * raw[ar, lo] + u * raw[ar, hi]
+            x[:, :, contact_cols] = (x[:, :, contact_cols] > 0.5).float()
+        else:
+            x = raw[:, Ws - W:]
+        if augment and mirror_perm is not None:
+            flip = torch.rand(B, generator=g, device=dev) < a.mirror
+            if bool(flip.any()):
+                x = x.clone()
+                x[flip] = x[flip][:, :, mirror_perm] * mirror_sign
+        if augment and a.scale_aug > 0:
+            sc = 1 + (torch.rand(B, 1, 1, generator=g, device=dev) * 2 - 1) * a.scale_aug
+            x = x.clone()
+            x[:, :, pos_cols] = x[:, :, pos_cols] * sc
+        return (x - mean_d) / std_d
 
     net = MlpWin(W, D, E=a.E, H=a.H, L=a.L, T=a.T).to(dev)
     ema = MlpWin(W, D, E=a.E, H=a.H, L=a.L, T=a.T).to(dev)
+    if init is not None:
+        net.load_state_dict(init[0].state_dict())
+        print(f"initialised from {a.init_from}", flush=True)
     ema.load_state_dict(net.state_dict())
     for p in ema.parameters():
         p.requires_grad_(False)
@@ -149,12 +294,15 @@ def main():
         gen.set_state(ck["gen"].cpu() if dev.type == "cpu" else ck["gen"])
         torch.set_rng_state(ck["torch_rng"])
         step, wall_before = ck["step"], ck.get("wall_s", 0.0)
+        if "norm_mean" in ck:
+            mean, std = ck["norm_mean"], ck["norm_std"]
+            mean_d, std_d = mean.to(dev), std.to(dev)
         print(f"resumed from {ckpt_path} at step {step}", flush=True)
 
     def lr_at(s):
         # Linear warm-up, then cosine decay over the run; with --minutes the decay follows whichever of
         # steps and wall time runs out first, so a time-limited run still ends at a low learning rate.
-        warm = 500
+        warm = a.warmup
         if s < warm:
             return a.lr * (s + 1) / warm
         frac = (s - warm) / max(1, a.steps - warm)
@@ -162,8 +310,8 @@ def main():
             frac = max(frac, (time.time() - t0 + wall_before) / 60.0 / a.minutes)
         return a.lr * 0.5 * (1 + math.cos(math.pi * min(1.0, frac)))
 
-    def loss_on(model, idx, g):
-        x0 = x_all[idx]
+    def loss_on(model, idx, g, augment=False):
+        x0 = draw(idx, g, augment)
         B = x0.shape[0]
         m, prefix = masker(B, g)
         t = torch.randint(0, a.T, (B,), generator=g, device=dev)
@@ -189,7 +337,7 @@ def main():
         if len(hold_idx_t) else None
 
     def monitor(model):
-        x0 = x_all[mon_idx]
+        x0 = draw(mon_idx, None, False)
         B = x0.shape[0]
         m = torch.zeros_like(x0)
         m[:, :W - 1, :] = 1.0
@@ -199,8 +347,8 @@ def main():
         g = torch.Generator(device=dev)
         g.manual_seed(5)
         out = ddim_sample(model, x0, m, ab, 4, g)
-        real_out = out[:, W - 1] * std.to(dev) + mean.to(dev)
-        real_x0 = x0[:, W - 1] * std.to(dev) + mean.to(dev)
+        real_out = out[:, W - 1] * std_d + mean_d
+        real_x0 = x0[:, W - 1] * std_d + mean_d
         def err(idx):
             return ((real_out[:, idx] - real_x0[:, idx]).norm(dim=-1)).mean().item() * 100
         return err(pos_idx), err(lower_idx)
@@ -214,9 +362,12 @@ def main():
             break
         for g_ in opt.param_groups:
             g_["lr"] = lr_at(step)
-        idx = train_idx_t[torch.randint(0, len(train_idx_t), (a.batch,), generator=gen, device=dev)]
+        if sample_p is None:
+            idx = train_idx_t[torch.randint(0, len(train_idx_t), (a.batch,), generator=gen, device=dev)]
+        else:
+            idx = train_idx_t[torch.multinomial(sample_p, a.batch, replacement=True, generator=gen)]
         net.train()
-        loss = loss_on(net, idx, gen)
+        loss = loss_on(net, idx, gen, augment=True)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(net.parameters(), 1.0)
@@ -256,7 +407,8 @@ def main():
             tmp = ckpt_path + ".tmp"
             torch.save({"net": net.state_dict(), "ema": ema.state_dict(), "opt": opt.state_dict(),
                         "gen": gen.get_state(), "torch_rng": torch.get_rng_state(), "step": step,
-                        "wall_s": time.time() - t0 + wall_before, "args": vars(a)}, tmp)
+                        "wall_s": time.time() - t0 + wall_before, "args": vars(a),
+                        "norm_mean": mean, "norm_std": std}, tmp)
             os.replace(tmp, ckpt_path)
 
     wall_s = time.time() - t0 + wall_before
