@@ -2,7 +2,7 @@
 BUILD ?= build
 JOBS ?= $(shell nproc)
 
-.PHONY: all setup build test demo clean sanitize
+.PHONY: all setup build test demo package clean sanitize
 
 all: build
 
@@ -18,6 +18,11 @@ test: build
 
 demo: build
 	@scripts/demo $(BUILD)
+
+# The Debian package $(BUILD)/bodyd_<version>_<arch>.deb (CPack; docs/install.md):
+# sudo apt install ./$(BUILD)/bodyd_*.deb
+package: build
+	@cd $(BUILD) && cpack -G DEB
 
 # ASan/UBSan build and test run (slower; in build-asan/).
 sanitize: setup

@@ -5,6 +5,7 @@
 //   bodyd-ctl reset
 //   bodyd-ctl reload-model [PATH]
 //   bodyd-ctl shutdown
+//   bodyd-ctl skeleton
 //
 // One REQ request, one reply, with a timeout: a daemon that does not answer is reported with
 // the endpoint tried and how to start one, never waited for forever.
@@ -279,6 +280,7 @@ int main(int argc, char** argv) {
   std::string model_path;
   reload->add_option("PATH", model_path, "model file (default: the one in use)");
   app.add_subcommand("shutdown", "stop bodyd");
+  app.add_subcommand("skeleton", "the skeleton the poses follow (JSON)");
 
   try {
     app.parse(argc, argv);

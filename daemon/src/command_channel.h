@@ -18,7 +18,7 @@
 namespace bodyd::daemon {
 
 struct Command {
-  enum class Kind { Height, FromHead, Swap } kind = Kind::Height;
+  enum class Kind { Height, FromHead, Swap, Recentre } kind = Kind::Height;
   double height_m = 0.0;                 // Height: the standing head height (0: the model's size)
   std::unique_ptr<Reconstructor> recon;  // Swap: the new reconstructor
   std::string model_path;                // Swap: its model file ("" for ik)

@@ -1,19 +1,15 @@
 #include "bodyd/daemon/config.h"
+#include "bodyd/paths/data_files.h"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include <cctype>
 #include <cmath>
 #include <fstream>
 #include <iostream>
 #include <sstream>
 
-#ifndef BODYD_DATA_DIR
-#define BODYD_DATA_DIR "data"
-#endif
-#ifndef BODYD_MODELS_DIR
-#define BODYD_MODELS_DIR "models"
-#endif
 
 namespace bodyd::daemon {
 namespace {
@@ -174,13 +170,14 @@ std::string apply_outputs(const json& j, const std::string& where, DaemonConfig&
 
 }  // namespace
 
-std::filesystem::path bundled_recording_path() { return std::filesystem::path(BODYD_DATA_DIR) / "demo" / "walk.csv"; }
-std::filesystem::path bundled_skeleton_path() { return std::filesystem::path(BODYD_DATA_DIR) / "demo" / "skeleton.bvh"; }
+// Searched at run time (bodyd/paths/data_files.h): installed, user's, or the build's source tree.
+std::filesystem::path bundled_recording_path() { return paths::find_data_file("data/demo/walk.csv").path; }
+std::filesystem::path bundled_skeleton_path() { return paths::find_data_file("data/demo/skeleton.bvh").path; }
 double configured_head_height_m(const DaemonConfig& c) {
   if (c.head_height_m > 0.0) return c.head_height_m;
   return c.user_height_m > 0.0 ? c.user_height_m * kHeadHeightPerStature : 0.0;
 }
-std::filesystem::path default_model_path() { return std::filesystem::path(BODYD_MODELS_DIR) / "bodyd-default.safetensors"; }
+std::filesystem::path default_model_path() { return paths::find_data_file("models/bodyd-default.safetensors").path; }
 
 std::string apply_config_json(const json& j, const std::string& source, DaemonConfig& config) {
   if (!j.is_object()) return source + ": the config must be a JSON object {\"key\": value, ...}";
@@ -208,9 +205,11 @@ std::string apply_config_json(const json& j, const std::string& source, DaemonCo
     else if (key == "control") ok = get_value(value, w, config.control_endpoint, error);
     else if (key == "allow_remote") ok = get_value(value, w, config.allow_remote, error);
     else if (key == "curve_secret_key") ok = get_value(value, w, config.curve_secret_key_file, error);
+    else if (key == "curve_allow") ok = get_value(value, w, config.curve_allow_dir, error);
     else if (key == "send_hwm") ok = get_value(value, w, config.send_hwm, error);
     else if (key == "wait_for_subscriber") ok = get_value(value, w, config.wait_for_subscriber, error);
     else if (key == "endpoints_file") ok = get_value(value, w, config.endpoints_file, error);
+    else if (key == "record_trackers") ok = get_value(value, w, config.record_trackers_file, error);
     else if (key == "rate_hz") ok = get_value(value, w, config.rate_hz, error);
     else if (key == "queue_capacity") ok = get_value(value, w, config.queue_capacity, error);
     else if (key == "method") ok = get_value(value, w, config.method, error);
@@ -282,6 +281,8 @@ std::string parse_offset_flag(const std::string& text, DaemonConfig& config) {
 }
 
 std::string validate_config(const DaemonConfig& c) {
+  if (!c.curve_allow_dir.empty() && c.curve_secret_key_file.empty())
+    return "curve_allow (--curve-allow) needs curve_secret_key (--curve-secret-key): the allow-list is of CURVE clients";
   if (!(c.replay_speed > 0.0) || !std::isfinite(c.replay_speed)) return "replay_speed must be > 0";
   if (!(c.rate_hz >= 0.0) || !std::isfinite(c.rate_hz)) return "rate_hz must be >= 0 (0: one pose per head sample)";
   if (c.queue_capacity < 16 || c.queue_capacity > (1u << 20)) return "queue_capacity must be in 16 .. 1048576";
@@ -334,9 +335,11 @@ json config_to_json(const DaemonConfig& c) {
       {"control", c.control_endpoint},
       {"allow_remote", c.allow_remote},
       {"curve_secret_key", c.curve_secret_key_file},
+      {"curve_allow", c.curve_allow_dir},
       {"send_hwm", c.send_hwm},
       {"wait_for_subscriber", c.wait_for_subscriber},
       {"endpoints_file", c.endpoints_file},
+      {"record_trackers", c.record_trackers_file},
       {"outputs", c.outputs},
       {"rate_hz", c.rate_hz},
       {"queue_capacity", c.queue_capacity},
@@ -352,7 +355,26 @@ json config_to_json(const DaemonConfig& c) {
 
 CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& config) {
   CliResult result;
-  // The config file is read first so that flags override it.
+  // The config files are read first so that flags override them: the user's config
+  // (--user-config, what the systemd unit runs), then --config FILE.
+  for (int i = 1; i < argc; ++i) {
+    if (std::string_view(argv[i]) != "--user-config") continue;
+    const std::filesystem::path user = paths::user_config_file();
+    std::error_code ec;
+    if (user.empty()) {
+      result.notes.push_back("--user-config: neither XDG_CONFIG_HOME nor HOME is set: no user config read");
+    } else if (!std::filesystem::exists(user, ec)) {
+      result.notes.push_back("--user-config: " + user.string() + " does not exist: using the defaults (docs/install.md)");
+    } else if (std::string e = load_config_file(user, config); !e.empty()) {
+      std::cerr << "bodyd: " << e << "\n";
+      result.action = CliResult::Action::Exit;
+      result.exit_code = 2;
+      return result;
+    } else {
+      result.notes.push_back("config: " + user.string());
+    }
+    break;
+  }
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     std::string path;
@@ -371,6 +393,9 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
   app.set_version_flag("--version", "bodyd 0.1.0");
   std::string config_file;
   app.add_option("--config", config_file, "JSON config file (keys: docs/daemon.md); flags override it");
+  bool user_config = false;
+  app.add_flag("--user-config", user_config,
+               "read $XDG_CONFIG_HOME/bodyd/config.json (~/.config/bodyd/config.json) when it exists, before --config");
 
   std::vector<std::string> source_flags, replay_flags, sim_flags, offset_flags;
   app.add_option("--source", source_flags,
@@ -396,6 +421,10 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
   app.add_flag("--wait-for-subscriber", config.wait_for_subscriber,
                "start the sources only when a subscriber has subscribed");
   app.add_option("--endpoints-file", config.endpoints_file, "write the bound endpoints here as JSON");
+  app.add_option("--curve-allow", config.curve_allow_dir,
+                 "only clients whose public key is in DIR (NAME.public files) may connect (needs --curve-secret-key)");
+  app.add_option("--record-trackers", config.record_trackers_file,
+                 "write every tracker sample received to FILE (tracker log v1; replay it with --replay FILE --fast)");
   app.add_option("--rate-hz", config.rate_hz, "output rate limit; 0: one pose per head sample")->check(CLI::NonNegativeNumber);
   app.add_option("--queue-capacity", config.queue_capacity, "tracker samples the queue holds");
   app.add_option("--method", config.method, "reconstruction: diffusion (default) or ik");
@@ -410,6 +439,9 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
   app.add_option("--log-level", config.log_level, "trace, debug, info, warn, error, off");
   std::string gen_keys_dir;
   app.add_option("--gen-keys", gen_keys_dir, "write a CURVE key pair to DIR (server.public, server.secret) and exit");
+  std::string gen_keys_client;
+  app.add_option("--client", gen_keys_client,
+                 "with --gen-keys: a client's key pair instead, DIR/NAME.public (for --curve-allow) and DIR/NAME.secret");
   bool list_devices = false;
   app.add_flag("--list-devices", list_devices, "list the tracker devices bodyd can see (for --source) and exit");
   bool print_config = false;
@@ -439,9 +471,21 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
     result.action = CliResult::Action::ListDevices;
     return result;
   }
+  if (!gen_keys_client.empty()) {
+    bool name_ok = gen_keys_client != "server" && gen_keys_client.front() != '.';
+    for (char ch : gen_keys_client) name_ok &= std::isalnum(static_cast<unsigned char>(ch)) || ch == '-' || ch == '_' || ch == '.';
+    if (gen_keys_dir.empty() || !name_ok) {
+      std::cerr << "bodyd: --client NAME goes with --gen-keys DIR; NAME is letters, digits, '-', '_', '.' (not "
+                   "\"server\"), e.g. --gen-keys ~/.config/bodyd/clients --client quest\n";
+      result.action = CliResult::Action::Exit;
+      result.exit_code = 2;
+      return result;
+    }
+  }
   if (!gen_keys_dir.empty()) {
     result.action = CliResult::Action::GenKeys;
     result.gen_keys_dir = gen_keys_dir;
+    if (!gen_keys_client.empty()) result.gen_keys_name = gen_keys_client;
     return result;
   }
   if (std::string e = validate_config(config); !e.empty()) {

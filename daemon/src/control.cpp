@@ -32,10 +32,11 @@ json dispatch(const json& request, ControlTarget& target) {
   if (!cmd_it->is_string()) return control_error("\"cmd\" must be a string, got " + std::string(cmd_it->type_name()));
   const std::string cmd = cmd_it->get<std::string>();
 
-  if (cmd == "status" || cmd == "skeleton" || cmd == "shutdown") {
+  if (cmd == "status" || cmd == "skeleton" || cmd == "shutdown" || cmd == "reset") {
     if (auto e = unknown_key(request, cmd, {}); !e.empty()) return control_error(e);
     if (cmd == "status") return target.status();
     if (cmd == "skeleton") return target.skeleton();
+    if (cmd == "reset") return target.recentre();
     return target.shutdown();
   }
   if (cmd == "calibrate") {
@@ -77,6 +78,8 @@ json dispatch(const json& request, ControlTarget& target) {
 }  // namespace
 
 json control_error(const std::string& message) { return json{{"ok", false}, {"error", message}}; }
+
+json ControlTarget::recentre() { return control_error("reset: re-centring is not supported here"); }
 
 json handle_control_request(std::string_view request, ControlTarget& target) {
   json parsed = json::parse(request.begin(), request.end(), nullptr, /*allow_exceptions=*/false);

@@ -16,6 +16,8 @@ std::string ControlServer::open(const DaemonConfig& config) {
   zmq_setsockopt(rep, ZMQ_MAXMSGSIZE, &max_request, sizeof(max_request));
   zmq_setsockopt(rep, ZMQ_LINGER, &zero, sizeof(zero));
   if (std::string e = set_curve_server(rep, config.curve_secret_key_file, curve_public_); !e.empty()) return e;
+  if (!config.curve_allow_dir.empty() && !curve_public_.empty())
+    if (std::string e = socket_.allow_only_keys_in(config.curve_allow_dir); !e.empty()) return e;
   return bind_socket(rep, config.control_endpoint, "--control", config.allow_remote, !curve_public_.empty(), bound_);
 }
 

@@ -7,6 +7,8 @@
 #include "bodyd/daemon/control.h"
 #include "bodyd/daemon/output.h"
 #include "bodyd/daemon/sample_queue.h"
+#include "bodyd/daemon/tracker_recorder.h"
+#include "bodyd/inference/features.h"
 #include "bodyd/drivers/open_source.h"
 #include "bodyd/protocol/pose_message.h"
 #include "command_channel.h"
@@ -15,13 +17,16 @@
 #include "stats.h"
 #include "zmq_publisher.h"
 
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
+#include <ctime>
 #include <fstream>
 #include <mutex>
 #include <thread>
@@ -132,6 +137,19 @@ struct Daemon::Impl final : ControlTarget {
   bool head_seen = false;
   std::int64_t next_no_head_warning_ns = 0;
   TrackerSample head_as_received;  // the last head sample before its device offset
+  std::atomic<std::uint64_t> loop_iterations{0};
+
+  // Re-centring ("reset", docs/control.md): every sample, after its device offset, becomes
+  // T_recentre * sample with T_recentre(p) = recentre_rotation * p + recentre_translation_m
+  // (a turn about +Y and a move on the floor). Reconstruction thread; status reads a copy.
+  Quat recentre_rotation = Quat::Identity();
+  Vec3 recentre_translation_m = Vec3::Zero();
+  bool recentred = false;                  // recon thread
+  json recentre_status = json{{"recentred", false}};  // shared_mutex
+  TrackerSample last_valid_head;           // as the reconstructor got it
+  std::int64_t last_valid_head_arrival_ns = 0;
+
+  TrackerRecorder recorder;  // --record-trackers (reconstruction thread once started)
 
   Impl(DaemonConfig c, ReconstructorFactory f)
       : config(std::move(c)),
@@ -199,10 +217,27 @@ struct Daemon::Impl final : ControlTarget {
     s.rotation = (s.rotation * o->rotation).normalized();
   }
 
+  void apply_recentre(TrackerSample& s) const {
+    if (!recentred || !s.valid) return;
+    s.position_m = recentre_rotation * s.position_m + recentre_translation_m;
+    s.rotation = (recentre_rotation * s.rotation).normalized();
+  }
+
   void handle_sample(drivers::SourceSample& in) {
     TrackerSample& s = in.sample;
     if (s.role == Role::Head) head_as_received = s;
     apply_offset(s);
+    apply_recentre(s);
+    if (recorder.is_open()) {
+      // The log reader normalises each rotation it reads; the reconstructor gets exactly that,
+      // so a replay of the recording is bit-identical (tracker_recorder.h).
+      recorder.record(s);
+      if (s.valid) s.rotation = s.rotation.normalized();
+    }
+    if (s.role == Role::Head && s.valid) {
+      last_valid_head = s;
+      last_valid_head_arrival_ns = in.arrival_ns;
+    }
     recon->push(s);
     stats.samples_in.add();
     stats.role_samples[static_cast<int>(s.role)].add();
@@ -286,6 +321,7 @@ struct Daemon::Impl final : ControlTarget {
         }
         refresh_skeleton();
         spdlog::info("calibrated: standing head height {:.3f} m", recon->user_height());
+        recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {}", last_valid_head.t_ns, recon->user_height()));
         break;
       }
       case Command::Kind::FromHead: {
@@ -304,7 +340,39 @@ struct Daemon::Impl final : ControlTarget {
         }
         refresh_skeleton();
         spdlog::info("calibrated from the standing head height: {:.3f} m", recon->user_height());
+        recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {}", last_valid_head.t_ns, recon->user_height()));
         break;
+      }
+      case Command::Kind::Recentre: {
+        if (last_valid_head_arrival_ns == 0 || monotonic_ns() - last_valid_head_arrival_ns > 2'000'000'000)
+          return control_error("reset: no valid head sample in the last 2 s: wear the headset (is it tracking?) and retry");
+        // The head's heading and floor position (the model's canonical frame, features.h) become
+        // forward (+Z) and the origin: T_new = C * T_old with C(p) = R_canon_world * (p - origin).
+        const features::Canonical c = features::canonical_from_head(last_valid_head.position_m, last_valid_head.rotation);
+        recentre_rotation = (c.R_canon_world * recentre_rotation).normalized();
+        recentre_translation_m = c.R_canon_world * (recentre_translation_m - c.origin_m);
+        recentred = true;
+        last_valid_head.position_m = c.R_canon_world * (last_valid_head.position_m - c.origin_m);
+        last_valid_head.rotation = (c.R_canon_world * last_valid_head.rotation).normalized();
+        recon->reset();  // the space jumped: start a fresh history
+        const double heading_deg = c.yaw_rad * 180.0 / M_PI;
+        // The total transform, as "turned by" and "moved by" (for status).
+        const Vec3 f = recentre_rotation * Vec3::UnitZ();
+        const double total_deg = -std::atan2(f.x(), f.z()) * 180.0 / M_PI;
+        const Vec3 origin = recentre_rotation.conjugate() * (-recentre_translation_m);
+        {
+          std::lock_guard lock(shared_mutex);
+          recentre_status = json{{"recentred", true},
+                                 {"recentre", {{"heading_deg", total_deg}, {"origin_m", {origin.x(), origin.z()}}}}};
+        }
+        recorder.comment(fmt::format("t_ns {}: reset (re-centred: turned by {:.3f} deg, origin x {:.4f} z {:.4f} m)",
+                                     last_valid_head.t_ns, heading_deg, c.origin_m.x(), c.origin_m.z()));
+        spdlog::info("re-centred: facing {:.1f} deg from forward, at x {:.3f} z {:.3f} m: that is now forward and the origin",
+                     heading_deg, c.origin_m.x(), c.origin_m.z());
+        return json{{"ok", true},
+                    {"heading_deg", heading_deg},
+                    {"origin_m", {c.origin_m.x(), c.origin_m.z()}},
+                    {"recentred", true}};
       }
       case Command::Kind::Swap: {
         bool calibrated;
@@ -318,6 +386,7 @@ struct Daemon::Impl final : ControlTarget {
         last_pose_t_ns = INT64_MIN;
         refresh_skeleton();
         spdlog::info("model reloaded: {} ({})", recon->name(), c.model_path);
+        recorder.comment(fmt::format("t_ns {}: reload-model {} {}", last_valid_head.t_ns, recon->name(), c.model_path));
         break;
       }
     }
@@ -371,6 +440,7 @@ struct Daemon::Impl final : ControlTarget {
     if (config.wait_for_subscriber) {
       spdlog::info("waiting for a subscriber on {} before starting the sources", pub->bound());
       while (!stop_flag.load()) {
+        loop_iterations.fetch_add(1, std::memory_order_relaxed);
         process_command();
         if (pub->wait_for_subscription(50, monotonic_ns())) break;
       }
@@ -385,6 +455,7 @@ struct Daemon::Impl final : ControlTarget {
     next_no_head_warning_ns = 0;
     drivers::SourceSample sample;
     while (!stop_flag.load(std::memory_order_relaxed)) {
+      loop_iterations.fetch_add(1, std::memory_order_relaxed);
       const std::int64_t before = monotonic_ns();
       for (auto& slot : outputs) slot->output->poll(before);
       process_command();
@@ -419,6 +490,11 @@ struct Daemon::Impl final : ControlTarget {
       j["skeleton_id"] = skeleton_msg.skeleton_id;
     }
     j["offsets_configured"] = offsets_configured;
+    {
+      std::lock_guard lock(shared_mutex);
+      j.update(recentre_status);
+    }
+    if (!config.record_trackers_file.empty()) j["record_trackers"] = config.record_trackers_file;
     json src = json::array();
     for (const auto& s : sources) {
       const drivers::SourceStatus st = s->status();
@@ -494,6 +570,12 @@ struct Daemon::Impl final : ControlTarget {
     return commands.run(std::move(c));
   }
 
+  json recentre() override {
+    Command c;
+    c.kind = Command::Kind::Recentre;
+    return commands.run(std::move(c));
+  }
+
   json shutdown() override {
     spdlog::info("shutdown requested on the control socket");
     shutdown_requested.store(true);
@@ -553,6 +635,35 @@ std::string Daemon::start() {
     if (!source) return error;
     spdlog::info("source: {}", source->name());
     d.sources.push_back(std::move(source));
+  }
+
+  // --record-trackers: the header says what the recorded samples went through.
+  if (!d.config.record_trackers_file.empty()) {
+    std::string offsets;
+    for (Role r : kRoles) {
+      const auto& o = d.config.offsets[static_cast<int>(r)];
+      if (!o) continue;
+      offsets += fmt::format("{}{} position_m {},{},{} rotation_xyzw {},{},{},{}", offsets.empty() ? "" : "; ", role_name(r),
+                             o->position_m.x(), o->position_m.y(), o->position_m.z(), o->rotation.x(), o->rotation.y(),
+                             o->rotation.z(), o->rotation.w());
+    }
+    const std::time_t now = std::time(nullptr);
+    char started[32] = {};
+    std::strftime(started, sizeof(started), "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
+    const TrackerLogMetadata meta{
+        {"generator", "bodyd"},
+        {"started", started},
+        {"sources", d.source_names()},
+        {"offsets", offsets.empty() ? "none" : "applied to the samples below: " + offsets},
+        {"recentre", "applied to the samples below after a reset (comment lines mark each)"},
+        {"calibration", fmt::format("head_height_m {} ({})", d.recon->user_height(),
+                                    d.height_calibrated ? "calibrated" : "the model's size")},
+        {"method", std::string(d.recon->name())},
+        {"model", d.model_path_text.empty() ? "none" : d.model_path_text},
+        {"rate_hz", fmt::format("{}", d.config.rate_hz)},
+        {"replay", "bodyd --replay FILE --fast, without offsets, with the same method, model, calibration, rate_hz"}};
+    if (std::string re = d.recorder.open(d.config.record_trackers_file, meta); !re.empty()) return re;
+    spdlog::info("recording every tracker sample to {}", d.config.record_trackers_file);
   }
 
   // The sockets.
@@ -628,6 +739,7 @@ void Daemon::stop() {
   d.notify();
   if (d.recon_thread.joinable()) d.recon_thread.join();
   for (auto& s : d.sources) s->stop();
+  d.recorder.close();
   d.control.stop();
   if (d.started)
     spdlog::info("stopped: {} samples in, {} poses out, {} samples dropped", d.stats.samples_in.get(),
@@ -646,5 +758,6 @@ const std::string& Daemon::curve_public_key() const {
   return impl_->pub ? impl_->pub->curve_public_key() : kNone;
 }
 json Daemon::status() const { return impl_->status(); }
+std::uint64_t Daemon::loop_iterations() const { return impl_->loop_iterations.load(std::memory_order_relaxed); }
 
 }  // namespace bodyd::daemon

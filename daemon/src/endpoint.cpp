@@ -93,28 +93,34 @@ std::string prepare_ipc_endpoint(std::string_view endpoint, std::string_view wha
   return {};
 }
 
-std::string generate_curve_keys(const std::filesystem::path& dir, CurveKeyPair& out_keys) {
+std::string generate_curve_keys(const std::filesystem::path& dir, CurveKeyPair& out_keys, const std::string& name) {
   if (!zmq_has("curve")) return "this libzmq was built without CURVE support";
   char pub[41] = {}, sec[41] = {};
   if (zmq_curve_keypair(pub, sec) != 0) return std::string("zmq_curve_keypair: ") + zmq_strerror(zmq_errno());
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (ec) return dir.string() + ": cannot create directory: " + ec.message();
-  const auto pub_path = dir / "server.public";
-  const auto sec_path = dir / "server.secret";
+  const bool server = name == "server";
+  const auto pub_path = dir / (name + ".public");
+  const auto sec_path = dir / (name + ".secret");
   for (const auto& p : {pub_path, sec_path})
     if (std::filesystem::exists(p, ec)) return p.string() + ": exists; not overwriting keys (delete it first)";
   {
     // Create the secret file with mode 0600 before anything is written to it.
     const int fd = ::open(sec_path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
     if (fd < 0) return sec_path.string() + ": " + std::strerror(errno);
-    const std::string text = std::string("# bodyd CURVE server secret key (Z85). Keep private.\n") + sec + "\n";
+    const std::string text =
+        (server ? std::string("# bodyd CURVE server secret key (Z85). Keep private.\n")
+                : "# bodyd CURVE client secret key (Z85) of \"" + name + "\". Keep private; for the client only.\n") +
+        sec + "\n";
     const bool ok = ::write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size());
     ::close(fd);
     if (!ok) return sec_path.string() + ": write failed";
   }
   std::ofstream out(pub_path);
-  out << "# bodyd CURVE server public key (Z85). Give it to clients (ZMQ_CURVE_SERVERKEY).\n" << pub << "\n";
+  out << (server ? std::string("# bodyd CURVE server public key (Z85). Give it to clients (ZMQ_CURVE_SERVERKEY).\n")
+                 : "# bodyd CURVE client public key (Z85) of \"" + name + "\". Put it in bodyd's --curve-allow directory.\n")
+      << pub << "\n";
   if (!out) return pub_path.string() + ": write failed";
   out_keys.public_key = pub;
   out_keys.secret_key = sec;

@@ -4,13 +4,20 @@
 #include "bodyd/daemon/daemon.h"
 #include "bodyd/daemon/endpoint.h"
 #include "bodyd/daemon/reconstructors.h"
+#include "bodyd/daemon/service.h"
 #include "bodyd/drivers/device_list.h"
 
 #include <nlohmann/json.hpp>
 #include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/sinks/systemd_sink.h>
 #include <spdlog/spdlog.h>
 
+#include <atomic>
+#include <condition_variable>
+#include <functional>
 #include <csignal>
+#include <mutex>
+#include <thread>
 #include <cstdio>
 #include <iostream>
 
@@ -30,6 +37,45 @@ void install_signal_handlers() {
   std::signal(SIGPIPE, SIG_IGN);
 }
 
+// Under systemd with WatchdogSec=: pings the watchdog while the daemon is alive (its
+// reconstruction loop keeps turning), so a hung bodyd is restarted.
+class WatchdogThread {
+ public:
+  // `progress` returns a count that grows while the daemon is alive.
+  WatchdogThread(const bodyd::daemon::ServiceNotifier& notifier, std::function<std::uint64_t()> progress) {
+    const auto interval = notifier.watchdog_ping_interval();
+    if (interval.count() <= 0) return;
+    thread_ = std::thread([this, &notifier, progress = std::move(progress), interval] {
+      std::uint64_t last = progress();
+      bool first = true;
+      std::unique_lock lock(mutex_);
+      while (!stop_) {
+        const std::uint64_t now = progress();
+        // The loop turns at least every 20 ms (its queue wait), so in a ping interval it always
+        // advances unless it hangs.
+        if (first || now != last) notifier.watchdog();
+        first = false;
+        last = now;
+        wake_.wait_for(lock, interval, [this] { return stop_; });
+      }
+    });
+  }
+  ~WatchdogThread() {
+    {
+      std::lock_guard lock(mutex_);
+      stop_ = true;
+    }
+    wake_.notify_all();
+    if (thread_.joinable()) thread_.join();
+  }
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable wake_;
+  bool stop_ = false;
+  std::thread thread_;
+};
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -41,31 +87,55 @@ int main(int argc, char** argv) {
     case CliResult::Action::PrintConfig: std::cout << config_to_json(config).dump(2) << "\n"; return 0;
     case CliResult::Action::GenKeys: {
       CurveKeyPair keys;
-      if (std::string e = generate_curve_keys(cli.gen_keys_dir, keys); !e.empty()) {
+      if (std::string e = generate_curve_keys(cli.gen_keys_dir, keys, cli.gen_keys_name); !e.empty()) {
         std::cerr << "bodyd: " << e << "\n";
         return 1;
       }
-      std::cout << "wrote " << cli.gen_keys_dir << "/server.secret (keep private; bodyd --curve-secret-key)\n"
-                << "wrote " << cli.gen_keys_dir << "/server.public (give to clients: ZMQ_CURVE_SERVERKEY)\n"
-                << "public key: " << keys.public_key << "\n";
+      const std::string base = cli.gen_keys_dir + "/" + cli.gen_keys_name;
+      if (cli.gen_keys_name == "server")
+        std::cout << "wrote " << base << ".secret (keep private; bodyd --curve-secret-key)\n"
+                  << "wrote " << base << ".public (give to clients: ZMQ_CURVE_SERVERKEY)\n";
+      else
+        std::cout << "wrote " << base << ".secret (give to this client only: its ZMQ_CURVE_SECRETKEY; "
+                  << "bodyd-ctl --curve-client-key)\n"
+                  << "wrote " << base << ".public (copy into bodyd's --curve-allow directory)\n";
+      std::cout << "public key: " << keys.public_key << "\n";
       return 0;
     }
     case CliResult::Action::ListDevices: std::cout << bodyd::drivers::list_devices_text(); return 0;
     case CliResult::Action::Run: break;
   }
 
-  auto logger = spdlog::stderr_color_mt("bodyd");
-  logger->set_pattern("%Y-%m-%d %H:%M:%S.%e bodyd %^%l%$: %v");
-  spdlog::set_default_logger(logger);
+  if (stderr_is_journal()) {
+    // The journal keeps time, program name and priority itself.
+    auto logger = std::make_shared<spdlog::logger>("bodyd", std::make_shared<spdlog::sinks::systemd_sink_mt>("bodyd"));
+    logger->set_pattern("%v");
+    spdlog::set_default_logger(logger);
+  } else {
+    auto logger = spdlog::stderr_color_mt("bodyd");
+    logger->set_pattern("%Y-%m-%d %H:%M:%S.%e bodyd %^%l%$: %v");
+    spdlog::set_default_logger(logger);
+  }
   spdlog::set_level(spdlog::level::from_str(config.log_level));
+  for (const auto& note : cli.notes) spdlog::info("{}", note);
   install_signal_handlers();
+  const ServiceNotifier notifier;
 
   const std::filesystem::path skeleton =
       config.skeleton_path.empty() ? bundled_skeleton_path() : std::filesystem::path(config.skeleton_path);
   Daemon daemon(config, make_default_factory(skeleton));
   if (std::string e = daemon.start(); !e.empty()) {
     spdlog::critical("{}", e);
+    notifier.status("failed to start: " + e);
     return 1;
   }
-  return daemon.run(&g_stop_signal);
+  notifier.ready("publishing poses on " + daemon.pub_endpoint() +
+                 (daemon.control_endpoint().empty() ? "" : ", control " + daemon.control_endpoint()));
+  int code = 0;
+  {
+    const WatchdogThread watchdog(notifier, [&daemon] { return daemon.loop_iterations(); });
+    code = daemon.run(&g_stop_signal);
+  }
+  notifier.stopping();
+  return code;
 }

@@ -18,6 +18,7 @@ ZmqPublisher::ZmqPublisher(std::string endpoint, std::string what, const DaemonC
     : endpoint_(std::move(endpoint)),
       what_(std::move(what)),
       curve_secret_file_(config.curve_secret_key_file),
+      curve_allow_dir_(config.curve_allow_dir),
       allow_remote_(config.allow_remote),
       send_hwm_(config.send_hwm) {}
 
@@ -31,6 +32,8 @@ std::string ZmqPublisher::open() {
   zmq_setsockopt(pub, ZMQ_XPUB_VERBOSER, &verboser, sizeof(verboser));
   zmq_setsockopt(pub, ZMQ_LINGER, &linger_ms, sizeof(linger_ms));
   if (std::string e = set_curve_server(pub, curve_secret_file_, curve_public_); !e.empty()) return e;
+  if (!curve_allow_dir_.empty() && !curve_public_.empty())
+    if (std::string e = socket_.allow_only_keys_in(curve_allow_dir_); !e.empty()) return e;
   return bind_socket(pub, endpoint_, what_, allow_remote_, !curve_public_.empty(), bound_);
 }
 

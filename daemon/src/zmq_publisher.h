@@ -42,7 +42,7 @@ class ZmqPublisher final : public Output {
   [[nodiscard]] std::uint64_t skeleton_sends_failed() const { return skeleton_failed_.load(std::memory_order_relaxed); }
 
  private:
-  std::string endpoint_, what_, curve_secret_file_, bound_, curve_public_;
+  std::string endpoint_, what_, curve_secret_file_, curve_allow_dir_, bound_, curve_public_;
   bool allow_remote_ = false;
   int send_hwm_ = 1000;
   ZmqSocket socket_;

@@ -1,5 +1,6 @@
 #include "zmq_util.h"
 
+#include "bodyd/daemon/curve_allow.h"
 #include "bodyd/daemon/endpoint.h"
 
 #include <spdlog/spdlog.h>
@@ -10,6 +11,9 @@
 namespace bodyd::daemon {
 
 std::string zmq_error_text() { return zmq_strerror(zmq_errno()); }
+
+ZmqSocket::ZmqSocket() = default;
+ZmqSocket::~ZmqSocket() { close(); }
 
 std::string ZmqSocket::open(int type, const char* type_name) {
   context_ = zmq_ctx_new();
@@ -22,8 +26,27 @@ std::string ZmqSocket::open(int type, const char* type_name) {
 void ZmqSocket::close() {
   if (socket_) zmq_close(socket_);
   socket_ = nullptr;
+  zap_.reset();
   if (context_) zmq_ctx_term(context_);
   context_ = nullptr;
+}
+
+std::string ZmqSocket::allow_only_keys_in(const std::string& dir) {
+  std::set<std::string> keys;
+  std::vector<std::string> skipped;
+  if (std::string e = load_curve_allow_dir(dir, keys, skipped); !e.empty()) return e;
+  for (const auto& name : skipped) {
+    if (name.size() > 7 && name.substr(name.size() - 7) == ".secret")
+      spdlog::warn("--curve-allow {}: {} is a secret key: it belongs to its client only, not here (ignored)", dir, name);
+    else
+      spdlog::debug("--curve-allow {}: {} ignored (not NAME.public)", dir, name);
+  }
+  auto zap = std::make_unique<ZapAllowList>();
+  const std::size_t count = keys.size();
+  if (std::string e = zap->start(context_, std::move(keys), dir); !e.empty()) return e;
+  zap_ = std::move(zap);
+  spdlog::debug("--curve-allow {}: {} client keys", dir, count);
+  return {};
 }
 
 std::string set_curve_server(void* socket, const std::string& secret_key_file, std::string& out_public_key) {

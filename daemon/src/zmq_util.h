@@ -2,17 +2,20 @@
 // socket (RAII), binding with bodyd's endpoint policy (endpoint.h), and CURVE server keys.
 #pragma once
 
+#include <memory>
 #include <string>
 
 namespace bodyd::daemon {
+
+class ZapAllowList;
 
 std::string zmq_error_text();
 
 // A ZeroMQ context and one socket of it, closed (socket, then context) on destruction.
 class ZmqSocket {
  public:
-  ZmqSocket() = default;
-  ~ZmqSocket() { close(); }
+  ZmqSocket();
+  ~ZmqSocket();
   ZmqSocket(const ZmqSocket&) = delete;
   ZmqSocket& operator=(const ZmqSocket&) = delete;
 
@@ -21,9 +24,14 @@ class ZmqSocket {
   void close();
   [[nodiscard]] void* get() const { return socket_; }
 
+  // --curve-allow DIR: a ZAP handler in this socket's context accepts only the CURVE client
+  // keys of DIR (curve_allow.h). Call after open(), before binding. Empty or the error.
+  [[nodiscard]] std::string allow_only_keys_in(const std::string& dir);
+
  private:
   void* context_ = nullptr;
   void* socket_ = nullptr;
+  std::unique_ptr<ZapAllowList> zap_;  // stopped after the socket closes, before the context ends
 };
 
 // Makes `socket` a CURVE server with the secret key in `secret_key_file` ("" = no CURVE).

@@ -50,9 +50,11 @@ struct DaemonConfig {
   std::string control_endpoint = "ipc:///tmp/bodyd/control";  // "" or "none": no control socket
   bool allow_remote = false;
   std::string curve_secret_key_file;  // set: CURVE on both sockets
+  std::string curve_allow_dir;        // set: only the client keys in DIR/*.public may connect (ZAP)
   int send_hwm = 1000;                // messages queued per subscriber before ZeroMQ drops
   bool wait_for_subscriber = false;   // start sources when the first subscription arrives
   std::string endpoints_file;         // write the bound endpoints as JSON here (tests, scripts)
+  std::string record_trackers_file;   // set: every tracker sample received is written here (tracker log v1)
   // Outputs besides --pub (docs/outputs.md): specs SCHEME:TARGET?KEY=VALUE&..., e.g.
   // "vrchat:127.0.0.1:9000?slots=hip,feet". The config file's "outputs" list may also hold
   // objects {"type": SCHEME, "target": TARGET, KEY: VALUE...}, converted to this form.
@@ -99,6 +101,8 @@ struct CliResult {
   enum class Action { Run, Exit, GenKeys, PrintConfig, ListDevices } action = Action::Run;
   int exit_code = 0;           // for Action::Exit
   std::string gen_keys_dir;    // for Action::GenKeys
+  std::string gen_keys_name = "server";  // for Action::GenKeys: NAME.public, NAME.secret
+  std::vector<std::string> notes;  // for the log once it is set up (which config files were read)
 };
 
 // Parses the command line (CLI11) into `config`, loading --config FILE first. Prints help

@@ -26,10 +26,13 @@ class ControlTarget {
   virtual nlohmann::json calibrate_from_head() = 0;
   virtual nlohmann::json reload_model(const std::optional<std::string>& path) = 0;
   virtual nlohmann::json shutdown() = 0;
+  // Re-centres the tracking space: the user's current facing and floor position become forward
+  // and the origin ("reset", docs/control.md). The default answers that it is not supported.
+  virtual nlohmann::json recentre();
 };
 
 // The commands, for messages.
-inline constexpr std::string_view kControlCommands = "status, skeleton, calibrate, reload-model, shutdown";
+inline constexpr std::string_view kControlCommands = "status, skeleton, calibrate, reset, reload-model, shutdown";
 
 // Bounds of a user height a calibration accepts (metres).
 inline constexpr double kMinUserHeightM = 0.5;

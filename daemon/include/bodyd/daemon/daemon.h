@@ -88,6 +88,10 @@ class Daemon {
   // The status command's reply (thread-safe).
   [[nodiscard]] nlohmann::json status() const;
 
+  // Turns of the reconstruction loop so far (thread-safe). The loop turns at least every
+  // 20 ms while it is alive, samples or not: the systemd watchdog pings while this grows.
+  [[nodiscard]] std::uint64_t loop_iterations() const;
+
   struct Impl;
 
  private:

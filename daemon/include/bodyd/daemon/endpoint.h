@@ -32,9 +32,11 @@ struct CurveKeyPair {
   std::string secret_key;
 };
 
-// Generates a key pair and writes DIR/server.public (0644) and DIR/server.secret (0600),
-// refusing to overwrite existing files. Empty on success, else the error.
-[[nodiscard]] std::string generate_curve_keys(const std::filesystem::path& dir, CurveKeyPair& out_keys);
+// Generates a key pair and writes DIR/NAME.public (0644) and DIR/NAME.secret (0600),
+// refusing to overwrite existing files. NAME "server": bodyd's own pair; any other: a
+// client's (its .public goes into a --curve-allow directory). Empty on success, else the error.
+[[nodiscard]] std::string generate_curve_keys(const std::filesystem::path& dir, CurveKeyPair& out_keys,
+                                              const std::string& name = "server");
 
 // Reads a Z85 key file (40 key characters; whitespace and '#' comment lines ignored).
 // Empty on success, else "file: what is wrong".

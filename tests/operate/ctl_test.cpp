@@ -1,0 +1,216 @@
+// bodyd-ctl against a running bodyd (docs/ctl.md): every control request, the human-readable
+// and JSON output, usage errors, and the message when no daemon answers.
+#include "../install/process.h"
+#include "../test_paths.h"
+
+#include "bodyd/protocol/pose_message.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+#include <zmq.hpp>
+
+#include <algorithm>
+
+#include <cmath>
+
+namespace bodyd::test {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+const std::string kBodyd = (bin_dir() / "bodyd").string();
+const std::string kCtl = (bin_dir() / "bodyd-ctl").string();
+
+// A bodyd (ik, the bundled recording looped at its pace) for the whole suite.
+class Ctl : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new ScratchDir("bodyd-ctl");
+    control_ = "ipc://" + (dir_->path / "control").string();
+    bodyd_ = new Process({kBodyd, "--method", "ik", "--pub", "ipc://" + (dir_->path / "pose").string(), "--control",
+                          control_, "--endpoints-file", (dir_->path / "endpoints.json").string()},
+                         {.output_dir = dir_->path, .name = "bodyd"});
+    ready_ = wait_for_file(dir_->path / "endpoints.json", 20000).has_value();
+  }
+  static void TearDownTestSuite() {
+    delete bodyd_;
+    delete dir_;
+  }
+  void SetUp() override { ASSERT_TRUE(ready_) << bodyd_->log(); }
+
+  static RunResult ctl(std::vector<std::string> args) {
+    args.insert(args.begin(), {kCtl, "--control", control_});
+    return run(args, {.output_dir = dir_->path, .name = "ctl"}, 20000);
+  }
+  static json status() {
+    const RunResult r = ctl({"status", "--json"});
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    return json::parse(r.out);
+  }
+
+  static inline ScratchDir* dir_ = nullptr;
+  static inline Process* bodyd_ = nullptr;
+  static inline std::string control_;
+  static inline bool ready_ = false;
+};
+
+TEST_F(Ctl, StatusIsASummaryAndJsonIsTheRawReply) {
+  // Wait for the first poses, so the numbers are there.
+  for (int i = 0; i < 100 && status().value("frames_out", 0) < 10; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  const RunResult r = ctl({"status"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* part : {"bodyd: up ", "method ik", "sources:\n  replay:", "walk.csv: connected, ", " Hz, ",
+                           "samples: ", " dropped, queue ", "poses: ", " out", "reconstruction: p50 ", "latency ",
+                           "calibration: head height ", "endpoints: poses ipc://"})
+    EXPECT_NE(r.out.find(part), std::string::npos) << "missing \"" << part << "\" in:\n" << r.out;
+  const json j = status();
+  EXPECT_EQ(j["ok"], true);
+  EXPECT_GE(j["frames_out"].get<int>(), 10);
+  EXPECT_EQ(j["control"], control_);
+}
+
+TEST_F(Ctl, SkeletonIsTheJsonReply) {
+  const RunResult r = ctl({"skeleton"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json j = json::parse(r.out);
+  EXPECT_EQ(j["names"].size(), j["parents"].size());
+  EXPECT_GT(j["names"].size(), 10u);
+  EXPECT_EQ(j["skeleton_id"], status()["skeleton_id"]);
+}
+
+TEST_F(Ctl, CalibrateEachWay) {
+  RunResult r = ctl({"calibrate", "--head-height-m", "1.6"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("head height 1.600 m"), std::string::npos) << r.out;
+  json j = status();
+  EXPECT_NEAR(j["head_height_m"].get<double>(), 1.6, 1e-9);
+  EXPECT_EQ(j["height_calibrated"], true);
+
+  r = ctl({"calibrate", "--height-m", "1.8"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NEAR(status()["head_height_m"].get<double>(), 1.8 * 0.9, 1e-9);  // docs/daemon.md: head = 0.90 x body
+
+  // The bundled walk's head is at a standing height, so --from-head takes it.
+  r = ctl({"calibrate", "--from-head"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const double h = status()["head_height_m"].get<double>();
+  EXPECT_GT(h, 1.2);
+  EXPECT_LT(h, 1.8);
+
+  // Refused by bodyd: exit 1, its message.
+  r = ctl({"calibrate", "--height-m", "3.5"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("bodyd says: "), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("between 0.5 and 2.6"), std::string::npos) << r.err;
+  // Usage errors: exit 2, nothing sent.
+  EXPECT_EQ(ctl({"calibrate"}).exit_code, 2);
+  r = ctl({"calibrate", "--height-m", "1.8", "--from-head"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(ctl({"calibrate", "--height-m", "tall"}).exit_code, 2);
+  // Restore the model's size for the other tests.
+  EXPECT_EQ(ctl({"calibrate", "--head-height-m", "0"}).exit_code, 0);
+}
+
+// After a reset the body stands at the origin facing +Z: the poses that follow have the Head
+// joint near x = z = 0 (the walk moves it ~1.4 m/s, so within a few tenths of a metre) and the
+// hips' heading near 0.
+TEST_F(Ctl, ResetRecentresAndSaysSo) {
+  const json skeleton = json::parse(ctl({"skeleton"}).out);
+  const auto& names = skeleton["names"];
+  const auto head = std::find(names.begin(), names.end(), "Head") - names.begin();
+  ASSERT_LT(head, static_cast<long>(names.size()));
+
+  zmq::context_t ctx;
+  zmq::socket_t sub(ctx, zmq::socket_type::sub);
+  sub.set(zmq::sockopt::linger, 0);
+  sub.set(zmq::sockopt::subscribe, std::string(protocol::kPoseTopic));
+  sub.connect("ipc://" + (dir_->path / "pose").string());
+  auto next_pose = [&]() -> std::optional<protocol::PoseMessage> {
+    zmq::pollitem_t item{sub.handle(), 0, ZMQ_POLLIN, 0};
+    if (zmq::poll(&item, 1, std::chrono::milliseconds(3000)) <= 0) return std::nullopt;
+    zmq::message_t topic, body;
+    if (!sub.recv(topic) || !sub.recv(body)) return std::nullopt;
+    protocol::PoseMessage pose;
+    const auto* p = static_cast<const std::uint8_t*>(body.data());
+    if (!protocol::decode_pose(std::vector<std::uint8_t>(p, p + body.size()), pose).ok()) return std::nullopt;
+    return pose;
+  };
+  ASSERT_TRUE(next_pose());  // subscribed
+
+  const RunResult r = ctl({"reset"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("re-centred"), std::string::npos) << r.out;
+  const json j = status();
+  EXPECT_EQ(j["recentred"], true);
+  const std::uint64_t after = j["frames_out"].get<std::uint64_t>();
+  // The first pose sent after the status above.
+  std::optional<protocol::PoseMessage> pose;
+  do pose = next_pose();
+  while (pose && pose->seq < after);
+  ASSERT_TRUE(pose);
+  const auto& h = pose->joints[static_cast<std::size_t>(head)].position_m;
+  EXPECT_LT(std::hypot(h[0], h[2]), 0.35) << "head at x " << h[0] << ", z " << h[2];
+  EXPECT_GT(h[1], 1.0);  // heights unchanged
+  EXPECT_LT(std::abs(pose->root_heading_rad), 0.8) << pose->root_heading_rad;
+}
+
+TEST_F(Ctl, ReloadModelTheSameOrAnotherFile) {
+  RunResult r = ctl({"reload-model"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("model reloaded: method ik"), std::string::npos) << r.out;
+  // A relative path is the caller's: bodyd-ctl makes it absolute (bodyd's working directory differs).
+  r = run({kCtl, "--control", control_, "reload-model", "models/bodyd-default.safetensors"},
+          {.cwd = source_dir(), .output_dir = dir_->path, .name = "ctl"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("method diffusion"), std::string::npos) << r.out;
+  EXPECT_EQ(status()["model"], (source_dir() / "models/bodyd-default.safetensors").string());
+  r = ctl({"reload-model", (dir_->path / "missing.safetensors").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("missing.safetensors"), std::string::npos) << r.err;
+  EXPECT_EQ(status()["method"], "diffusion");  // the running model stays
+}
+
+TEST_F(Ctl, EndpointFromEndpointsFileOrUserConfig) {
+  RunResult r = run({kCtl, "--endpoints-file", (dir_->path / "endpoints.json").string(), "status", "--json"},
+                    {.output_dir = dir_->path, .name = "ctl"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(json::parse(r.out)["control"], control_);
+  // The service's config names the endpoint: bodyd-ctl finds it there.
+  ScratchDir config;
+  fs::create_directories(config.path / "bodyd");
+  std::ofstream(config.path / "bodyd/config.json") << "{\"control\": \"" << control_ << "\"}\n";
+  r = run({kCtl, "status"}, {.env = {{"XDG_CONFIG_HOME", config.path.string()}}, .output_dir = dir_->path, .name = "ctl"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+}
+
+TEST(CtlNoDaemon, SaysWhichEndpointAndHowToStartOne) {
+  ScratchDir dir;
+  const std::string endpoint = "ipc://" + (dir.path / "control").string();
+  const auto start = std::chrono::steady_clock::now();
+  const RunResult r = run({kCtl, "--control", endpoint, "--timeout-s", "0.5", "status"}, {.output_dir = dir.path}, 20000);
+  const auto took = std::chrono::steady_clock::now() - start;
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_NE(r.err.find("no answer from bodyd on " + endpoint), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("does not exist"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("systemctl --user start bodyd"), std::string::npos) << r.err;
+  EXPECT_LT(took, std::chrono::seconds(10));
+}
+
+// Last: stops a bodyd of its own.
+TEST(CtlShutdown, StopsTheDaemon) {
+  ScratchDir dir;
+  const std::string control = "ipc://" + (dir.path / "control").string();
+  Process bodyd({kBodyd, "--method", "ik", "--pub", "ipc://" + (dir.path / "pose").string(), "--control", control,
+                 "--endpoints-file", (dir.path / "endpoints.json").string()},
+                {.output_dir = dir.path, .name = "bodyd"});
+  ASSERT_TRUE(wait_for_file(dir.path / "endpoints.json", 20000)) << bodyd.log();
+  const RunResult r = run({kCtl, "--control", control, "shutdown"}, {.output_dir = dir.path, .name = "ctl"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("shutting down"), std::string::npos);
+  EXPECT_EQ(bodyd.wait(10000), 0) << bodyd.log();
+}
+
+}  // namespace
+}  // namespace bodyd::test

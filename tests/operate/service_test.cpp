@@ -1,0 +1,175 @@
+// bodyd under systemd, without systemd (docs/install.md): the test binds the NOTIFY_SOCKET
+// datagram socket itself and checks READY=1, the watchdog pings and STOPPING=1; the user
+// config read by --user-config (what the unit runs).
+#include "../install/process.h"
+#include "../test_paths.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <poll.h>
+
+namespace bodyd::test {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+const std::string kBodyd = (bin_dir() / "bodyd").string();
+const std::string kCtl = (bin_dir() / "bodyd-ctl").string();
+
+// The service manager's end of NOTIFY_SOCKET: a bound AF_UNIX datagram socket.
+class NotifySocket {
+ public:
+  explicit NotifySocket(const fs::path& path) : path_(path) {
+    fd_ = socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::snprintf(addr.sun_path, sizeof(addr.sun_path), "%s", path.c_str());
+    if (fd_ < 0 || bind(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0)
+      throw std::runtime_error("cannot bind " + path.string());
+  }
+  ~NotifySocket() { close(fd_); }
+  // The next datagram within timeout_ms, or nullopt.
+  std::optional<std::string> receive(int timeout_ms) {
+    pollfd p{fd_, POLLIN, 0};
+    if (poll(&p, 1, timeout_ms) <= 0) return std::nullopt;
+    char buf[4096];
+    const ssize_t n = recv(fd_, buf, sizeof(buf), 0);
+    if (n < 0) return std::nullopt;
+    return std::string(buf, static_cast<std::size_t>(n));
+  }
+  const fs::path& path() const { return path_; }
+
+ private:
+  fs::path path_;
+  int fd_ = -1;
+};
+
+bool has_line(const std::string& message, const std::string& line) {
+  std::istringstream in(message);
+  std::string l;
+  while (std::getline(in, l))
+    if (l == line) return true;
+  return false;
+}
+
+std::vector<std::string> bodyd_args(const fs::path& dir) {
+  return {kBodyd, "--method", "ik", "--pub", "ipc://" + (dir / "pose").string(), "--control",
+          "ipc://" + (dir / "control").string()};
+}
+
+TEST(SystemdNotify, ReadyThenWatchdogPingsThenStopping) {
+  ScratchDir dir;
+  NotifySocket notify(dir.path / "notify");
+  // 200 ms watchdog: bodyd pings every 100 ms.
+  Process bodyd(bodyd_args(dir.path), {.env = {{"NOTIFY_SOCKET", notify.path().string()}, {"WATCHDOG_USEC", "200000"},
+                                               {"WATCHDOG_PID", kUnset}},
+                                       .output_dir = dir.path, .name = "bodyd"});
+  const auto ready = notify.receive(10000);
+  ASSERT_TRUE(ready) << bodyd.log();
+  EXPECT_TRUE(has_line(*ready, "READY=1")) << *ready;
+  EXPECT_NE(ready->find("STATUS=publishing poses on ipc://"), std::string::npos) << *ready;
+
+  int pings = 0;
+  const auto start = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() - start < std::chrono::milliseconds(1000)) {
+    const auto m = notify.receive(300);
+    if (m && has_line(*m, "WATCHDOG=1")) ++pings;
+  }
+  // About 10 in a second; at least 3 leaves room for a loaded machine, none would fail.
+  EXPECT_GE(pings, 3);
+  EXPECT_LE(pings, 20);
+
+  const RunResult shutdown = run({kCtl, "--control", "ipc://" + (dir.path / "control").string(), "shutdown"},
+                                 {.output_dir = dir.path, .name = "ctl"});
+  EXPECT_EQ(shutdown.exit_code, 0) << shutdown.err;
+  bool stopping = false;
+  while (auto m = notify.receive(5000)) {
+    if (has_line(*m, "STOPPING=1")) {
+      stopping = true;
+      break;
+    }
+  }
+  EXPECT_TRUE(stopping);
+  EXPECT_EQ(bodyd.wait(10000), 0) << bodyd.log();
+}
+
+TEST(SystemdNotify, NoWatchdogPingsWithoutWatchdogUsec) {
+  ScratchDir dir;
+  NotifySocket notify(dir.path / "notify");
+  Process bodyd(bodyd_args(dir.path), {.env = {{"NOTIFY_SOCKET", notify.path().string()}, {"WATCHDOG_USEC", kUnset}},
+                                       .output_dir = dir.path, .name = "bodyd"});
+  const auto ready = notify.receive(10000);
+  ASSERT_TRUE(ready) << bodyd.log();
+  EXPECT_TRUE(has_line(*ready, "READY=1"));
+  const auto next = notify.receive(600);
+  EXPECT_FALSE(next && has_line(*next, "WATCHDOG=1")) << *next;
+  bodyd.signal(SIGTERM);
+  EXPECT_EQ(bodyd.wait(10000), 0) << bodyd.log();
+}
+
+TEST(SystemdNotify, StartFailureIsReportedAndNotReady) {
+  ScratchDir dir;
+  NotifySocket notify(dir.path / "notify");
+  const RunResult r = run({kBodyd, "--method", "diffusion", "--model", (dir.path / "missing.safetensors").string(),
+                           "--pub", "ipc://" + (dir.path / "pose").string(), "--control", "none"},
+                          {.env = {{"NOTIFY_SOCKET", notify.path().string()}}, .output_dir = dir.path, .name = "bodyd"});
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  const auto m = notify.receive(100);
+  ASSERT_TRUE(m);
+  EXPECT_FALSE(has_line(*m, "READY=1")) << *m;
+  EXPECT_NE(m->find("STATUS=failed to start: "), std::string::npos) << *m;
+}
+
+// --user-config reads $XDG_CONFIG_HOME/bodyd/config.json; flags still override it.
+TEST(UserConfig, ReadFromXdgConfigHomeAndOverriddenByFlags) {
+  ScratchDir dir;
+  fs::create_directories(dir.path / "config/bodyd");
+  std::ofstream(dir.path / "config/bodyd/config.json") << "// a user's config\n{\"method\": \"ik\", \"rate_hz\": 30}\n";
+  const ProcessOptions env{.env = {{"XDG_CONFIG_HOME", (dir.path / "config").string()}}, .output_dir = dir.path};
+  RunResult r = run({kBodyd, "--user-config", "--print-config"}, env);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  json printed = json::parse(r.out);
+  EXPECT_EQ(printed["method"], "ik");
+  EXPECT_EQ(printed["rate_hz"], 30.0);
+  r = run({kBodyd, "--user-config", "--rate-hz", "45", "--print-config"}, env);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(json::parse(r.out)["rate_hz"], 45.0);
+  // Without --user-config the file is not read.
+  r = run({kBodyd, "--print-config"}, env);
+  EXPECT_EQ(json::parse(r.out)["method"], "diffusion");
+}
+
+TEST(UserConfig, MissingFileMeansDefaultsAndABadOneIsAnError) {
+  ScratchDir dir;
+  ProcessOptions env{.env = {{"XDG_CONFIG_HOME", (dir.path / "config").string()}}, .output_dir = dir.path};
+  RunResult r = run({kBodyd, "--user-config", "--print-config"}, env);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(json::parse(r.out)["method"], "diffusion");
+  fs::create_directories(dir.path / "config/bodyd");
+  std::ofstream(dir.path / "config/bodyd/config.json") << "{\n  \"method\": \"ik\",\n  \"rate_hz\": \"fast\"\n}\n";
+  r = run({kBodyd, "--user-config", "--print-config"}, env);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find((dir.path / "config/bodyd/config.json").string() + ": rate_hz"), std::string::npos) << r.err;
+  // XDG_CONFIG_HOME unset: ~/.config.
+  env.env = {{"XDG_CONFIG_HOME", kUnset}, {"HOME", dir.path.string()}};
+  fs::create_directories(dir.path / ".config/bodyd");
+  std::ofstream(dir.path / ".config/bodyd/config.json") << "{\"rate_hz\": 20}\n";
+  r = run({kBodyd, "--user-config", "--print-config"}, env);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(json::parse(r.out)["rate_hz"], 20.0);
+}
+
+// The example config shipped in share/doc/bodyd loads as it is.
+TEST(UserConfig, ShippedExampleLoads) {
+  ScratchDir dir;
+  const RunResult r = run({kBodyd, "--config", (source_dir() / "packaging/config.example.json").string(), "--print-config"},
+                          {.output_dir = dir.path});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(json::parse(r.out)["control"], "ipc:///tmp/bodyd/control");
+}
+
+}  // namespace
+}  // namespace bodyd::test
