@@ -530,12 +530,14 @@ struct Daemon::Impl final : ControlTarget {
     std::lock_guard lock(shared_mutex);
     json offsets = json::array();
     for (const auto& o : skeleton_msg.offsets_m) offsets.push_back({o[0], o[1], o[2]});
-    return json{{"ok", true},
-                {"skeleton_id", skeleton_msg.skeleton_id},
-                {"names", skeleton_msg.names},
-                {"parents", skeleton_msg.parents},
-                {"offsets_m", offsets},
-                {"head_height_m", head_height_m}};
+    json reply{{"ok", true},
+               {"skeleton_id", skeleton_msg.skeleton_id},
+               {"names", skeleton_msg.names},
+               {"parents", skeleton_msg.parents},
+               {"offsets_m", offsets},
+               {"head_height_m", head_height_m}};
+    if (!skeleton_msg.rest_rotations_xyzw.empty()) reply["rest_rotations_xyzw"] = rest_rotations_json(skeleton_msg);
+    return reply;
   }
 
   json calibrate_height(double height_m) override {

@@ -1,6 +1,7 @@
 // The registered outputs: one row per output kind (daemon/include/bodyd/daemon/output.h says
 // how to add one). Each factory lives in its output's own file.
 #include "bodyd/daemon/output.h"
+#include "bodyd/daemon/vmc.h"
 #include "zmq_publisher.h"
 
 namespace bodyd::daemon {
@@ -8,6 +9,7 @@ namespace bodyd::daemon {
 const std::vector<OutputKind>& output_kinds() {
   static const std::vector<OutputKind> kinds = {
       {"zmq", make_zmq_output, "zmq:ENDPOINT  another ZeroMQ pose stream (docs/protocol.md), like --pub"},
+      {"vmc", make_vmc_output, "vmc:[HOST:PORT]  VMC protocol to a marionette: VSeeFace, VNyan, Warudo, EVMC4U (default 127.0.0.1:39539)"},
   };
   return kinds;
 }

@@ -1,17 +1,35 @@
 #include "pose_wire.h"
 
+#include "bodyd/motion/humanoid.h"
+
 namespace bodyd::daemon {
 
 protocol::SkeletonMessage skeleton_message(const Skeleton& skeleton) {
   protocol::SkeletonMessage m;
+  RestPose rest;
+  std::string not_humanoid;
+  const bool humanoid = make_rest_pose(skeleton, rest, not_humanoid);
   for (int j = 0; j < skeleton.size(); ++j) {
-    m.names.push_back(skeleton.names[j]);
-    m.parents.push_back(static_cast<std::int16_t>(skeleton.parents[j]));
-    const Vec3& o = skeleton.offsets[j];
+    const auto i = static_cast<std::size_t>(j);
+    m.names.push_back(skeleton.names[i]);
+    m.parents.push_back(static_cast<std::int16_t>(skeleton.parents[i]));
+    const Vec3& o = humanoid ? rest.offsets[i] : skeleton.offsets[i];
     m.offsets_m.push_back({static_cast<float>(o.x()), static_cast<float>(o.y()), static_cast<float>(o.z())});
+    if (humanoid) {
+      const Quat q = rest.rotations[i].normalized();
+      m.rest_rotations_xyzw.push_back({static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()),
+                                       static_cast<float>(q.w())});
+    }
   }
   m.skeleton_id = protocol::skeleton_id_of(m);
   return m;
+}
+
+nlohmann::json rest_rotations_json(const protocol::SkeletonMessage& skeleton) {
+  if (skeleton.rest_rotations_xyzw.empty()) return nullptr;
+  nlohmann::json rest = nlohmann::json::array();
+  for (const auto& q : skeleton.rest_rotations_xyzw) rest.push_back({q[0], q[1], q[2], q[3]});
+  return rest;
 }
 
 void fill_pose_message(const BodyPose& body, const PoseMessageContext& c, protocol::PoseMessage& out) {

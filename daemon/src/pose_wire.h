@@ -6,12 +6,22 @@
 #include "bodyd/motion/skeleton.h"
 #include "bodyd/protocol/pose_message.h"
 
+#include <nlohmann/json.hpp>
+
 #include <cstdint>
 
 namespace bodyd::daemon {
 
-// The skeleton message of a reconstruction skeleton (skeleton_id computed).
+// The skeleton message of a reconstruction skeleton (skeleton_id computed). For the bundled
+// data's humanoid it carries the reference T-pose (motion/humanoid.h, docs/protocol.md "Rest
+// pose"): rest rotations, and the Hips offset at its standing height above joint_Root (the
+// BVH's is a clip's world position); any other skeleton gets a version-1 message, its offsets
+// as they are and no rest rotations.
 [[nodiscard]] protocol::SkeletonMessage skeleton_message(const Skeleton& skeleton);
+
+// The control reply's "rest_rotations_xyzw" (docs/control.md): [[x, y, z, w], ...], or null
+// when the skeleton has none.
+[[nodiscard]] nlohmann::json rest_rotations_json(const protocol::SkeletonMessage& skeleton);
 
 // What a pose message carries besides the pose.
 struct PoseMessageContext {

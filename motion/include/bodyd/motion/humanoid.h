@@ -1,6 +1,6 @@
 // The skeleton's reference T-pose ("rest pose") and the retargeting of bodyd's poses to
 // Unity's humanoid convention (HumanBodyBones, left-handed axes, every bone's rotation the
-// identity in the T-pose), as the VMC protocol's receivers expect them (docs/outputs.md, VMC).
+// identity in the T-pose), as the VMC protocol's receivers expect them (docs/vmc.md).
 //
 // Why: a joint's local frame in bodyd's skeleton (the bundled motion data's) is its BVH frame,
 // whose axes differ from joint to joint (the spine's X points up, the left arm's X points

@@ -1,0 +1,98 @@
+// `--output vmc:HOST:PORT`: the VMC protocol, marionette side (bodyd/daemon/vmc.h,
+// docs/vmc.md): each pose retargeted to Unity's humanoid (motion/humanoid.h) and
+// sent as one OSC bundle.
+#include "bodyd/daemon/vmc.h"
+
+#include "bodyd/daemon/output.h"
+#include "osc_sender.h"
+
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include <atomic>
+#include <memory>
+#include <mutex>
+
+namespace bodyd::daemon {
+namespace {
+
+class VmcOutput final : public Output {
+ public:
+  VmcOutput(std::string host, std::string port) : host_(std::move(host)), port_(std::move(port)) {}
+
+  std::string name() const override { return "vmc:" + (sender_.address().empty() ? host_ + ":" + port_ : sender_.address()); }
+
+  std::string open() override { return sender_.open(host_, port_, "--output vmc:" + host_ + ":" + port_); }
+
+  // The rig is rebuilt for every new skeleton (calibration scales the bones).
+  void set_skeleton(const Skeleton& skeleton, const std::vector<std::uint8_t>&) override {
+    std::string error;
+    rig_ok_ = make_unity_rig(skeleton, rig_, error);
+    joint_count_ = skeleton.size();
+    if (!rig_ok_)
+      spdlog::error("--output {}: the skeleton cannot be retargeted to Unity's humanoid; nothing is sent: {}", name(), error);
+    std::lock_guard lock(mutex_);
+    rig_error_ = rig_ok_ ? std::string() : error;
+  }
+
+  bool send(const OutputFrame& frame, std::string& out_error) override {
+    if (!rig_ok_) {
+      out_error = "the skeleton is not the humanoid the VMC output knows (see the log)";
+      return false;
+    }
+    const GlobalPose& g = frame.body.global;
+    if (static_cast<int>(g.positions.size()) != joint_count_ || static_cast<int>(g.rotations.size()) != joint_count_) {
+      out_error = "the pose's joint count differs from its skeleton's";
+      return false;
+    }
+    if (first_t_ns_ == INT64_MIN) first_t_ns_ = frame.t_ns;
+    retarget_to_unity(rig_, g, pose_);
+    const auto time_s = static_cast<float>(static_cast<double>(frame.t_ns - first_t_ns_) * 1e-9);
+    const std::vector<std::uint8_t>& bytes = encoder_.encode(pose_, time_s);
+    if (bytes.empty()) {
+      out_error = "liblo could not serialise the bundle";
+      return false;
+    }
+    if (!sender_.send(bytes.data(), bytes.size(), out_error)) return false;
+    bundles_sent_.fetch_add(1, std::memory_order_relaxed);
+    return true;
+  }
+
+  nlohmann::json status() const override {
+    nlohmann::json j{{"bundles_sent", bundles_sent_.load(std::memory_order_relaxed)}};
+    std::lock_guard lock(mutex_);
+    if (!rig_error_.empty()) j["error"] = rig_error_;
+    return j;
+  }
+
+  void close() override { sender_.close(); }
+
+ private:
+  std::string host_, port_;
+  OscSender sender_;
+  vmc::BundleEncoder encoder_;
+  UnityRig rig_;
+  bool rig_ok_ = false;
+  int joint_count_ = 0;
+  UnityPose pose_;
+  std::int64_t first_t_ns_ = INT64_MIN;
+  std::atomic<std::uint64_t> bundles_sent_{0};
+  mutable std::mutex mutex_;
+  std::string rig_error_;
+};
+
+}  // namespace
+
+std::unique_ptr<Output> make_vmc_output(const OutputSpec& spec, const OutputEnv& env, std::string& error) {
+  (void)env;
+  if (std::string e = check_options(spec, {}); !e.empty()) {
+    error = e;
+    return nullptr;
+  }
+  std::string host, port;
+  if (!split_host_port(spec.target, vmc::kDefaultHost, vmc::kDefaultPort, host, port, "--output " + spec.text, error))
+    return nullptr;
+  return std::make_unique<VmcOutput>(host, port);
+}
+
+}  // namespace bodyd::daemon
