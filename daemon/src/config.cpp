@@ -5,7 +5,10 @@
 #include <nlohmann/json.hpp>
 
 #include <cctype>
+#include "bodyd/motion/limits.h"
+
 #include <cmath>
+#include <limits>
 #include <fstream>
 #include <iostream>
 #include <sstream>
@@ -17,6 +20,12 @@ namespace {
 using nlohmann::json;
 
 std::string type_name(const json& j) { return j.type_name(); }
+
+std::string fmt_number(double x) {
+  std::ostringstream s;
+  s << x;
+  return s.str();
+}
 
 // Reads one typed value; on a type mismatch, sets `error`.
 template <typename T>
@@ -32,9 +41,19 @@ bool get_value(const json& j, const std::string& where, T& out, std::string& err
       return false;
     }
   } else if constexpr (std::is_integral_v<T>) {
-    if (!j.is_number_integer() || (std::is_unsigned_v<T> && j.get<std::int64_t>() < 0)) {
+    if (!j.is_number_integer() || (std::is_unsigned_v<T> && !j.is_number_unsigned())) {
       error = where + ": expected a " + (std::is_unsigned_v<T> ? "non-negative " : "") + "integer, got " +
               (j.is_number() ? j.dump() : type_name(j));
+      return false;
+    }
+    // Range of T, checked before converting (3000000000 into an int would wrap; issue 11).
+    const bool fits = j.is_number_unsigned()
+                          ? j.get<std::uint64_t>() <= static_cast<std::uint64_t>(std::numeric_limits<T>::max())
+                          : j.get<std::int64_t>() >= static_cast<std::int64_t>(std::numeric_limits<T>::min()) &&
+                                (std::is_unsigned_v<T> || j.get<std::int64_t>() <= static_cast<std::int64_t>(std::numeric_limits<T>::max()));
+    if (!fits) {
+      error = where + ": " + j.dump() + " is out of range (" + std::to_string(std::numeric_limits<T>::min()) + " .. " +
+              std::to_string(std::numeric_limits<T>::max()) + ")";
       return false;
     }
   } else {
@@ -66,6 +85,10 @@ bool get_vec(const json& j, const std::string& where, std::size_t n, std::vector
 std::string offset_from_values(const std::vector<double>& v, const std::string& where, DeviceOffset& out) {
   for (double x : v)
     if (!std::isfinite(x)) return where + ": values must be finite";
+  for (int k = 0; k < 3; ++k)
+    if (std::fabs(v[static_cast<std::size_t>(k)]) > limits::kMaxAbsOffsetM)
+      return where + ": each position coordinate must be within +-" + fmt_number(limits::kMaxAbsOffsetM) +
+             " m (an offset from the device to the joint; docs/daemon.md, \"Limits\")";
   out.position_m = Vec3(v[0], v[1], v[2]);
   out.rotation = Quat::Identity();
   if (v.size() == 7) {
@@ -214,6 +237,7 @@ std::string apply_config_json(const json& j, const std::string& source, DaemonCo
     else if (key == "queue_capacity") ok = get_value(value, w, config.queue_capacity, error);
     else if (key == "method") ok = get_value(value, w, config.method, error);
     else if (key == "model") ok = get_value(value, w, config.model_path, error);
+    else if (key == "models_dir") ok = get_value(value, w, config.models_dir, error);
     else if (key == "user_height_m") ok = get_value(value, w, config.user_height_m, error);
     else if (key == "head_height_m") ok = get_value(value, w, config.head_height_m, error);
     else if (key == "skeleton") ok = get_value(value, w, config.skeleton_path, error);
@@ -243,6 +267,10 @@ std::string load_config_file(const std::filesystem::path& path, DaemonConfig& co
     } catch (const json::parse_error& e) {
       byte = e.byte;
       what = e.what();
+    } catch (const json::exception& e) {
+      // A number that overflows a double (1e400) is an out_of_range error, with no byte offset.
+      what = e.what();
+      return path.string() + ": " + what + " (numbers must fit a double; see docs/daemon.md, \"Limits\")";
     }
     int line = 1, column = 1;
     for (std::size_t i = 0; i + 1 < byte && i < text.size(); ++i) {
@@ -252,6 +280,22 @@ std::string load_config_file(const std::filesystem::path& path, DaemonConfig& co
     return path.string() + ":" + std::to_string(line) + ":" + std::to_string(column) + ": " + what;
   }
   return apply_config_json(j, path.string(), config);
+}
+
+std::string check_reload_model_path(const std::filesystem::path& requested, const DaemonConfig& config) {
+  std::error_code ec;
+  const std::filesystem::path configured = config.model_path.empty() ? default_model_path() : std::filesystem::path(config.model_path);
+  const std::filesystem::path dir = config.models_dir.empty() ? default_model_path().parent_path() : std::filesystem::path(config.models_dir);
+  const auto file = std::filesystem::weakly_canonical(requested, ec);
+  if (ec) return requested.string() + ": cannot resolve the path";
+  if (file == std::filesystem::weakly_canonical(configured, ec)) return {};
+  const auto root = std::filesystem::weakly_canonical(dir, ec);
+  if (!ec) {
+    const auto rel = file.lexically_relative(root);
+    if (!rel.empty() && *rel.begin() != ".." && rel != ".") return {};
+  }
+  return requested.string() + ": not the configured model and not under the models directory " + root.string() +
+         " (reload-model loads only those; start bodyd with --models-dir DIR to allow another directory)";
 }
 
 std::string parse_offset_flag(const std::string& text, DaemonConfig& config) {
@@ -283,15 +327,22 @@ std::string parse_offset_flag(const std::string& text, DaemonConfig& config) {
 std::string validate_config(const DaemonConfig& c) {
   if (!c.curve_allow_dir.empty() && c.curve_secret_key_file.empty())
     return "curve_allow (--curve-allow) needs curve_secret_key (--curve-secret-key): the allow-list is of CURVE clients";
-  if (!(c.replay_speed > 0.0) || !std::isfinite(c.replay_speed)) return "replay_speed must be > 0";
-  if (!(c.rate_hz >= 0.0) || !std::isfinite(c.rate_hz)) return "rate_hz must be >= 0 (0: one pose per head sample)";
+  if (!(c.replay_speed > 0.0) || !(c.replay_speed <= limits::kMaxReplaySpeed))
+    return "replay_speed (--speed) must be > 0 and at most " + fmt_number(limits::kMaxReplaySpeed) + ", not " +
+           fmt_number(c.replay_speed) + " (use --fast to replay as fast as possible)";
+  if (!(c.rate_hz >= 0.0) || !(c.rate_hz <= limits::kMaxRateHz))
+    return "rate_hz must be between 0 (one pose per head sample) and " + fmt_number(limits::kMaxRateHz) + ", not " +
+           fmt_number(c.rate_hz);
   if (c.queue_capacity < 16 || c.queue_capacity > (1u << 20)) return "queue_capacity must be in 16 .. 1048576";
   if (c.send_hwm < 1) return "send_hwm must be >= 1";
+  if (c.pub_endpoint == c.control_endpoint)
+    return "pub and control are the same endpoint (" + c.pub_endpoint + "): give each socket its own";
   if (c.method != "diffusion" && c.method != "ik") return "method \"" + c.method + "\": expected diffusion or ik";
   for (auto [name, h] : {std::pair{"user_height_m", c.user_height_m}, std::pair{"head_height_m", c.head_height_m}}) {
-    if (!std::isfinite(h) || h < 0.0 || h > 2.6 || (h > 0.0 && h < 0.5))
-      return std::string(name) + " must be 0 (the model's size) or a height in metres between 0.5 and 2.6 (e.g. 1.75), not " +
-             std::to_string(h);
+    if (!std::isfinite(h) || h < 0.0 || h > limits::kMaxUserHeightM || (h > 0.0 && h < limits::kMinUserHeightM))
+      return std::string(name) + " must be 0 (the model's size) or a height in metres between " +
+             fmt_number(limits::kMinUserHeightM) + " and " + fmt_number(limits::kMaxUserHeightM) + " (e.g. 1.75), not " +
+             fmt_number(h);
   }
   if (c.user_height_m > 0.0 && c.head_height_m > 0.0)
     return "give user_height_m (body height) or head_height_m (standing head height), not both";
@@ -345,6 +396,7 @@ json config_to_json(const DaemonConfig& c) {
       {"queue_capacity", c.queue_capacity},
       {"method", c.method},
       {"model", c.model_path},
+      {"models_dir", c.models_dir},
       {"skeleton", c.skeleton_path},
       {"user_height_m", c.user_height_m},
       {"head_height_m", c.head_height_m},
@@ -429,6 +481,8 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
   app.add_option("--queue-capacity", config.queue_capacity, "tracker samples the queue holds");
   app.add_option("--method", config.method, "reconstruction: diffusion (default) or ik");
   app.add_option("--model", config.model_path, "model file (default models/bodyd-default.safetensors)");
+  app.add_option("--models-dir", config.models_dir,
+                 "reload-model loads only --model or files under this directory (default: the default model's)");
   app.add_option("--skeleton", config.skeleton_path, "BVH file whose skeleton the ik method uses (default: bundled)");
   app.add_option("--user-height-m", config.user_height_m,
                  "user's body height in metres (approximate scaling; 0: the model's size)");
@@ -451,7 +505,9 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     result.action = CliResult::Action::Exit;
-    result.exit_code = app.exit(e);
+    // app.exit prints the message; --help and --version exit 0, and every bad command line
+    // exits 2 as documented (CLI11's own codes are 105, 109, ...; issue 11).
+    result.exit_code = app.exit(e) == 0 ? 0 : 2;
     return result;
   }
   std::vector<std::string> sources = source_flags;

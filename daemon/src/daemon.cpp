@@ -41,7 +41,7 @@ ModelChoice choose_model(const DaemonConfig& config, std::string& warning) {
   std::error_code ec;
   if (config.method == "diffusion" && config.model_path.empty() && !std::filesystem::exists(choice.model_path, ec)) {
     warning = "the default model " + choice.model_path.string() +
-              " does not exist yet: using the ik baseline instead (train one with the trainer, docs/model.md, "
+              " does not exist yet: using the ik baseline instead (the shipped models and how to make one: docs/models.md; "
               "or pass --model FILE; --method ik silences this warning)";
     choice.method = "ik";
   }
@@ -134,7 +134,9 @@ struct Daemon::Impl final : ControlTarget {
   protocol::PoseMessage pose_msg;
   std::vector<std::uint8_t> pose_bytes;
   int hips_index = -1;
-  bool head_seen = false;
+  bool head_seen = false;  // a valid head sample has arrived
+  // Head time going back by more than this restarts the reconstruction (handle_sample).
+  static constexpr std::int64_t kTimeBaseRestartNs = 1'000'000'000;
   std::int64_t next_no_head_warning_ns = 0;
   TrackerSample head_as_received;  // the last head sample before its device offset
   std::atomic<std::uint64_t> loop_iterations{0};
@@ -234,17 +236,30 @@ struct Daemon::Impl final : ControlTarget {
       recorder.record(s);
       if (s.valid) s.rotation = s.rotation.normalized();
     }
+    if (s.role == Role::Head && s.t_ns < last_pose_t_ns - kTimeBaseRestartNs) {
+      // Head time went far back: a replay's time base started over (a loop at the int64 limit,
+      // issue 11) or a source restarted. The reconstruction starts over instead of waiting,
+      // silently, until time passes the last pose again.
+      spdlog::warn("head time went back by {:.3f} s: the reconstruction starts over", (last_pose_t_ns - s.t_ns) * 1e-9);
+      stats.time_restarts.add();
+      recon->reset();
+      last_pose_t_ns = INT64_MIN;
+      rate_gate = RateGate(rate_gate.rate_hz());
+      for (auto& slot : outputs) slot->gate = RateGate(slot->gate.rate_hz());
+    }
     if (s.role == Role::Head && s.valid) {
       last_valid_head = s;
       last_valid_head_arrival_ns = in.arrival_ns;
     }
+    const std::int64_t refused_before = recon->refused_samples();
     recon->push(s);
+    if (recon->refused_samples() != refused_before) stats.samples_refused.add();
     stats.samples_in.add();
     stats.role_samples[static_cast<int>(s.role)].add();
     if (s.role != Role::Head) return;
-    if (!head_seen) {
+    if (!head_seen && s.valid) {  // an invalid head gives no pose (issue 11)
       head_seen = true;
-      spdlog::info("first head sample received; publishing poses");
+      spdlog::info("first valid head sample received; publishing poses");
     }
     if (s.valid) {
       stats.last_head_y_m.store(s.position_m.y(), std::memory_order_relaxed);
@@ -430,7 +445,7 @@ struct Daemon::Impl final : ControlTarget {
   void warn_if_no_head(std::int64_t now_ns) {
     if (head_seen || now_ns < next_no_head_warning_ns) return;
     if (next_no_head_warning_ns != 0)
-      spdlog::warn("no trackers: waiting for a head sample from {} (is the headset on and tracking? "
+      spdlog::warn("no trackers: waiting for a valid head sample from {} (is the headset on and tracking? "
                    "check the source with `bodyd --source ... --log-level debug`)",
                    source_names());
     next_no_head_warning_ns = now_ns + (next_no_head_warning_ns == 0 ? 3'000'000'000LL : 30'000'000'000LL);
@@ -561,7 +576,12 @@ struct Daemon::Impl final : ControlTarget {
     }
     ModelChoice choice{config.method, path ? std::filesystem::path(*path)
                                            : (current.empty() ? default_model_path() : std::filesystem::path(current))};
-    if (path) choice.method = "diffusion";  // a model file is for the diffusion method
+    if (path) {
+      // Only the configured model or files under the models directory (issue 11): the control
+      // socket must not become a way to read, or probe, any file the daemon can open.
+      if (std::string e = check_reload_model_path(*path, config); !e.empty()) return control_error("reload-model: " + e);
+      choice.method = "diffusion";  // a model file is for the diffusion method
+    }
     std::string error;
     std::unique_ptr<Reconstructor> next = factory(choice, error);
     if (!next) return control_error("reload-model: " + error);
@@ -727,7 +747,14 @@ int Daemon::run(const volatile std::sig_atomic_t* signal_flag) {
     d.wake.wait_for(lock, std::chrono::milliseconds(50));
   }
   stop();
-  return d.fatal.load() ? 1 : 0;
+  if (d.fatal.load()) return 1;
+  if (d.config.exit_at_end && d.drained.load() && !d.head_seen) {
+    // Not a success: nothing was published (issue 11). Documented in docs/daemon.md.
+    spdlog::error("every source finished without a valid head sample: no pose was published (is the head "
+                  "role valid anywhere in the input? docs/tracker-log.md)");
+    return 3;
+  }
+  return 0;
 }
 
 void Daemon::request_stop() {

@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <sstream>
@@ -61,31 +62,80 @@ std::string check_bind_endpoint(std::string_view endpoint, bool allow_remote, st
          "bodyd --gen-keys DIR, then --curve-secret-key DIR/server.secret; see docs/daemon.md)";
 }
 
+std::string zmq_bind_address(std::string_view endpoint, bool& out_ipv6) {
+  out_ipv6 = false;
+  if (!starts_with(endpoint, "tcp://")) return std::string(endpoint);
+  const std::string_view host = tcp_host(endpoint);
+  const std::string_view port = endpoint.substr(6 + host.size());  // ":PORT"
+  // ZeroMQ reads a bind host as an interface name or a numeric address, so "localhost" fails
+  // with "No such device"; bind the IPv4 loopback address it stands for.
+  if (host == "localhost") return "tcp://127.0.0.1" + std::string(port);
+  // A bracketed IPv6 address binds only on a socket with ZMQ_IPV6 set.
+  if (host.size() >= 2 && host.front() == '[' && host.back() == ']') out_ipv6 = true;
+  return std::string(endpoint);
+}
+
+std::string check_private_directory(const std::filesystem::path& dir) {
+  struct stat st {};
+  if (::lstat(dir.c_str(), &st) != 0) return dir.string() + ": " + std::strerror(errno);
+  const char* why = nullptr;
+  if (S_ISLNK(st.st_mode)) why = "is a symbolic link";
+  else if (!S_ISDIR(st.st_mode)) why = "is not a directory";
+  else if (st.st_uid != ::geteuid()) why = "is owned by another user";
+  else if ((st.st_mode & 077) != 0) why = "is open to other users";
+  if (why == nullptr) return {};
+  char mode[8];
+  std::snprintf(mode, sizeof(mode), "%04o", static_cast<unsigned>(st.st_mode & 07777));
+  return dir.string() + " " + why + " (mode " + mode +
+         "); bodyd keeps its sockets in a private directory (mode 0700, owned by you, not a symlink). "
+         "Remove it (rm -r " + dir.string() + ") so bodyd can create it, or choose another endpoint";
+}
+
 std::string prepare_ipc_endpoint(std::string_view endpoint, std::string_view what) {
   if (!starts_with(endpoint, "ipc://")) return {};
   const std::filesystem::path path(std::string(endpoint.substr(6)));
   const std::string opt(what);
+  const std::string ep(endpoint);
   if (path.string().empty() || path.string()[0] == '@') return {};  // abstract namespace: nothing on disk
   const std::filesystem::path dir = path.parent_path();
   std::error_code ec;
-  if (!dir.empty() && !std::filesystem::exists(dir, ec)) {
-    // Only this user may connect to a socket in a 0700 directory.
-    std::filesystem::create_directories(dir, ec);
-    if (ec) return opt + " " + std::string(endpoint) + ": cannot create directory " + dir.string() + ": " + ec.message();
-    ::chmod(dir.c_str(), 0700);
+  bool created = false;
+  if (!dir.empty()) {
+    struct stat st {};
+    if (::lstat(dir.c_str(), &st) != 0 && errno == ENOENT) {
+      // Only this user may connect to a socket in a 0700 directory. The last component is made
+      // with mkdir(0700) itself, so it is never open to others, not even for a moment.
+      if (dir.has_parent_path()) std::filesystem::create_directories(dir.parent_path(), ec);
+      if (ec) return opt + " " + ep + ": cannot create directory " + dir.parent_path().string() + ": " + ec.message();
+      if (::mkdir(dir.c_str(), 0700) != 0 && errno != EEXIST)
+        return opt + " " + ep + ": cannot create directory " + dir.string() + ": " + std::strerror(errno);
+      created = true;
+    }
+    // The default directory (/tmp/bodyd), and any bodyd creates, must be private: a directory
+    // (not a symlink someone else planted), owned by this user, with no access for others.
+    const std::filesystem::path default_dir = std::filesystem::path(kDefaultIpcDirectory);
+    if (created || dir.lexically_normal() == default_dir)
+      if (std::string e = check_private_directory(dir); !e.empty()) return opt + " " + ep + ": " + e;
   }
-  if (std::filesystem::exists(path, ec)) {
+  struct stat st {};
+  if (::lstat(path.c_str(), &st) == 0) {
+    if (S_ISDIR(st.st_mode))
+      return opt + " " + ep + ": " + path.string() + " is a directory; name a socket file inside it (e.g. ipc://" +
+             (path / "pose").string() + ")";
+    if (!S_ISSOCK(st.st_mode))
+      return opt + " " + ep + ": " + path.string() +
+             " exists and is not a socket; bodyd does not replace other files (remove it, or choose another path)";
     sockaddr_un addr{};
     addr.sun_family = AF_UNIX;
     if (path.string().size() >= sizeof(addr.sun_path))
-      return opt + " " + std::string(endpoint) + ": path too long for a Unix socket";
+      return opt + " " + ep + ": path too long for a Unix socket";
     std::strncpy(addr.sun_path, path.c_str(), sizeof(addr.sun_path) - 1);
     const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
     if (fd >= 0) {
       const bool listening = ::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) == 0;
       ::close(fd);
       if (listening)
-        return opt + " " + std::string(endpoint) +
+        return opt + " " + ep +
                ": in use: a process is listening on it (another bodyd running? stop it, or choose another " + opt +
                " endpoint)";
     }

@@ -23,8 +23,8 @@ ReconstructorFactory make_default_factory(const std::filesystem::path& skeleton_
     } catch (const std::exception& e) {
       error = e.what();
       if (choice.method == "diffusion")
-        error += " (the default model is " + default_model_path().string() +
-                 ": train it with the trainer, docs/model.md, or run with --method ik)";
+        error += " (give another model with --model, or run with --method ik; the shipped models and how to "
+                 "make one: docs/models.md)";
       return nullptr;
     }
   };

@@ -30,6 +30,8 @@ void PipelineStats::to_json(nlohmann::json& j) const {
   j["frames_skipped_by_rate"] = skipped_by_rate.get();
   j["sends_failed"] = sends_failed.get();
   j["encode_failed"] = encode_failed.get();
+  j["samples_refused"] = samples_refused.get();
+  j["time_restarts"] = time_restarts.get();
   j["reconstruct_us"] = reconstruct.summary_us();
   j["latency_us"] = latency.summary_us();
 }

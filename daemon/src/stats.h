@@ -38,6 +38,9 @@ struct Counter {
 
 struct PipelineStats {
   Counter samples_in, frames_out, sends_failed, not_ready, encode_failed, skipped_by_rate;
+  // Issue 11: samples the reconstructor refused for absurd values (second wall), and restarts of
+  // the reconstruction because head time went far back (a replay's time base started over).
+  Counter samples_refused, time_restarts;
   std::array<Counter, kRoleCount> role_samples;
   TimingRing reconstruct, latency;
   // The last valid head sample (after its device offset), for calibrate-from-head.

@@ -65,11 +65,20 @@ std::string bind_socket(void* socket, const std::string& endpoint, const std::st
                         std::string& out_bound) {
   if (std::string e = check_bind_endpoint(endpoint, allow_remote, what); !e.empty()) return e;
   if (std::string e = prepare_ipc_endpoint(endpoint, what); !e.empty()) return e;
-  if (zmq_bind(socket, endpoint.c_str()) != 0) {
+  // "localhost" and "[::1]" as documented (issue 11): ZeroMQ needs 127.0.0.1 and ZMQ_IPV6.
+  bool ipv6 = false;
+  const std::string address = zmq_bind_address(endpoint, ipv6);
+  if (ipv6) {
+    const int one = 1;
+    zmq_setsockopt(socket, ZMQ_IPV6, &one, sizeof(one));
+  }
+  if (zmq_bind(socket, address.c_str()) != 0) {
     const int err = zmq_errno();
     if (err == EADDRINUSE)
-      return what + " " + endpoint + ": address in use (another bodyd running? stop it, or choose another " + what +
-             " endpoint)";
+      return what + " " + endpoint + ": address in use (" +
+             (endpoint.rfind("ipc://", 0) == 0 ? std::string("another socket of this or another process is bound there; ")
+                                               : std::string("another bodyd running? ")) +
+             "stop it, or choose another " + what + " endpoint)";
     return what + " " + endpoint + ": cannot bind: " + zmq_strerror(err) +
            (err == EINVAL || err == EPROTONOSUPPORT ? " (write ipc:///PATH or tcp://127.0.0.1:PORT)" : "");
   }

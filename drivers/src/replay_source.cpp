@@ -1,6 +1,10 @@
 #include "bodyd/drivers/replay_source.h"
 
+#include "bodyd/motion/limits.h"
 #include "bodyd/motion/tracker_log.h"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <condition_variable>
@@ -15,6 +19,7 @@ class ReplaySource final : public TrackerSource {
   ReplaySource(std::string name, std::vector<TrackerSample> samples, const ReplayOptions& options)
       : name_(std::move(name)), samples_(std::move(samples)), options_(options) {
     if (!(options_.speed > 0.0)) options_.speed = 1.0;
+    if (!(options_.max_gap_s > 0.0)) options_.max_gap_s = ReplayOptions{}.max_gap_s;
     loop_shift_ns_ = compute_loop_shift();
   }
   ~ReplaySource() override { stop(); }
@@ -50,11 +55,16 @@ class ReplaySource final : public TrackerSource {
     s.samples = pushed_.load(std::memory_order_relaxed);
     s.rate_hz = s.finished ? 0.0 : rate_.rate_hz();
     if (samples_.empty()) s.last_error = "the recording holds no samples";
+    {
+      std::lock_guard lock(mutex_);
+      if (s.last_error.empty()) s.last_error = note_;
+    }
     return s;
   }
 
  private:
   // Span of the recording plus one sample period (the mean spacing of distinct timestamps).
+  // 0 when the span does not fit the time limits (the loop then restarts its time base).
   std::int64_t compute_loop_shift() const {
     if (samples_.empty()) return 0;
     std::int64_t t_min = samples_.front().t_ns, t_max = t_min;
@@ -67,9 +77,22 @@ class ReplaySource final : public TrackerSource {
     }
     std::sort(times.begin(), times.end());
     const auto distinct = std::unique(times.begin(), times.end()) - times.begin();
-    const std::int64_t period_ns =
-        distinct > 1 ? (t_max - t_min) / (distinct - 1) : 11'111'111;  // 90 Hz when unknown
-    return (t_max - t_min) + std::max<std::int64_t>(period_ns, 1);
+    std::int64_t span_ns = 0;
+    if (__builtin_sub_overflow(t_max, t_min, &span_ns) || span_ns > limits::kMaxAbsTimeNs) return 0;
+    const std::int64_t period_ns = distinct > 1 ? span_ns / (distinct - 1) : 11'111'111;  // 90 Hz when unknown
+    return span_ns + std::max<std::int64_t>(period_ns, 1);
+  }
+
+  // Shifted time of a recorded sample; false when it would leave the time limits
+  // (limits::kMaxAbsTimeNs), which a loop reaches after very many rounds or with a log near them.
+  static bool shifted(std::int64_t t_ns, std::int64_t shift_ns, std::int64_t& out_t_ns) {
+    return !__builtin_add_overflow(t_ns, shift_ns, &out_t_ns) && limits::time_plausible(out_t_ns);
+  }
+
+  void note(std::string text) {
+    spdlog::warn("{}: {}", name_, text);
+    std::lock_guard lock(mutex_);
+    note_ = std::move(text);
   }
 
   // Waits until the host time `due_ns`; false when stop was requested first.
@@ -90,16 +113,40 @@ class ReplaySource final : public TrackerSource {
       return;
     }
     const std::int64_t t_first = samples_.front().t_ns;
-    const std::int64_t host_start_ns = monotonic_ns();
+    std::int64_t host_start_ns = monotonic_ns();
     std::int64_t shift_ns = 0;
+    // Paced: the log time that host_start_ns stands for. A jump forward by more than max_gap_s
+    // moves it, so the replay waits max_gap_s (scaled by speed) instead of the whole jump.
+    std::int64_t anchor_t_ns = t_first;
+    std::int64_t previous_t_ns = t_first;
+    const auto max_gap_ns = static_cast<std::int64_t>(options_.max_gap_s * 1e9);
+    std::uint64_t jumps = 0;
     SourceSample out;
     out.source_index = source_index;
     for (;;) {
       for (const TrackerSample& recorded : samples_) {
         out.sample = recorded;
-        out.sample.t_ns = recorded.t_ns + shift_ns;
+        if (!shifted(recorded.t_ns, shift_ns, out.sample.t_ns)) {
+          // Looping further would overflow the time base (issue 11): start it over. Time goes
+          // backwards once; the daemon starts the reconstruction over when it sees that.
+          note("looped timestamps would pass the time limit (+-2^62 ns); the replay's time base starts over");
+          shift_ns = 0;
+          out.sample.t_ns = recorded.t_ns;
+          anchor_t_ns = previous_t_ns = recorded.t_ns;
+          host_start_ns = monotonic_ns();
+        }
         if (options_.paced) {
-          const double offset_ns = static_cast<double>(out.sample.t_ns - t_first) / options_.speed;
+          if (out.sample.t_ns - previous_t_ns > max_gap_ns) {
+            // A jump in the log (a paused recording, a clock step): re-anchor rather than stall
+            // silently for its whole length (issue 11). Documented in docs/tracker-log.md.
+            ++jumps;
+            const std::int64_t jump_ns = out.sample.t_ns - previous_t_ns;
+            anchor_t_ns += jump_ns - max_gap_ns;
+            note(fmt::format("the log's time jumps forward by {:.3f} s (jump {}); replayed as a {:.3f} s gap", jump_ns * 1e-9,
+                             jumps, options_.max_gap_s));
+          }
+          previous_t_ns = out.sample.t_ns;
+          const double offset_ns = static_cast<double>(out.sample.t_ns - anchor_t_ns) / options_.speed;
           const std::int64_t due_ns = host_start_ns + static_cast<std::int64_t>(offset_ns);
           if (!wait_until(due_ns)) return;
           if (options_.restamp) out.sample.t_ns = due_ns;
@@ -117,7 +164,8 @@ class ReplaySource final : public TrackerSource {
         rate_.count(out.arrival_ns);
       }
       if (!options_.loop) break;
-      shift_ns += loop_shift_ns_;
+      if (loop_shift_ns_ == 0 || __builtin_add_overflow(shift_ns, loop_shift_ns_, &shift_ns)) shift_ns = limits::kMaxAbsTimeNs;
+      if (options_.paced) previous_t_ns = t_first + shift_ns;  // a loop is not a jump
     }
     finished_.store(true);
   }
@@ -128,13 +176,14 @@ class ReplaySource final : public TrackerSource {
   std::int64_t loop_shift_ns_ = 0;
 
   std::thread thread_;
-  std::mutex mutex_;
+  mutable std::mutex mutex_;
   std::condition_variable wake_;
   bool stop_requested_ = false;
   std::atomic<bool> running_{false};
   std::atomic<bool> finished_{false};
   std::atomic<std::uint64_t> pushed_{0};
   RateMeter rate_;
+  std::string note_;  // the last time-base event (jump, restart), shown as status().last_error; guarded by mutex_
 };
 
 }  // namespace
@@ -151,7 +200,16 @@ std::unique_ptr<TrackerSource> open_replay_source(const std::filesystem::path& l
     return nullptr;
   }
   std::error_code ec;
-  if (!std::filesystem::is_regular_file(log_path, ec)) {
+  const auto status = std::filesystem::status(log_path, ec);
+  if (std::filesystem::is_directory(status)) {
+    error = log_path.string() + ": is a directory; give a tracker log file (docs/tracker-log.md)";
+    return nullptr;
+  }
+  if (std::filesystem::exists(status) && !std::filesystem::is_regular_file(status)) {
+    error = log_path.string() + ": is not a regular file; give a tracker log file (docs/tracker-log.md)";
+    return nullptr;
+  }
+  if (!std::filesystem::is_regular_file(status)) {
     error = log_path.string() + ": no such tracker log (make one from a BVH clip with bodyd-sim, "
                                 "docs/tracker-log.md)";
     return nullptr;

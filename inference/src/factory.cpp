@@ -31,8 +31,8 @@ std::unique_ptr<Reconstructor> make_reconstructor(std::string_view method, const
     try {
       model = inference::load_model(model_path);
     } catch (const inference::ModelFileError& e) {
-      throw ReconstructorError(fmt::format("cannot load the model: {} (retrain it with training/train.py, see "
-                                           "docs/models.md, or pass another --model)", e.what()));
+      // No advice here: the caller (the daemon, a tool) adds the one hint that fits it.
+      throw ReconstructorError(fmt::format("cannot load the model: {}", e.what()));
     }
     DiffusionOptions d;
     d.steps = options.diffusion_steps;

@@ -6,6 +6,7 @@
 #include "bodyd/daemon/sample_queue.h"
 #include "bodyd/drivers/open_source.h"
 #include "bodyd/drivers/replay_source.h"
+#include "bodyd/motion/limits.h"
 #include "bodyd/motion/tracker_log.h"
 #include "fake_reconstructor.h"
 #include "../test_paths.h"
@@ -296,6 +297,133 @@ TEST(Config, CommandLineErrorsExitWithUsageCode) {
   EXPECT_EQ(d.sources, (std::vector<std::string>{"replay:z.csv", "replay:x.csv", "sim:y.bvh"}));
 }
 
+// Issue 11, item 2: a number that overflows never aborts; every integer is range-checked.
+TEST(Config, OverflowingNumbersAreErrorsNotAborts) {
+  test::TempDir dir;
+  auto load = [&](const std::string& text) {
+    std::ofstream(dir.path / "c.json", std::ios::trunc) << text;
+    daemon::DaemonConfig c;
+    return daemon::load_config_file(dir.path / "c.json", c);
+  };
+  std::string e = load(R"({"rate_hz": 1e400})");  // used to throw json::out_of_range: exit 134
+  EXPECT_NE(e.find("c.json"), std::string::npos) << e;
+  EXPECT_NE(e.find("overflow"), std::string::npos) << e;
+  e = load(R"({"sim": {"seed": 1e400}})");
+  EXPECT_NE(e.find("overflow"), std::string::npos) << e;
+  e = load(R"({"send_hwm": 3000000000})");  // used to wrap to a negative int: "must be >= 1"
+  EXPECT_NE(e.find("send_hwm: 3000000000 is out of range"), std::string::npos) << e;
+  e = load(R"({"sim": {"seed": 18446744073709551615}})");  // the largest uint64: fits
+  EXPECT_EQ(e, "") << e;
+  e = load(R"({"sim": {"seed": -1}})");
+  EXPECT_NE(e.find("non-negative"), std::string::npos) << e;
+  e = load(R"({"queue_capacity": 99999999999999999999})");  // beyond uint64: a float in JSON
+  EXPECT_NE(e.find("queue_capacity"), std::string::npos) << e;
+  e = load(R"({"offsets": {"left_hand": {"position_m": [1e300, 0, 0]}}})");
+  EXPECT_NE(e.find("offsets.left_hand"), std::string::npos) << e;
+  EXPECT_NE(e.find("within +-2 m"), std::string::npos) << e;
+  // Through the process: exit 2 with the message, not an abort.
+  std::ofstream(dir.path / "c.json", std::ios::trunc) << R"({"rate_hz": 1e400})";
+  const std::string config_path = (dir.path / "c.json").string();
+  const char* argv[] = {"bodyd", "--config", config_path.c_str()};
+  daemon::DaemonConfig c;
+  const auto r = daemon::parse_command_line(3, argv, c);
+  EXPECT_EQ(r.action, daemon::CliResult::Action::Exit);
+  EXPECT_EQ(r.exit_code, 2);
+}
+
+TEST(Config, LimitsOnRatesSpeedsAndOffsets) {
+  daemon::DaemonConfig c;
+  c.rate_hz = 1e300;
+  EXPECT_NE(daemon::validate_config(c).find("rate_hz"), std::string::npos);
+  c = {};
+  c.replay_speed = 1e300;
+  EXPECT_NE(daemon::validate_config(c).find("--speed"), std::string::npos);
+  EXPECT_NE(daemon::parse_offset_flag("left_hand=1e300,0,0", c).find("within +-2 m"), std::string::npos);
+  EXPECT_NE(daemon::parse_offset_flag("left_hand=inf,0,0", c), "");
+  EXPECT_FALSE(c.offsets[1].has_value());
+  EXPECT_EQ(daemon::parse_offset_flag("left_hand=2,-2,0.5", c), "");  // the limit itself is fine
+}
+
+// Issue 11, item 9: every bad command line exits 2, as docs/daemon.md says (CLI11 used 105, 109).
+TEST(Config, EveryBadCommandLineExits2) {
+  for (std::vector<const char*> argv : {std::vector<const char*>{"bodyd", "--speed", "0"},
+                                        std::vector<const char*>{"bodyd", "--bogus"},
+                                        std::vector<const char*>{"bodyd", "--send-hwm", "0"},
+                                        std::vector<const char*>{"bodyd", "--rate-hz", "abc"},
+                                        std::vector<const char*>{"bodyd", "--speed", "1e300"}}) {
+    daemon::DaemonConfig c;
+    const auto r = daemon::parse_command_line(static_cast<int>(argv.size()), argv.data(), c);
+    EXPECT_EQ(r.action, daemon::CliResult::Action::Exit) << argv[1];
+    EXPECT_EQ(r.exit_code, 2) << argv[1];
+  }
+  daemon::DaemonConfig c;
+  const char* help[] = {"bodyd", "--help"};
+  EXPECT_EQ(daemon::parse_command_line(2, help, c).exit_code, 0);
+}
+
+// Issue 11, item 3: an ipc:// endpoint never replaces a file that is not a socket, and the
+// socket directory must be private.
+TEST(Endpoint, IpcNeverReplacesAFileAndNeedsAPrivateDirectory) {
+  test::TempDir dir;
+  ::chmod(dir.path.c_str(), 0700);
+  std::ofstream(dir.path / "f.txt") << "data\n";
+  std::string e = daemon::prepare_ipc_endpoint("ipc://" + (dir.path / "f.txt").string(), "--pub");
+  EXPECT_NE(e.find("exists and is not a socket"), std::string::npos) << e;
+  std::ifstream in(dir.path / "f.txt");
+  std::string text;
+  std::getline(in, text);
+  EXPECT_EQ(text, "data");
+  std::filesystem::create_directory(dir.path / "d");
+  e = daemon::prepare_ipc_endpoint("ipc://" + (dir.path / "d").string(), "--pub");
+  EXPECT_NE(e.find("is a directory"), std::string::npos) << e;
+  EXPECT_EQ(e.find("another bodyd"), std::string::npos) << e;
+  std::filesystem::create_symlink(dir.path / "f.txt", dir.path / "link");
+  e = daemon::prepare_ipc_endpoint("ipc://" + (dir.path / "link").string(), "--pub");
+  EXPECT_NE(e.find("not a socket"), std::string::npos) << e;
+
+  EXPECT_EQ(daemon::check_private_directory(dir.path), "");
+  std::filesystem::create_directory(dir.path / "open");
+  ::chmod((dir.path / "open").c_str(), 0777);
+  e = daemon::check_private_directory(dir.path / "open");
+  EXPECT_NE(e.find("open to other users (mode 0777)"), std::string::npos) << e;
+  std::filesystem::create_directory_symlink(dir.path / "d", dir.path / "dlink");
+  e = daemon::check_private_directory(dir.path / "dlink");
+  EXPECT_NE(e.find("symbolic link"), std::string::npos) << e;
+  // A directory bodyd creates is private even under a permissive umask.
+  const mode_t old = ::umask(0);
+  e = daemon::prepare_ipc_endpoint("ipc://" + (dir.path / "new" / "pose").string(), "--pub");
+  ::umask(old);
+  EXPECT_EQ(e, "");
+  struct stat st {};
+  ASSERT_EQ(::stat((dir.path / "new").c_str(), &st), 0);
+  EXPECT_EQ(st.st_mode & 0777, 0700u);
+}
+
+// Issue 11, item 8: the documented loopback forms bind.
+TEST(Endpoint, LocalhostAndBracketedIpv6Bind) {
+  bool ipv6 = false;
+  EXPECT_EQ(daemon::zmq_bind_address("tcp://localhost:5570", ipv6), "tcp://127.0.0.1:5570");
+  EXPECT_FALSE(ipv6);
+  EXPECT_EQ(daemon::zmq_bind_address("tcp://[::1]:5570", ipv6), "tcp://[::1]:5570");
+  EXPECT_TRUE(ipv6);
+  EXPECT_EQ(daemon::zmq_bind_address("ipc:///tmp/x", ipv6), "ipc:///tmp/x");
+  EXPECT_FALSE(ipv6);
+  zmq::context_t ctx;
+  zmq::socket_t s(ctx, zmq::socket_type::pub);
+  s.set(zmq::sockopt::linger, 0);
+  EXPECT_NO_THROW(s.bind(daemon::zmq_bind_address("tcp://localhost:*", ipv6)));
+  zmq::socket_t s6(ctx, zmq::socket_type::pub);
+  s6.set(zmq::sockopt::linger, 0);
+  const std::string a6 = daemon::zmq_bind_address("tcp://[::1]:*", ipv6);
+  s6.set(zmq::sockopt::ipv6, ipv6 ? 1 : 0);
+  try {
+    s6.bind(a6);
+  } catch (const zmq::error_t& e) {
+    // A machine without IPv6 on loopback cannot bind [::1] at all; anything else is a failure.
+    if (e.num() != EADDRNOTAVAIL) ADD_FAILURE() << e.what();
+  }
+}
+
 // ------------------------------------------------------------------------ control requests
 
 class RecordingTarget final : public daemon::ControlTarget {
@@ -458,6 +586,60 @@ TEST(ReplaySource, LoopKeepsTimeIncreasingAndStopIsPrompt) {
   const auto t1 = std::chrono::steady_clock::now();
   paced->stop();
   EXPECT_LT(std::chrono::steady_clock::now() - t1, 500ms);
+}
+
+// Issue 11, item 6: a jump forward in a paced replay's log time is replayed as a short gap,
+// logged and shown in status, not an hour of silence.
+TEST(ReplaySource, PacedJumpForwardIsReplayedAsAGapAndReported) {
+  auto samples = test::synthetic_samples(20, 200.0);
+  for (std::size_t i = samples.size() / 2; i < samples.size(); ++i) samples[i].t_ns += 3'600'000'000'000;  // an hour
+  drivers::ReplayOptions options;
+  options.max_gap_s = 0.1;
+  auto source = drivers::make_replay_source("jump", samples, options);
+  CollectingSink sink;
+  ASSERT_EQ(source->start(sink, 0), "");
+  SourceSample s;
+  std::vector<SourceSample> got;
+  while (got.size() < samples.size() && sink.queue.pop(s, 3s)) got.push_back(s);
+  ASSERT_EQ(got.size(), samples.size());
+  const std::size_t k = samples.size() / 2;
+  const std::int64_t gap_ns = got[k].sample.t_ns - got[k - 1].sample.t_ns;  // restamped host times
+  EXPECT_GE(gap_ns, 100'000'000 - (samples[k - 1].t_ns - samples[k - 2].t_ns));
+  EXPECT_LT(gap_ns, 2'000'000'000);
+  EXPECT_NE(source->status().last_error.find("jumps forward by 3600"), std::string::npos) << source->status().last_error;
+}
+
+// Issue 11, item 11: looping over times near the limit never overflows: the time base starts over.
+TEST(ReplaySource, FastLoopNearTheTimeLimitNeverOverflows) {
+  const std::int64_t t0 = limits::kMaxAbsTimeNs - 200'000'000;  // 0.2 s before the limit
+  const auto samples = test::synthetic_samples(10, 90.0, t0);
+  drivers::ReplayOptions options;
+  options.paced = false;
+  options.loop = true;
+  auto source = drivers::make_replay_source("edge", samples, options);
+  SampleQueue queue(64);
+  ASSERT_EQ(source->start(queue, 0), "");
+  SourceSample s;
+  int backwards = 0;
+  std::int64_t last = INT64_MIN;
+  for (int i = 0; i < 300; ++i) {
+    ASSERT_TRUE(queue.pop(s, 2s));
+    ASSERT_TRUE(limits::time_plausible(s.sample.t_ns)) << i << ": " << s.sample.t_ns;
+    if (s.sample.t_ns < last) ++backwards;
+    last = s.sample.t_ns;
+  }
+  source->stop();
+  EXPECT_GE(backwards, 1);
+  EXPECT_NE(source->status().last_error.find("starts over"), std::string::npos) << source->status().last_error;
+}
+
+// Issue 11, item 9: a directory is not "no such tracker log".
+TEST(OpenSource, ADirectoryAsTheLogSaysSo) {
+  test::TempDir dir;
+  std::string error;
+  EXPECT_FALSE(drivers::open_replay_source(dir.path, {}, error));
+  EXPECT_NE(error.find("is a directory"), std::string::npos) << error;
+  EXPECT_EQ(error.find("no such"), std::string::npos) << error;
 }
 
 TEST(OpenSource, SpecsAndErrors) {

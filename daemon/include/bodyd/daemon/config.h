@@ -29,6 +29,11 @@ struct DeviceOffset {
 // Where the bundled files are (set at build time to the source tree; see docs/daemon.md).
 [[nodiscard]] std::filesystem::path bundled_recording_path();
 [[nodiscard]] std::filesystem::path default_model_path();
+struct DaemonConfig;
+// Empty when reload-model may load `requested`: the configured model file, or a file under
+// the models directory (config.models_dir, "" = the default model's directory), compared
+// after resolving symlinks and "..". Otherwise why not; never quotes the file's contents.
+[[nodiscard]] std::string check_reload_model_path(const std::filesystem::path& requested, const DaemonConfig& config);
 [[nodiscard]] std::filesystem::path bundled_skeleton_path();
 
 // The height of the skeleton's Head joint (the base of the skull) as a fraction of body height
@@ -65,6 +70,9 @@ struct DaemonConfig {
 
   std::string method = "diffusion";  // "diffusion" or "ik"
   std::string model_path;            // "": default_model_path()
+  // reload-model loads only this model file or files under this directory ("": the
+  // directory of default_model_path()); issue 11, docs/control.md.
+  std::string models_dir;
   std::string skeleton_path;         // BVH whose skeleton the ik method uses ("": bundled_skeleton_path())
   // Calibration of the user's size. The reconstructors scale by the standing head height (the
   // Head joint's height when standing straight); a body height is converted with

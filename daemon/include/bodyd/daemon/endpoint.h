@@ -21,10 +21,27 @@ namespace bodyd::daemon {
 // the socket in the message ("--pub", "--control").
 [[nodiscard]] std::string check_bind_endpoint(std::string_view endpoint, bool allow_remote, std::string_view what);
 
-// For ipc:// endpoints: creates the socket's directory (mode 0700) if missing, and refuses a
-// socket file that another process is listening on ("another bodyd running?"); a stale file
-// left by a crashed process is fine (ZeroMQ replaces it). Empty on success, else the error.
+// The directory of the default ipc:// endpoints (ipc:///tmp/bodyd/pose, .../control).
+inline constexpr std::string_view kDefaultIpcDirectory = "/tmp/bodyd";
+
+// For ipc:// endpoints: creates the socket's directory (mkdir mode 0700) if missing. That
+// directory, and the default one (/tmp/bodyd) whether new or not, must be private: a real
+// directory (not a symlink), owned by this user, no permissions for group or others;
+// otherwise refused with what to do. Refuses a path that is a directory or any file other
+// than a socket (bodyd never replaces a file), and a socket another process is listening on
+// ("another bodyd running?"); a stale socket left by a crashed process is fine (ZeroMQ
+// replaces it). Empty on success, else the error.
 [[nodiscard]] std::string prepare_ipc_endpoint(std::string_view endpoint, std::string_view what);
+
+// Empty when `dir` is a private directory: a directory (lstat: not a symlink), owned by the
+// effective user, with no permission bits for group or others. Else what is wrong and what to do.
+[[nodiscard]] std::string check_private_directory(const std::filesystem::path& dir);
+
+// The address to pass to zmq_bind for an endpoint check_bind_endpoint accepted:
+// "tcp://localhost:P" becomes "tcp://127.0.0.1:P" (ZeroMQ takes a bind host for an interface
+// name); a bracketed IPv6 host ("tcp://[::1]:P") sets out_ipv6, and the socket needs ZMQ_IPV6
+// set before binding. Other endpoints are returned as they are.
+[[nodiscard]] std::string zmq_bind_address(std::string_view endpoint, bool& out_ipv6);
 
 // A CURVE key pair, Z85 text (40 characters each).
 struct CurveKeyPair {

@@ -8,7 +8,8 @@
 // room, never loses a sample, and keeps the log's time base (there is no host time to give:
 // the same input as an offline run on the log). Looping starts again at the first sample
 // with every timestamp shifted by the log's span plus one sample period, so time keeps
-// increasing.
+// increasing; should the shifted times pass limits::kMaxAbsTimeNs, the time base starts over
+// once (time goes backwards; logged, and the daemon starts its reconstruction over).
 #pragma once
 
 #include "bodyd/drivers/source.h"
@@ -25,6 +26,10 @@ struct ReplayOptions {
   bool loop = false;    // start again at the end (forever, until stop())
   double speed = 1.0;   // paced replay speed factor (2 = twice as fast); must be > 0
   bool restamp = true;  // paced: t_ns = the host time the sample is released; false: keep the log's
+  // Paced: a forward jump in the log's time longer than this (seconds of log time) is replayed
+  // as a gap of this length, logged and shown in status().last_error, instead of stalling for
+  // the whole jump. Shorter gaps (a tracker lost for a while) keep their length.
+  double max_gap_s = 5.0;
 };
 
 // A replay of samples already in memory (tests, simulated devices). `name` is reported in
