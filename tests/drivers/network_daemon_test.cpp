@@ -2,7 +2,10 @@
 // 90 Hz keep the daemon publishing while every malformed kind of packet is sent to each
 // input; the daemon must keep publishing finite poses, count each bad packet under its
 // reason in `status`, and say so in its log (rate-limited).
+#include "bodyd/motion/bvh.h"
+#include "bodyd/motion/tracker_log.h"
 #include "bodyd/protocol/pose_message.h"
+#include "bodyd/simulators/tracker_sim.h"
 
 #include "../test_paths.h"
 
@@ -84,9 +87,9 @@ class Daemon {
   std::optional<int> code_;
 };
 
-// A UDP port free right now (bound, read, released): the daemon binds it a moment later.
-int free_udp_port() {
-  const int fd = socket(AF_INET, SOCK_DGRAM, 0);
+// A port free right now (bound, read, released): the daemon binds it a moment later.
+int free_port(int type = SOCK_DGRAM) {
+  const int fd = socket(AF_INET, type, 0);
   sockaddr_in a{};
   a.sin_family = AF_INET;
   a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
@@ -161,8 +164,8 @@ std::vector<Bad> bad_packets() {
 TEST(DaemonNetworkInputs, BadPacketsAreCountedWhilePosesKeepComing) {
   const fs::path dir = fs::temp_directory_path() / ("bodyd-net-e2e-" + std::to_string(getpid()));
   fs::create_directories(dir);
-  const int ports[3] = {free_udp_port(), free_udp_port(), free_udp_port()};
-  Daemon daemon({"--method", "ik", "--pub", "tcp://127.0.0.1:*", "--control", "tcp://127.0.0.1:*", "--endpoints-file",
+  const int ports[3] = {free_port(), free_port(), free_port()};
+  Daemon daemon({"--method", "ik", "--pub", "tcp://127.0.0.1:*", "--control", "tcp://127.0.0.1:" + std::to_string(free_port(SOCK_STREAM)), "--endpoints-file",
                  (dir / "endpoints.json").string(), "--source",
                  "vrchat:127.0.0.1:" + std::to_string(ports[0]) + "?oscquery=off", "--source",
                  "vmc:127.0.0.1:" + std::to_string(ports[1]), "--source", "udp:127.0.0.1:" + std::to_string(ports[2])},
@@ -258,6 +261,74 @@ TEST(DaemonNetworkInputs, BadPacketsAreCountedWhilePosesKeepComing) {
   EXPECT_EQ(daemon.stop(5000), 0) << daemon.err();
   const std::string log = daemon.err();
   EXPECT_NE(log.find("rejected a packet from 127.0.0.1"), std::string::npos) << log;
+  fs::remove_all(dir);
+}
+
+// The VRChat input driving the pose stream: osc.js plays a BVH clip's head and wrists as
+// VRChat sends them (/tracking/vrsystem/*/pose, Unity axes and Euler angles, 90 Hz) into
+// bodyd --source vrchat:, and a ZeroMQ subscriber receives poses with all three trackers valid.
+// (The full VRChat loop, with --output vrchat:, is tested with the outputs: docs/outputs.md.)
+TEST(DaemonNetworkInputs, VrchatSenderDrivesThePoseStream) {
+  if (std::system("node --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "node is not installed (scripts/setup)";
+  if (!fs::exists(test::source_dir() / "tests/node/node_modules/osc/package.json"))
+    GTEST_SKIP() << "the npm package osc is not installed in tests/node (scripts/setup runs npm ci there)";
+  const fs::path dir = fs::temp_directory_path() / ("bodyd-net-vrc-" + std::to_string(getpid()));
+  fs::create_directories(dir);
+  SimOptions sim;  // 90 Hz, the clip's motion without noise
+  sim.position_noise_mm = 0;
+  sim.rotation_noise_deg = 0;
+  sim.dropout_rate_hz = 0;
+  const std::vector<TrackerSample> samples = simulate_trackers(read_bvh(test::fixtures() / "walk_60.bvh"), sim);
+  write_tracker_log(dir / "walk.csv", samples);
+  const int port = free_port();
+  Daemon daemon({"--method", "ik", "--pub", "tcp://127.0.0.1:*", "--control", "tcp://127.0.0.1:" + std::to_string(free_port(SOCK_STREAM)), "--endpoints-file",
+                 (dir / "endpoints.json").string(), "--source", "vrchat:127.0.0.1:" + std::to_string(port)},
+                dir);
+  nlohmann::json endpoints;
+  for (int i = 0; i < 500 && !endpoints.contains("control"); ++i) {
+    endpoints = nlohmann::json::parse(read_file(dir / "endpoints.json"), nullptr, false);
+    if (endpoints.is_discarded()) endpoints = nlohmann::json::object();
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_TRUE(endpoints.contains("control")) << daemon.err();
+  zmq::context_t ctx;
+  zmq::socket_t sub(ctx, zmq::socket_type::sub);
+  sub.set(zmq::sockopt::linger, 0);
+  sub.set(zmq::sockopt::subscribe, "");
+  sub.connect(endpoints["pub"].get<std::string>());
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));  // the subscription reaches the publisher
+
+  std::thread sender([&] {
+    const std::string command = "NODE_PATH='" + (test::source_dir() / "tests/node/node_modules").string() + "' node '" +
+                                (test::source_dir() / "tests/drivers/node/send_trackers.js").string() +
+                                "' vrchat 127.0.0.1 " + std::to_string(port) + " '" + (dir / "walk.csv").string() +
+                                "' 11 > '" + (dir / "sender.txt").string() + "' 2>&1";
+    EXPECT_EQ(std::system(command.c_str()), 0) << read_file(dir / "sender.txt");
+  });
+  const std::uint32_t all = protocol::kFlagHeadValid | protocol::kFlagLeftHandValid | protocol::kFlagRightHandValid;
+  int poses = 0, tracked = 0;
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (std::chrono::steady_clock::now() < end) {
+    zmq::pollitem_t item{sub.handle(), 0, ZMQ_POLLIN, 0};
+    if (zmq::poll(&item, 1, std::chrono::milliseconds(50)) == 0) continue;
+    zmq::message_t topic, payload;
+    if (!sub.recv(topic, zmq::recv_flags::dontwait) || !topic.more()) continue;
+    (void)sub.recv(payload);
+    while (payload.more()) (void)sub.recv(payload);
+    if (topic.to_string_view() != protocol::kPoseTopic) continue;
+    protocol::PoseMessage pose;
+    const auto* p = static_cast<const std::uint8_t*>(payload.data());
+    if (!protocol::decode_pose(std::vector<std::uint8_t>(p, p + payload.size()), pose).ok()) continue;
+    ++poses;
+    if ((pose.flags & all) == all) ++tracked;
+  }
+  sender.join();
+  const int frames = static_cast<int>(samples.size() / 3);
+  EXPECT_GE(tracked, frames * 8 / 10) << poses << " poses, " << tracked << " with all trackers, of " << frames
+                                      << " frames sent\n"
+                                      << daemon.err();
+  EXPECT_EQ(daemon.stop(5000), 0) << daemon.err();
+  EXPECT_NE(daemon.err().find("OSCQuery on http://127.0.0.1:"), std::string::npos) << daemon.err();
   fs::remove_all(dir);
 }
 
