@@ -399,6 +399,26 @@ TEST(Endpoint, IpcNeverReplacesAFileAndNeedsAPrivateDirectory) {
   EXPECT_EQ(st.st_mode & 0777, 0700u);
 }
 
+// Issue 11, item 4: reload-model loads only the configured model or files under the models directory.
+TEST(Config, ReloadModelOnlyFromTheModelsDirectory) {
+  test::TempDir dir;
+  std::filesystem::create_directories(dir.path / "models");
+  std::ofstream(dir.path / "models" / "a.safetensors") << "x";
+  std::ofstream(dir.path / "mine.safetensors") << "x";
+  daemon::DaemonConfig c;
+  c.models_dir = (dir.path / "models").string();
+  c.model_path = (dir.path / "mine.safetensors").string();
+  EXPECT_EQ(daemon::check_reload_model_path(dir.path / "models" / "a.safetensors", c), "");
+  EXPECT_EQ(daemon::check_reload_model_path(dir.path / "mine.safetensors", c), "");
+  for (const auto& bad : {std::filesystem::path("/etc/shadow"), dir.path / "models" / ".." / "other.safetensors",
+                          dir.path / "models"}) {
+    const std::string e = daemon::check_reload_model_path(bad, c);
+    EXPECT_NE(e.find("not under the models directory"), std::string::npos) << bad << ": " << e;
+  }
+  std::filesystem::create_symlink("/etc/passwd", dir.path / "models" / "link.safetensors");
+  EXPECT_NE(daemon::check_reload_model_path(dir.path / "models" / "link.safetensors", c), "");
+}
+
 // Issue 11, item 8: the documented loopback forms bind.
 TEST(Endpoint, LocalhostAndBracketedIpv6Bind) {
   bool ipv6 = false;
