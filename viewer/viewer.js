@@ -41,10 +41,12 @@ const trackedGeometry = new THREE.SphereGeometry(0.055, 16, 12);
 const boneGeometry = new THREE.CylinderGeometry(0.022, 0.022, 1, 10);  // unit length along +Y
 
 // With ?hold-load in the URL the module (hence the page's load event) does not finish before the
-// first pose is drawn (or 10 s have passed), so `chromium --headless --screenshot` captures a
-// skeleton (docs/viewer.md, tests/render/viewer_test.cpp).
-let firstPoseDrawn;
+// first pose is drawn and the first daemon status is shown (or 10 s have passed), so
+// `chromium --headless --screenshot` captures a skeleton and `--dump-dom` a filled status panel
+// (docs/viewer.md, tests/render/viewer_test.cpp).
+let firstPoseDrawn, firstStatusShown;
 const firstPose = new Promise((resolve) => { firstPoseDrawn = resolve; });
+const firstStatus = new Promise((resolve) => { firstStatusShown = resolve; });
 
 let skeleton = null;  // { names, parents, joints: [Mesh], bones: [{mesh, child, parent}] }
 let poses = 0;
@@ -116,6 +118,89 @@ function setStatus(state, text) {
   statusEl.textContent = text;
 }
 
+// ---- the daemon's status panel (the bridge's "status" message: docs/viewer.md) ----------------
+
+const daemonEl = document.getElementById('daemon');
+const summaryEl = document.getElementById('daemon-summary');
+const sourcesEl = document.getElementById('sources');
+const numbersEl = document.getElementById('numbers');
+const resultEl = document.getElementById('action-result');
+
+function cell(row, text, cls) {
+  const td = row.insertCell();
+  td.textContent = text;
+  if (cls) td.className = cls;
+  return td;
+}
+
+function fmt(x, digits = 0) { return typeof x === 'number' && isFinite(x) ? x.toFixed(digits) : '–'; }
+
+function showStatus(msg) {
+  firstStatusShown();
+  const d = msg.daemon || {};
+  const s = d.status;
+  if (d.control === 'none') {
+    daemonEl.dataset.daemonState = 'no-control';
+    summaryEl.textContent = 'no control endpoint (bridge started with --control none)';
+  } else if (!d.answered || !s) {
+    daemonEl.dataset.daemonState = 'not-answering';
+    summaryEl.textContent = `no answer from ${d.control}: ${d.error || 'no reply'} (is bodyd running?)`;
+    summaryEl.className = 'bad';
+  } else {
+    daemonEl.dataset.daemonState = 'answering';
+    summaryEl.className = '';
+    summaryEl.textContent = `${s.method}${s.model ? ' · ' + s.model.split('/').pop() : ''} · up ${fmt(s.uptime_s)} s`;
+  }
+  sourcesEl.replaceChildren();
+  numbersEl.replaceChildren();
+  if (!s) return;
+  const sources = s.sources || [];
+  daemonEl.dataset.sources = String(sources.length);
+  for (const src of sources) {
+    const row = sourcesEl.insertRow();
+    const state = src.finished ? 'finished' : src.connected ? 'connected' : 'disconnected';
+    cell(row, src.name);
+    cell(row, state, src.connected || src.finished ? '' : 'bad');
+    cell(row, `${fmt(src.rate_hz)} Hz`, 'v');
+    if (src.last_error) cell(sourcesEl.insertRow(), src.last_error, 'bad').colSpan = 3;
+  }
+  const lat = s.latency_us || {}, rec = s.reconstruct_us || {};
+  daemonEl.dataset.framesPerS = fmt(d.frames_per_s, 1);
+  daemonEl.dataset.latencyP99Us = fmt(lat.p99);
+  const rows = [
+    ['poses per second', fmt(d.frames_per_s, 1)],
+    ['poses sent', fmt(s.frames_out)],
+    ['samples dropped (queue full)', fmt(s.samples_dropped)],
+    ['poses not sent', fmt(s.sends_failed)],
+    ['poses lost on the way here', fmt(msg.dropped)],
+    ['latency p50 / p99 (ms)', `${fmt(lat.p50 / 1000, 2)} / ${fmt(lat.p99 / 1000, 2)}`],
+    ['reconstruction p50 / p99 (ms)', `${fmt(rec.p50 / 1000, 2)} / ${fmt(rec.p99 / 1000, 2)}`],
+    ['head height (m)', `${fmt(s.head_height_m, 3)} ${s.height_calibrated ? '(calibrated)' : '(model default)'}`],
+  ];
+  for (const [name, value] of rows) {
+    const row = numbersEl.insertRow();
+    cell(row, name);
+    cell(row, value, 'v');
+  }
+}
+
+async function post(path, body) {
+  resultEl.textContent = '…';
+  try {
+    const response = await fetch(path, { method: 'POST', headers: { 'Content-Type': 'application/json' },
+                                         body: JSON.stringify(body) });
+    const reply = await response.json();
+    resultEl.className = reply.ok ? '' : 'bad';
+    resultEl.textContent = reply.ok ? 'done' : `refused: ${reply.error}`;
+  } catch (e) {
+    resultEl.className = 'bad';
+    resultEl.textContent = `no answer from the bridge: ${e}`;
+  }
+}
+
+document.getElementById('calibrate').addEventListener('click', () => post('/api/calibrate', { from: 'head' }));
+document.getElementById('reset').addEventListener('click', () => post('/api/reset', {}));
+
 function connect() {
   const ws = new WebSocket(`ws://${location.host}/ws`);
   ws.onopen = () => setStatus('connected', 'connected, waiting for poses');
@@ -123,6 +208,8 @@ function connect() {
     const msg = JSON.parse(event.data);
     if (msg.type === 'skeleton') {
       buildSkeleton(msg);
+    } else if (msg.type === 'status') {
+      showStatus(msg);
     } else if (msg.type === 'pose') {
       if (showPose(msg)) {
         ++poses;
@@ -150,5 +237,5 @@ window.addEventListener('resize', () => {
 render();
 connect();
 if (new URLSearchParams(location.search).has('hold-load')) {
-  await Promise.race([firstPose, new Promise((resolve) => setTimeout(resolve, 10000))]);
+  await Promise.race([Promise.all([firstPose, firstStatus]), new Promise((resolve) => setTimeout(resolve, 10000))]);
 }

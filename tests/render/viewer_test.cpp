@@ -1,10 +1,8 @@
-// The live viewer: the WebSocket/HTTP helpers against RFC 6455's examples, bodyd-viewer-bridge
-// end to end (bodyd replaying the bundled recording -> bridge -> an HTTP and WebSocket client
-// written here), and the page itself in headless Chromium with a screenshot whose skeleton
-// pixels are counted. The Chromium test skips when chromium or viewer/node_modules (npm install)
-// is missing.
-#include "bodyd/viewer/websocket.h"
-
+// The live viewer: bodyd-viewer-bridge end to end (bodyd replaying the bundled recording ->
+// bridge -> an HTTP and WebSocket client written here, checked against RFC 6455's handshake
+// example), the daemon's status and the calibrate/reset buttons through the bridge, and the page
+// itself in headless Chromium: a screenshot whose skeleton pixels are counted and the status panel
+// read from the page's DOM. The Chromium tests skip when chromium or three.js is missing.
 #include "../test_paths.h"
 
 #include <arpa/inet.h>
@@ -21,6 +19,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <fstream>
 #include <optional>
 #include <sstream>
@@ -29,7 +28,6 @@
 extern char** environ;
 
 namespace fs = std::filesystem;
-using namespace bodyd::viewer;
 using namespace std::chrono_literals;
 
 namespace {
@@ -159,6 +157,17 @@ std::string http_get(int port, const std::string& target) {
   return s.buffer();
 }
 
+// POST `body` (JSON) to `target`; the whole response.
+std::string http_post(int port, const std::string& target, const std::string& body) {
+  Socket s(port);
+  if (!s.ok()) return {};
+  s.send_all("POST " + target + " HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\nContent-Length: " +
+             std::to_string(body.size()) + "\r\n\r\n" + body);
+  while (s.receive_more()) {
+  }
+  return s.buffer();
+}
+
 std::string body_of(const std::string& response) {
   const size_t at = response.find("\r\n\r\n");
   return at == std::string::npos ? std::string() : response.substr(at + 4);
@@ -170,6 +179,7 @@ struct Stack {
   TempDir dir;
   std::unique_ptr<Process> daemon, bridge;
   int http_port = 0;
+  std::string control;
   std::string error;
 
   Stack() {
@@ -178,14 +188,19 @@ struct Stack {
     daemon = std::make_unique<Process>(
         std::vector<std::string>{(bin / "bodyd").string(), "--replay",
                                  (bodyd::test::source_dir() / "data/demo/walk.csv").string(), "--method", "ik", "--loop",
-                                 "--pub", "tcp://127.0.0.1:*", "--control", "none", "--endpoints-file", endpoints.string(),
+                                 "--pub", "tcp://127.0.0.1:*", "--control", "tcp://127.0.0.1:*", "--endpoints-file",
+                                 endpoints.string(),
                                  "--log-level", "warn"},
         dir.path(), "bodyd");
     std::string pub;
     for (int i = 0; i < 250 && pub.empty(); ++i) {
       std::this_thread::sleep_for(20ms);
       try {
-        if (fs::exists(endpoints)) pub = nlohmann::json::parse(read_text(endpoints)).at("pub").get<std::string>();
+        if (fs::exists(endpoints)) {
+          const auto j = nlohmann::json::parse(read_text(endpoints));
+          control = j.at("control").get<std::string>();
+          pub = j.at("pub").get<std::string>();
+        }
       } catch (const std::exception&) {
       }
     }
@@ -194,7 +209,8 @@ struct Stack {
       return;
     }
     bridge = std::make_unique<Process>(std::vector<std::string>{(bin / "bodyd-viewer-bridge").string(), "--endpoint", pub,
-                                                                "--http", "127.0.0.1:0", "--log-level", "warn"},
+                                                                "--control", control, "--http", "127.0.0.1:0",
+                                                                "--log-level", "warn"},
                                        dir.path(), "bridge");
     for (int i = 0; i < 250 && http_port == 0; ++i) {
       std::this_thread::sleep_for(20ms);
@@ -205,12 +221,15 @@ struct Stack {
     if (http_port == 0) error = "the bridge did not report its port: " + bridge->err();
   }
 
-  // Waits until the bridge has received poses and the skeleton.
+  // Waits until the bridge has received poses and the skeleton, and the daemon's status twice
+  // (so that its pose rate is known).
   bool wait_for_poses() {
     for (int i = 0; i < 150; ++i) {
       try {
         const auto status = nlohmann::json::parse(body_of(http_get(http_port, "/status")));
-        if (status.at("poses").get<int>() > 5 && status.at("skeleton").get<bool>()) return true;
+        if (status.at("poses").get<int>() > 5 && status.at("skeleton").get<bool>() &&
+            status.at("daemon").at("answered").get<bool>() && status.at("daemon").at("frames_per_s").get<double>() > 0)
+          return true;
       } catch (const std::exception&) {
       }
       std::this_thread::sleep_for(50ms);
@@ -231,76 +250,6 @@ std::optional<std::string> find_chromium() {
 
 }  // namespace
 
-TEST(WebSocket, AcceptKeyOfRfc6455Example) {
-  // RFC 6455 section 1.3.
-  EXPECT_EQ(websocket_accept_key("dGhlIHNhbXBsZSBub25jZQ=="), "s3pPLMBiTxaQ9kYGzzhZRbK+xOo=");
-}
-
-TEST(WebSocket, HandshakeChecksTheRequest) {
-  HttpRequest req;
-  ASSERT_EQ(parse_http_request("GET /ws?x=1 HTTP/1.1\r\nHost: a\r\nUpgrade: WebSocket\r\nConnection: keep-alive, Upgrade\r\n"
-                               "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13",
-                               req),
-            "");
-  EXPECT_EQ(req.target, "/ws");
-  EXPECT_EQ(req.headers.at("upgrade"), "WebSocket");
-  std::string error;
-  const std::string response = websocket_handshake_response(req, error);
-  EXPECT_EQ(error, "");
-  EXPECT_EQ(response.rfind("HTTP/1.1 101 Switching Protocols\r\n", 0), 0u);
-  EXPECT_NE(response.find("Sec-WebSocket-Accept: s3pPLMBiTxaQ9kYGzzhZRbK+xOo=\r\n"), std::string::npos);
-  req.headers["sec-websocket-version"] = "8";
-  EXPECT_EQ(websocket_handshake_response(req, error), "");
-  EXPECT_NE(error.find("Version"), std::string::npos);
-  EXPECT_NE(parse_http_request("GET\r\n", req), "");
-  EXPECT_NE(parse_http_request("GET index.html HTTP/1.1", req), "");
-  EXPECT_NE(parse_http_request("GET / HTTP/1.1\r\nno colon here", req), "");
-}
-
-TEST(WebSocket, ClientFramesOfRfc6455Examples) {
-  // RFC 6455 section 5.7: a masked "Hello".
-  const std::vector<std::uint8_t> hello{0x81, 0x85, 0x37, 0xfa, 0x21, 0x3d, 0x7f, 0x9f, 0x4d, 0x51, 0x58};
-  ClientFrame f;
-  size_t used = 0;
-  std::string error;
-  ASSERT_EQ(parse_client_frame(hello, f, used, error), FrameParse::kFrame) << error;
-  EXPECT_EQ(used, hello.size());
-  EXPECT_EQ(f.opcode, Opcode::kText);
-  EXPECT_EQ(std::string(f.payload.begin(), f.payload.end()), "Hello");
-  for (size_t n = 0; n < hello.size(); ++n) {
-    EXPECT_EQ(parse_client_frame(std::span(hello.data(), n), f, used, error), FrameParse::kNeedMore) << n;
-  }
-  // The unmasked "Hello" of the same section is a server frame: refused from a client.
-  const std::vector<std::uint8_t> unmasked{0x81, 0x05, 0x48, 0x65, 0x6c, 0x6c, 0x6f};
-  EXPECT_EQ(parse_client_frame(unmasked, f, used, error), FrameParse::kError);
-  EXPECT_NE(error.find("masked"), std::string::npos);
-  const std::vector<std::uint8_t> huge{0x82, 0xFF, 0, 0, 0, 0, 0, 0x10, 0, 0, 1, 2, 3, 4};
-  EXPECT_EQ(parse_client_frame(huge, f, used, error), FrameParse::kError);
-  const std::vector<std::uint8_t> long_ping{0x89, 0xFE, 0x00, 0x7E, 1, 2, 3, 4};
-  EXPECT_EQ(parse_client_frame(long_ping, f, used, error), FrameParse::kError);
-}
-
-TEST(WebSocket, ServerFrameLengths) {
-  // RFC 6455 section 5.7: unmasked "Hello" is 0x81 0x05 "Hello"; 256 bytes use the 16-bit length,
-  // 64 KiB the 64-bit one.
-  std::vector<std::uint8_t> out;
-  append_server_frame(Opcode::kText, "Hello", out);
-  EXPECT_EQ(out, (std::vector<std::uint8_t>{0x81, 0x05, 0x48, 0x65, 0x6c, 0x6c, 0x6f}));
-  out.clear();
-  append_server_frame(Opcode::kBinary, std::vector<std::uint8_t>(256, 7), out);
-  ASSERT_EQ(out.size(), 4u + 256u);
-  EXPECT_EQ(out[0], 0x82);
-  EXPECT_EQ(out[1], 126);
-  EXPECT_EQ(out[2], 0x01);
-  EXPECT_EQ(out[3], 0x00);
-  out.clear();
-  append_server_frame(Opcode::kBinary, std::vector<std::uint8_t>(65536, 7), out);
-  ASSERT_EQ(out.size(), 10u + 65536u);
-  EXPECT_EQ(out[1], 127);
-  EXPECT_EQ((std::vector<std::uint8_t>(out.begin() + 2, out.begin() + 10)),
-            (std::vector<std::uint8_t>{0, 0, 0, 0, 0, 1, 0, 0}));
-}
-
 TEST(ViewerBridge, ServesThePageAndPushesPoses) {
   Stack stack;
   ASSERT_EQ(stack.error, "");
@@ -312,7 +261,7 @@ TEST(ViewerBridge, ServesThePageAndPushesPoses) {
   EXPECT_EQ(http_get(stack.http_port, "/viewer.js").rfind("HTTP/1.1 200 OK\r\n", 0), 0u);
   EXPECT_EQ(http_get(stack.http_port, "/three/..%2Fpackage.json").rfind("HTTP/1.1 404", 0), 0u);
   EXPECT_EQ(http_get(stack.http_port, "/../CMakeLists.txt").rfind("HTTP/1.1 404", 0), 0u);
-  EXPECT_EQ(http_get(stack.http_port, "/ws").rfind("HTTP/1.1 400", 0), 0u);  // not an upgrade
+  EXPECT_EQ(http_get(stack.http_port, "/ws").rfind("HTTP/1.1 4", 0), 0u);  // not an upgrade
 
   Socket ws(stack.http_port);
   ASSERT_TRUE(ws.ok());
@@ -343,7 +292,9 @@ TEST(ViewerBridge, ServesThePageAndPushesPoses) {
       if (len != 126 && buf.size() >= at + len) {
         const auto msg = nlohmann::json::parse(buf.substr(at, len));
         buf.erase(0, at + len);
-        if (msg.at("type") == "skeleton") {
+        if (msg.at("type") == "status") {
+          EXPECT_TRUE(msg.contains("daemon"));  // the daemon's status, once a second
+        } else if (msg.at("type") == "skeleton") {
           skeleton = true;
           EXPECT_EQ(msg.at("names").size(), 22u);
         } else {
@@ -374,6 +325,58 @@ TEST(ViewerBridge, ServesThePageAndPushesPoses) {
   EXPECT_TRUE(closed);
 }
 
+TEST(ViewerBridge, StatusCarriesTheDaemonsState) {
+  Stack stack;
+  ASSERT_EQ(stack.error, "");
+  ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
+  const auto status = nlohmann::json::parse(body_of(http_get(stack.http_port, "/status")));
+  const auto& daemon = status.at("daemon");
+  EXPECT_EQ(daemon.at("control").get<std::string>(), stack.control);
+  // The daemon replays a 90 Hz recording: poses flow, one source, connected, at a rate near 90 Hz.
+  EXPECT_GT(daemon.at("frames_per_s").get<double>(), 10.0);
+  const auto& d = daemon.at("status");
+  EXPECT_GT(d.at("frames_out").get<double>(), 0.0);
+  ASSERT_EQ(d.at("sources").size(), 1u);
+  EXPECT_TRUE(d.at("sources")[0].at("connected").get<bool>());
+  EXPECT_TRUE(d.at("latency_us").contains("p99"));
+  EXPECT_EQ(http_post(stack.http_port, "/status", "{}").rfind("HTTP/1.1 405", 0), 0u);
+}
+
+TEST(ViewerBridge, CalibrateAndResetButtonsReachTheDaemon) {
+  Stack stack;
+  ASSERT_EQ(stack.error, "");
+  ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
+  const std::string calibrate = http_post(stack.http_port, "/api/calibrate", R"({"head_height_m": 1.5})");
+  ASSERT_EQ(calibrate.rfind("HTTP/1.1 200", 0), 0u) << calibrate;
+  EXPECT_TRUE(nlohmann::json::parse(body_of(calibrate)).at("ok").get<bool>());
+  // The daemon's next status (polled once a second) shows the new head height.
+  bool seen = false;
+  for (int i = 0; i < 60 && !seen; ++i) {
+    std::this_thread::sleep_for(50ms);
+    const auto status = nlohmann::json::parse(body_of(http_get(stack.http_port, "/status")));
+    const auto& d = status.at("daemon");
+    seen = d.contains("status") && std::abs(d.at("status").at("head_height_m").get<double>() - 1.5) < 1e-6 &&
+           d.at("status").at("height_calibrated").get<bool>();
+  }
+  EXPECT_TRUE(seen) << "the calibration did not reach the daemon";
+  // A value the daemon refuses comes back as its error, not as success.
+  const std::string bad = http_post(stack.http_port, "/api/calibrate", R"({"head_height_m": -3})");
+  EXPECT_EQ(bad.rfind("HTTP/1.1 502", 0), 0u) << bad;
+  EXPECT_FALSE(nlohmann::json::parse(body_of(bad)).at("ok").get<bool>());
+  EXPECT_EQ(http_post(stack.http_port, "/api/calibrate", "[1, 2]").rfind("HTTP/1.1 400", 0), 0u);
+  // The daemon's answer to reset comes back whatever it is (the ik method has no facing to
+  // re-centre and says so; docs/control.md).
+  const std::string reset = http_post(stack.http_port, "/api/reset", "{}");
+  const auto reset_reply = nlohmann::json::parse(body_of(reset));
+  if (reset_reply.at("ok").get<bool>()) {
+    EXPECT_EQ(reset.rfind("HTTP/1.1 200", 0), 0u) << reset;
+  } else {
+    EXPECT_EQ(reset.rfind("HTTP/1.1 502", 0), 0u) << reset;
+    EXPECT_EQ(reset_reply.at("error").get<std::string>().rfind("reset", 0), 0u) << reset;
+  }
+  EXPECT_EQ(http_get(stack.http_port, "/api/reset").rfind("HTTP/1.1 405", 0), 0u);
+}
+
 TEST(ViewerBridge, RefusesNonLoopbackAndBadSpecs) {
   TempDir dir;
   const fs::path bin = bodyd::test::bin_dir();
@@ -402,13 +405,14 @@ TEST(ViewerBrowser, HeadlessChromiumShowsTheSkeleton) {
   // screenshot at the load event (--timeout caps the wait; --virtual-time-budget never ends while
   // a WebSocket is open). SwiftShader renders WebGL on the CPU.
   Process browser({*chromium, "--headless", "--no-sandbox", "--disable-gpu-sandbox", "--use-angle=swiftshader",
-                   "--enable-unsafe-swiftshader", "--no-first-run", "--disable-extensions", "--hide-scrollbars",
+                   "--enable-unsafe-swiftshader", "--no-first-run", "--disable-extensions", "--disable-background-networking",
+                   "--disable-sync", "--disable-component-update", "--no-default-browser-check", "--hide-scrollbars",
                    "--user-data-dir=" + (stack.dir.path() / "profile").string(), "--window-size=800,600",
-                   "--timeout=15000", "--screenshot=" + shot.string(),
+                   "--timeout=30000", "--screenshot=" + shot.string(),
                    "http://127.0.0.1:" + std::to_string(stack.http_port) + "/?hold-load"},
                   stack.dir.path(), "chromium");
   ASSERT_TRUE(browser.started());
-  const auto code = browser.wait(40000ms);
+  const auto code = browser.wait(60000ms);
   ASSERT_TRUE(code.has_value()) << "chromium did not finish";
   ASSERT_TRUE(fs::exists(shot)) << "no screenshot; chromium exit " << *code << ": " << browser.err().substr(0, 2000);
 
@@ -440,4 +444,40 @@ TEST(ViewerBrowser, HeadlessChromiumShowsTheSkeleton) {
     std::error_code ec;
     fs::copy_file(shot, fs::temp_directory_path() / "bodyd-viewer-test-failed.png", fs::copy_options::overwrite_existing, ec);
   }
+}
+
+TEST(ViewerBrowser, HeadlessChromiumShowsTheDaemonsStatus) {
+  const auto chromium = find_chromium();
+  if (!chromium) GTEST_SKIP() << "chromium is not installed (apt-get install chromium); the viewer's browser test is skipped";
+  Stack stack;
+  ASSERT_EQ(stack.error, "");
+  ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
+  // ?hold-load also waits for the first status message, so the DOM Chromium dumps at the load
+  // event holds the status panel as the page filled it.
+  Process browser({*chromium, "--headless", "--no-sandbox", "--disable-gpu-sandbox", "--use-angle=swiftshader",
+                   "--enable-unsafe-swiftshader", "--no-first-run", "--disable-extensions", "--disable-background-networking",
+                   "--disable-sync", "--disable-component-update", "--no-default-browser-check",
+                   "--user-data-dir=" + (stack.dir.path() / "profile").string(), "--timeout=30000", "--dump-dom",
+                   "http://127.0.0.1:" + std::to_string(stack.http_port) + "/?hold-load"},
+                  stack.dir.path(), "chromium");
+  ASSERT_TRUE(browser.started());
+  ASSERT_TRUE(browser.wait(60000ms).has_value()) << "chromium did not finish";
+  const std::string dom = browser.out();
+  ASSERT_NE(dom.find("id=\"daemon\""), std::string::npos) << dom.substr(0, 3000);
+  // The panel's data attributes carry what it shows (docs/viewer.md).
+  const auto attribute = [&](const std::string& name) -> std::string {
+    const std::string key = name + "=\"";
+    const size_t at = dom.find(key);
+    if (at == std::string::npos) return "";
+    return dom.substr(at + key.size(), dom.find('"', at + key.size()) - at - key.size());
+  };
+  EXPECT_EQ(attribute("data-daemon-state"), "answering") << dom.substr(0, 3000);
+  EXPECT_EQ(attribute("data-sources"), "1");
+  const std::string rate = attribute("data-frames-per-s");
+  ASSERT_FALSE(rate.empty());
+  EXPECT_GT(std::stod(rate), 10.0);
+  EXPECT_FALSE(attribute("data-latency-p99-us").empty());
+  EXPECT_NE(dom.find("id=\"calibrate\""), std::string::npos);
+  EXPECT_NE(dom.find("id=\"reset\""), std::string::npos);
+  EXPECT_NE(dom.find("walk.csv"), std::string::npos) << "the source's name is not shown";
 }

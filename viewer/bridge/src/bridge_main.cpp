@@ -1,75 +1,49 @@
-// bodyd-viewer-bridge: subscribes to bodyd's pose stream and serves the live 3D viewer page
-// (viewer/index.html, three.js from viewer/node_modules or Debian's libjs-three) with the poses pushed to the page as
-// JSON over a WebSocket. Specification: docs/viewer.md.
+// bodyd-viewer-bridge: subscribes to bodyd's pose stream, polls the daemon's control socket for
+// its status, and serves the live viewer page (viewer/index.html, three.js from viewer/node_modules
+// or Debian's libjs-three). Poses, the skeleton and the daemon's status are pushed to the page as
+// JSON over a WebSocket; the page's calibrate and reset buttons are forwarded to the control
+// socket. HTTP and WebSocket are CivetWeb's (libcivetweb). Specification: docs/viewer.md.
 //
-// Threads: a ZeroMQ thread receives poses (bodyd::client) and formats the newest as JSON; the
-// HTTP thread (poll loop over the listening socket, the connections and a wake-up pipe) serves
-// files and writes each new pose to every WebSocket. A slow browser loses poses, never delays
-// the others: a connection with more than kMaxQueuedBytes unsent skips poses until it drains.
-#include "bodyd/viewer/websocket.h"
-
+// Threads: the pose thread receives poses (bodyd::client) and keeps the newest as JSON; the
+// status thread asks the daemon for `status` once a second; the push thread sends what is new to
+// every open WebSocket at most every 10 ms; CivetWeb's worker threads serve files and forward the
+// buttons. A browser that falls behind loses poses (only the newest is ever sent), never delays
+// the others' by more than CivetWeb's write timeout.
 #include "bodyd/client/client.h"
+#include "bodyd/paths/data_files.h"
 
 #include <CLI/CLI.hpp>
+#include <civetweb.h>
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include <arpa/inet.h>
-#include <fcntl.h>
-#include <netinet/in.h>
-#include <poll.h>
 #include <signal.h>
-#include <sys/socket.h>
-#include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
-#include <cerrno>
+#include <chrono>
+#include <condition_variable>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <list>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <sstream>
 #include <thread>
 
-#ifndef BODYD_VIEWER_DIR
-#define BODYD_VIEWER_DIR "viewer"
-#endif
-
 namespace fs = std::filesystem;
 using namespace bodyd;
-using namespace bodyd::viewer;
+using namespace std::chrono_literals;
 
 namespace {
 
 std::atomic<bool> g_stop{false};
 extern "C" void on_signal(int) { g_stop.store(true); }
 
-constexpr std::size_t kMaxQueuedBytes = 256 * 1024;
-
-// What the ZeroMQ thread hands to the HTTP thread.
-struct Shared {
-  std::mutex mutex;
-  std::string pose_json;       // newest pose message
-  std::uint64_t pose_version = 0;
-  std::string skeleton_json;   // newest skeleton message
-  std::uint64_t skeleton_version = 0;
-  std::uint64_t poses = 0, dropped = 0, malformed = 0;
-};
-
-struct Connection {
-  int fd = -1;
-  bool websocket = false;
-  bool close_after_write = false;
-  std::string in;
-  std::vector<std::uint8_t> out;
-  std::size_t out_at = 0;
-  std::uint64_t skipped = 0;
-  std::uint64_t pose_version = 0, skeleton_version = 0;  // the newest sent on this WebSocket
-  [[nodiscard]] std::size_t queued() const { return out.size() - out_at; }
-  void queue(std::string_view s) { out.insert(out.end(), s.begin(), s.end()); }
-};
+// Requests from the page larger than this are refused (the buttons send a few bytes).
+constexpr long long kMaxRequestBody = 4096;
 
 std::optional<std::string> read_file(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
@@ -95,366 +69,379 @@ bool safe_name(std::string_view name) {
 }
 
 struct Paths {
-  fs::path web_root;  // index.html, viewer.js
+  fs::path web_root;   // index.html, viewer.js
   fs::path three_dir;  // three.js build folder (three.module.js, three.core.js)
 };
 
-class Server {
- public:
-  Server(int listen_fd, int wake_fd, const Paths& paths, Shared& shared, std::string endpoint)
-      : listen_fd_(listen_fd), wake_fd_(wake_fd), paths_(paths), shared_(shared), endpoint_(std::move(endpoint)) {}
+// What the threads share. Versions tell the push thread what is new.
+struct Shared {
+  std::mutex mutex;
+  std::string pose_json, skeleton_json, status_json;
+  std::uint64_t pose_version = 0, skeleton_version = 0, status_version = 0;
+  std::uint64_t poses = 0, dropped = 0, malformed = 0;
+  std::condition_variable changed;
+};
 
-  void run() {
-    std::vector<pollfd> fds;
-    while (!g_stop.load()) {
-      fds.clear();
-      fds.push_back({listen_fd_, POLLIN, 0});
-      fds.push_back({wake_fd_, POLLIN, 0});
-      for (const Connection& c : conns_) {
-        fds.push_back({c.fd, static_cast<short>(POLLIN | (c.queued() ? POLLOUT : 0)), 0});
-      }
-      const int n = ::poll(fds.data(), fds.size(), 100);
-      if (n < 0) {
-        if (errno == EINTR) continue;
-        spdlog::error("poll: {}", std::strerror(errno));
-        return;
-      }
-      if (fds[1].revents & POLLIN) {
-        char buf[256];
-        while (::read(wake_fd_, buf, sizeof buf) > 0) {
-        }
-      }
-      publish_new();
-      size_t i = 2;
-      for (auto it = conns_.begin(); it != conns_.end(); ++i) {
-        bool keep = true;
-        if (fds[i].revents & (POLLIN | POLLHUP | POLLERR)) keep = on_readable(*it);
-        if (keep && it->queued() && (fds[i].revents & POLLOUT)) keep = on_writable(*it);
-        if (keep && it->close_after_write && it->queued() == 0) keep = false;
-        if (!keep) {
-          ::close(it->fd);
-          it = conns_.erase(it);
-        } else {
-          ++it;
-        }
-      }
-      if (fds[0].revents & POLLIN) accept_all();
+// The bridge's view of the daemon: the last status reply and what the page shows from it.
+struct DaemonView {
+  std::string control_endpoint;  // empty: none configured
+  bool answered = false;         // the last status request got a reply
+  std::string error;             // why not
+  nlohmann::json status;         // the last reply
+  double frames_per_s = 0;       // poses sent by the daemon per second, from frames_out
+};
+
+// One WebSocket connection and what it has been sent.
+struct WsClient {
+  mg_connection* conn = nullptr;
+  std::uint64_t pose_version = 0, skeleton_version = 0, status_version = 0;
+};
+
+class Bridge {
+ public:
+  Bridge(Paths paths, std::string endpoint, client::Client& poses, client::Client* control, std::string control_endpoint)
+      : paths_(std::move(paths)), endpoint_(std::move(endpoint)), poses_(poses), control_(control) {
+    daemon_.control_endpoint = std::move(control_endpoint);
+  }
+
+  Shared& shared() { return shared_; }
+
+  // ---- CivetWeb callbacks (worker threads) ----------------------------------------------
+
+  int on_request(mg_connection* conn) {
+    const mg_request_info* ri = mg_get_request_info(conn);
+    const std::string method = ri->request_method ? ri->request_method : "";
+    const std::string uri = ri->local_uri ? ri->local_uri : "";
+    if (uri == "/api/calibrate" || uri == "/api/reset") return on_button(conn, method, uri);
+    if (method != "GET" && method != "HEAD") return reply(conn, 405, "text/plain", "only GET (and POST to /api/...)\n");
+    if (uri == "/ws") return reply(conn, 400, "text/plain", "/ws is a WebSocket endpoint (Upgrade: websocket)\n");
+    if (uri == "/status") return reply(conn, 200, "application/json", status_json().dump() + "\n");
+    std::optional<fs::path> file;
+    if (uri == "/" || uri == "/index.html") {
+      file = paths_.web_root / "index.html";
+    } else if (uri == "/viewer.js") {
+      file = paths_.web_root / "viewer.js";
+    } else if (uri.rfind("/three/", 0) == 0 && safe_name(uri.substr(7)) && fs::path(uri).extension() == ".js") {
+      file = paths_.three_dir / uri.substr(7);
     }
-    for (Connection& c : conns_) ::close(c.fd);
+    const std::optional<std::string> body = file ? read_file(*file) : std::nullopt;
+    if (!body) {
+      std::string why = fmt::format("{} not found\n", uri);
+      if (file && uri.rfind("/three/", 0) == 0) {
+        why += fmt::format("three.js is missing ({} does not exist): apt-get install libjs-three\n", file->string());
+      }
+      return reply(conn, 404, "text/plain; charset=utf-8", why);
+    }
+    return reply(conn, 200, content_type(*file), *body, method == "HEAD");
+  }
+
+  int on_ws_connect(const mg_connection*) {
+    std::lock_guard lock(clients_mutex_);
+    return clients_.size() >= 64 ? 1 : 0;  // non-zero refuses
+  }
+
+  void on_ws_ready(mg_connection* conn) {
+    {
+      std::lock_guard lock(clients_mutex_);
+      clients_.push_back({conn});
+      spdlog::info("viewer connected ({} open)", clients_.size());
+    }
+    shared_.changed.notify_all();  // the push thread sends the newest skeleton, pose and status at once
+  }
+
+  void on_ws_close(const mg_connection* conn) {
+    std::lock_guard lock(clients_mutex_);
+    std::erase_if(clients_, [&](const WsClient& c) { return c.conn == conn; });
+  }
+
+  // ---- bridge threads -------------------------------------------------------------------
+
+  // Receives poses until g_stop; keeps the newest as JSON.
+  void pose_thread() {
+    protocol::PoseMessage pose;
+    std::uint32_t skeleton_id = 0;
+    while (!g_stop.load()) {
+      const client::Received r = poses_.receive(pose, 100ms);
+      if (r == client::Received::kTimeout) continue;
+      if (r == client::Received::kError) {
+        spdlog::error("pose stream: {}", poses_.error());
+        std::this_thread::sleep_for(100ms);
+        continue;
+      }
+      std::string skeleton_json;
+      const auto& skel = poses_.current_skeleton();
+      if (skel && skel->skeleton_id != skeleton_id) {
+        skeleton_id = skel->skeleton_id;
+        nlohmann::json j = client::skeleton_to_json(*skel);
+        j["type"] = "skeleton";
+        skeleton_json = j.dump();
+      }
+      std::string pose_json;
+      if (r == client::Received::kPose) {
+        nlohmann::ordered_json j = client::pose_to_json(pose, skel ? &*skel : nullptr, false);
+        j["type"] = "pose";
+        pose_json = j.dump();
+      }
+      {
+        std::lock_guard lock(shared_.mutex);
+        if (!skeleton_json.empty()) {
+          shared_.skeleton_json = std::move(skeleton_json);
+          ++shared_.skeleton_version;
+        }
+        if (!pose_json.empty()) {
+          shared_.pose_json = std::move(pose_json);
+          ++shared_.pose_version;
+        }
+        shared_.poses = poses_.stats().poses;
+        shared_.dropped = poses_.stats().dropped;
+        shared_.malformed = poses_.stats().malformed;
+      }
+      shared_.changed.notify_all();
+    }
+  }
+
+  // Asks the daemon for its status once a second.
+  void status_thread() {
+    std::optional<std::pair<std::chrono::steady_clock::time_point, double>> last_frames;
+    while (!g_stop.load()) {
+      const auto start = std::chrono::steady_clock::now();
+      if (control_) {
+        client::ControlReply r;
+        {
+          std::lock_guard lock(control_mutex_);
+          r = control_->request(nlohmann::json{{"cmd", "status"}}, 800ms);
+        }
+        std::lock_guard lock(daemon_mutex_);
+        daemon_.answered = r.ok;
+        daemon_.error = r.ok ? "" : r.error;
+        if (r.ok) {
+          daemon_.status = r.json;
+          const double frames = r.json.value("frames_out", 0.0);
+          if (last_frames && start > last_frames->first) {
+            const double dt = std::chrono::duration<double>(start - last_frames->first).count();
+            daemon_.frames_per_s = std::max(0.0, (frames - last_frames->second) / dt);
+          }
+          last_frames = std::make_pair(start, frames);
+        } else {
+          last_frames.reset();
+          daemon_.frames_per_s = 0;
+        }
+      }
+      {
+        nlohmann::json j = status_json();
+        j["type"] = "status";
+        std::lock_guard lock(shared_.mutex);
+        shared_.status_json = j.dump();
+        ++shared_.status_version;
+      }
+      shared_.changed.notify_all();
+      while (!g_stop.load() && std::chrono::steady_clock::now() - start < 1s) std::this_thread::sleep_for(50ms);
+    }
+  }
+
+  // Sends what is new to every WebSocket, at most every 10 ms.
+  void push_thread() {
+    while (!g_stop.load()) {
+      std::string pose, skeleton, status;
+      std::uint64_t pose_version = 0, skeleton_version = 0, status_version = 0;
+      {
+        std::unique_lock lock(shared_.mutex);
+        shared_.changed.wait_for(lock, 100ms);
+        pose = shared_.pose_json;
+        skeleton = shared_.skeleton_json;
+        status = shared_.status_json;
+        pose_version = shared_.pose_version;
+        skeleton_version = shared_.skeleton_version;
+        status_version = shared_.status_version;
+      }
+      std::lock_guard lock(clients_mutex_);
+      for (WsClient& c : clients_) {
+        // The skeleton before any pose that follows it.
+        if (!skeleton.empty() && c.skeleton_version < skeleton_version) {
+          send(c.conn, skeleton);
+          c.skeleton_version = skeleton_version;
+        }
+        if (!pose.empty() && c.pose_version < pose_version) {
+          send(c.conn, pose);
+          c.pose_version = pose_version;
+        }
+        if (!status.empty() && c.status_version < status_version) {
+          send(c.conn, status);
+          c.status_version = status_version;
+        }
+      }
+      std::this_thread::sleep_for(10ms);
+    }
+  }
+
+  std::uint64_t poses_received() {
+    std::lock_guard lock(shared_.mutex);
+    return shared_.poses;
   }
 
  private:
-  void accept_all() {
-    while (true) {
-      const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
-      if (fd < 0) return;
-      if (conns_.size() >= 64) {
-        ::close(fd);
-        continue;
-      }
-      Connection c;
-      c.fd = fd;
-      conns_.push_back(std::move(c));
-    }
+  static void send(mg_connection* conn, const std::string& text) {
+    // A failed write closes the connection on CivetWeb's side; the close handler removes it.
+    (void)mg_websocket_write(conn, MG_WEBSOCKET_OPCODE_TEXT, text.data(), text.size());
   }
 
-  // New pose/skeleton from the ZeroMQ thread to every WebSocket that has not had them.
-  void publish_new() {
-    std::string pose, skeleton;
-    std::uint64_t pose_version = 0, skeleton_version = 0;
+  static int reply(mg_connection* conn, int code, std::string_view type, std::string_view body, bool head_only = false) {
+    mg_response_header_start(conn, code);
+    mg_response_header_add(conn, "Content-Type", type.data(), static_cast<int>(type.size()));
+    const std::string length = std::to_string(body.size());
+    mg_response_header_add(conn, "Content-Length", length.c_str(), -1);
+    mg_response_header_add(conn, "Cache-Control", "no-store", -1);
+    mg_response_header_send(conn);
+    if (!head_only) mg_write(conn, body.data(), body.size());
+    return code;
+  }
+
+  // The bridge's own counters and the daemon's status, as GET /status and the page's "status"
+  // message carry them (docs/viewer.md).
+  nlohmann::json status_json() {
+    nlohmann::json j;
     {
       std::lock_guard lock(shared_.mutex);
-      skeleton_version = shared_.skeleton_version;
-      pose_version = shared_.pose_version;
-      if (skeleton_version != skeleton_version_) skeleton = shared_.skeleton_json;
-      if (pose_version != pose_version_) pose = shared_.pose_json;
-    }
-    skeleton_version_ = skeleton_version;
-    pose_version_ = pose_version;
-    for (Connection& c : conns_) {
-      if (!c.websocket) continue;
-      if (!skeleton.empty() && c.skeleton_version < skeleton_version) {
-        send_ws(c, skeleton);
-        c.skeleton_version = skeleton_version;
-      }
-      if (pose.empty() || c.pose_version >= pose_version) continue;
-      if (c.queued() > kMaxQueuedBytes) {
-        ++c.skipped;
-      } else {
-        send_ws(c, pose);
-      }
-      c.pose_version = pose_version;
-    }
-  }
-
-  void send_ws(Connection& c, std::string_view text) {
-    if (c.out_at > 0 && c.out_at == c.out.size()) {
-      c.out.clear();
-      c.out_at = 0;
-    }
-    append_server_frame(Opcode::kText, text, c.out);
-    (void)on_writable(c);  // try at once; POLLOUT handles the rest
-  }
-
-  bool on_writable(Connection& c) {
-    while (c.queued()) {
-      const ssize_t n = ::send(c.fd, c.out.data() + c.out_at, c.queued(), MSG_NOSIGNAL);
-      if (n < 0) return errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR;
-      c.out_at += static_cast<size_t>(n);
-    }
-    c.out.clear();
-    c.out_at = 0;
-    return true;
-  }
-
-  bool on_readable(Connection& c) {
-    char buf[4096];
-    while (true) {
-      const ssize_t n = ::recv(c.fd, buf, sizeof buf, 0);
-      if (n == 0) return false;
-      if (n < 0) {
-        if (errno == EAGAIN || errno == EWOULDBLOCK) break;
-        if (errno == EINTR) continue;
-        return false;
-      }
-      c.in.append(buf, static_cast<size_t>(n));
-      if (c.in.size() > kMaxRequestHeadBytes + kMaxClientPayload + 16) break;
-    }
-    return c.websocket ? on_ws_data(c) : on_http_data(c);
-  }
-
-  bool on_ws_data(Connection& c) {
-    while (true) {
-      ClientFrame frame;
-      size_t used = 0;
-      std::string error;
-      const auto r = parse_client_frame(std::span(reinterpret_cast<const std::uint8_t*>(c.in.data()), c.in.size()), frame,
-                                        used, error);
-      if (r == FrameParse::kNeedMore) return true;
-      if (r == FrameParse::kError) {
-        spdlog::debug("websocket: {}; closing", error);
-        const std::uint8_t code[2] = {0x03, 0xEA};  // 1002 protocol error
-        append_server_frame(Opcode::kClose, std::span(code, 2), c.out);
-        c.close_after_write = true;
-        c.in.clear();
-        return on_writable(c);
-      }
-      c.in.erase(0, used);
-      if (frame.opcode == Opcode::kClose) {
-        append_server_frame(Opcode::kClose, std::span(frame.payload.data(), std::min<size_t>(frame.payload.size(), 2)), c.out);
-        c.close_after_write = true;
-        return on_writable(c);
-      }
-      if (frame.opcode == Opcode::kPing) append_server_frame(Opcode::kPong, frame.payload, c.out);
-      // Text and binary frames from the page carry nothing the bridge uses.
-    }
-  }
-
-  bool on_http_data(Connection& c) {
-    const size_t end = c.in.find("\r\n\r\n");
-    if (end == std::string::npos) {
-      if (c.in.size() > kMaxRequestHeadBytes) {
-        c.queue(http_response(431, "Request Header Fields Too Large", "text/plain", "request head too large\n"));
-        c.close_after_write = true;
-      }
-      return true;
-    }
-    HttpRequest req;
-    const std::string error = parse_http_request(std::string_view(c.in).substr(0, end), req);
-    c.in.erase(0, end + 4);
-    c.close_after_write = true;
-    if (!error.empty()) {
-      c.queue(http_response(400, "Bad Request", "text/plain", error + "\n"));
-      return true;
-    }
-    if (req.method != "GET" && req.method != "HEAD") {
-      c.queue(http_response(405, "Method Not Allowed", "text/plain", "only GET\n"));
-      return true;
-    }
-    if (req.target == "/ws") {
-      std::string ws_error;
-      const std::string response = websocket_handshake_response(req, ws_error);
-      if (response.empty()) {
-        c.queue(http_response(400, "Bad Request", "text/plain", ws_error + "\n"));
-        return true;
-      }
-      c.queue(response);
-      c.websocket = true;
-      c.close_after_write = false;
-      // The newest skeleton and pose at once, so the page draws without waiting.
-      {
-        std::lock_guard lock(shared_.mutex);
-        if (!shared_.skeleton_json.empty()) append_server_frame(Opcode::kText, shared_.skeleton_json, c.out);
-        if (!shared_.pose_json.empty()) append_server_frame(Opcode::kText, shared_.pose_json, c.out);
-        c.skeleton_version = shared_.skeleton_version;
-        c.pose_version = shared_.pose_version;
-      }
-      int websockets = 0;
-      for (const Connection& o : conns_) websockets += o.websocket ? 1 : 0;
-      spdlog::info("viewer connected ({} open)", websockets);
-      return on_ws_data(c);
-    }
-    if (req.target == "/status") {
-      nlohmann::json status;
-      {
-        std::lock_guard lock(shared_.mutex);
-        status = {{"endpoint", endpoint_},
-                  {"poses", shared_.poses},
-                  {"dropped", shared_.dropped},
-                  {"malformed", shared_.malformed},
-                  {"skeleton", !shared_.skeleton_json.empty()}};
-      }
-      int websockets = 0;
-      for (const Connection& o : conns_) websockets += o.websocket ? 1 : 0;
-      status["websockets"] = websockets;
-      c.queue(http_response(200, "OK", "application/json", status.dump() + "\n"));
-      return true;
-    }
-    std::optional<fs::path> file;
-    if (req.target == "/" || req.target == "/index.html") {
-      file = paths_.web_root / "index.html";
-    } else if (req.target == "/viewer.js") {
-      file = paths_.web_root / "viewer.js";
-    } else if (req.target.rfind("/three/", 0) == 0 && safe_name(req.target.substr(7)) &&
-               fs::path(req.target).extension() == ".js") {
-      file = paths_.three_dir / req.target.substr(7);
-    }
-    std::optional<std::string> body = file ? read_file(*file) : std::nullopt;
-    if (!body) {
-      std::string why = fmt::format("{} not found\n", req.target);
-      if (file && req.target.rfind("/three/", 0) == 0) {
-        why += fmt::format("three.js is missing: run 'npm install' in viewer/ ({} does not exist)\n", file->string());
-      }
-      c.queue(http_response(404, "Not Found", "text/plain; charset=utf-8", why));
-      return true;
-    }
-    std::string response = http_response(200, "OK", content_type(*file), *body);
-    if (req.method == "HEAD") response.resize(response.find("\r\n\r\n") + 4);
-    c.queue(response);
-    return on_writable(c);
-  }
-
-  int listen_fd_, wake_fd_;
-  Paths paths_;
-  Shared& shared_;
-  std::string endpoint_;
-  std::list<Connection> conns_;
-  std::uint64_t pose_version_ = 0, skeleton_version_ = 0;
-};
-
-// Receives poses until g_stop; formats the newest as JSON and wakes the HTTP thread.
-void zmq_thread(client::Client& cl, Shared& shared, int wake_write_fd) {
-  protocol::PoseMessage pose;
-  std::uint32_t skeleton_id = 0;
-  while (!g_stop.load()) {
-    const client::Received r = cl.receive(pose, std::chrono::milliseconds(100));
-    if (r == client::Received::kTimeout) continue;
-    if (r == client::Received::kError) {
-      spdlog::error("pose stream: {}", cl.error());
-      std::this_thread::sleep_for(std::chrono::milliseconds(100));
-      continue;
-    }
-    std::string skeleton_json;
-    const auto& skel = cl.current_skeleton();
-    if (skel && skel->skeleton_id != skeleton_id) {
-      skeleton_id = skel->skeleton_id;
-      nlohmann::json j = client::skeleton_to_json(*skel);
-      j["type"] = "skeleton";
-      skeleton_json = j.dump();
-    }
-    std::string pose_json;
-    if (r == client::Received::kPose) {
-      nlohmann::ordered_json j = client::pose_to_json(pose, skel ? &*skel : nullptr, false);
-      j["type"] = "pose";
-      pose_json = j.dump();
+      j = {{"endpoint", endpoint_},
+           {"poses", shared_.poses},
+           {"dropped", shared_.dropped},
+           {"malformed", shared_.malformed},
+           {"skeleton", !shared_.skeleton_json.empty()}};
     }
     {
-      std::lock_guard lock(shared.mutex);
-      if (!skeleton_json.empty()) {
-        shared.skeleton_json = std::move(skeleton_json);
-        ++shared.skeleton_version;
-      }
-      if (!pose_json.empty()) {
-        shared.pose_json = std::move(pose_json);
-        ++shared.pose_version;
-      }
-      shared.poses = cl.stats().poses;
-      shared.dropped = cl.stats().dropped;
-      shared.malformed = cl.stats().malformed;
+      std::lock_guard lock(clients_mutex_);
+      j["websockets"] = clients_.size();
     }
-    const char byte = 1;
-    (void)!::write(wake_write_fd, &byte, 1);
+    std::lock_guard lock(daemon_mutex_);
+    nlohmann::json d = {{"control", daemon_.control_endpoint.empty() ? "none" : daemon_.control_endpoint},
+                        {"answered", daemon_.answered}};
+    if (!daemon_.error.empty()) d["error"] = daemon_.error;
+    if (daemon_.answered) {
+      d["status"] = daemon_.status;
+      d["frames_per_s"] = daemon_.frames_per_s;
+    }
+    j["daemon"] = std::move(d);
+    return j;
   }
+
+  // POST /api/calibrate (body: {"from": "head"}, {"head_height_m": H} or {"user_height_m": H}) and
+  // POST /api/reset: forwarded to the control socket; the daemon's reply is the answer.
+  int on_button(mg_connection* conn, const std::string& method, const std::string& uri) {
+    if (method != "POST") return reply(conn, 405, "text/plain", uri + " takes POST\n");
+    if (!control_) {
+      return reply(conn, 503, "application/json",
+                   nlohmann::json{{"ok", false}, {"error", "the bridge has no --control endpoint"}}.dump() + "\n");
+    }
+    const mg_request_info* ri = mg_get_request_info(conn);
+    if (ri->content_length > kMaxRequestBody) return reply(conn, 413, "text/plain", "request body too large\n");
+    std::string body;
+    char buf[1024];
+    int n = 0;
+    while (body.size() <= kMaxRequestBody && (n = mg_read(conn, buf, sizeof buf)) > 0) body.append(buf, n);
+    if (body.size() > kMaxRequestBody) return reply(conn, 413, "text/plain", "request body too large\n");
+    nlohmann::json request;
+    if (uri == "/api/reset") {
+      request = {{"cmd", "reset"}};
+    } else {
+      const nlohmann::json args = nlohmann::json::parse(body.empty() ? "{}" : body, nullptr, false);
+      if (!args.is_object()) return reply(conn, 400, "text/plain", "the body must be a JSON object\n");
+      request = {{"cmd", "calibrate"}};
+      // Only the keys the page sends; anything else is the daemon's to refuse.
+      for (const char* key : {"from", "head_height_m", "user_height_m"}) {
+        if (args.contains(key)) request[key] = args[key];
+      }
+      if (request.size() == 1) request["from"] = "head";
+    }
+    client::ControlReply r;
+    {
+      std::lock_guard lock(control_mutex_);
+      r = control_->request(request, 2000ms);
+    }
+    nlohmann::json answer = r.json.is_object() ? r.json : nlohmann::json::object();
+    answer["ok"] = r.ok;
+    if (!r.ok && !answer.contains("error")) answer["error"] = r.error;
+    return reply(conn, r.ok ? 200 : 502, "application/json", answer.dump() + "\n");
+  }
+
+  Paths paths_;
+  std::string endpoint_;
+  client::Client& poses_;
+  client::Client* control_;
+  std::mutex control_mutex_;  // one control request at a time (REQ socket)
+  Shared shared_;
+  std::mutex clients_mutex_;
+  std::vector<WsClient> clients_;
+  std::mutex daemon_mutex_;
+  DaemonView daemon_;
+};
+
+extern "C" int request_handler(mg_connection* conn, void* self) { return static_cast<Bridge*>(self)->on_request(conn); }
+extern "C" int ws_connect(const mg_connection* conn, void* self) { return static_cast<Bridge*>(self)->on_ws_connect(conn); }
+extern "C" void ws_ready(mg_connection* conn, void* self) { static_cast<Bridge*>(self)->on_ws_ready(conn); }
+// The page sends nothing the bridge uses; a close frame is answered with a close frame (RFC 6455
+// section 5.5.1) carrying the same status code, and ends the connection.
+extern "C" int ws_data(mg_connection* conn, int bits, char* data, size_t len, void*) {
+  if ((bits & 0x0F) != MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE) return 1;
+  (void)mg_websocket_write(conn, MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE, data, std::min<size_t>(len, 2));
+  return 0;
+}
+extern "C" void ws_close(const mg_connection* conn, void* self) { static_cast<Bridge*>(self)->on_ws_close(conn); }
+extern "C" int log_message(const mg_connection*, const char* message) {
+  spdlog::debug("civetweb: {}", message);
+  return 1;
 }
 
-// "HOST:PORT" -> a listening IPv4 socket; the bound port in `out_port`. Empty string on success.
-std::string listen_on(const std::string& spec, bool allow_remote, int& out_fd, int& out_port) {
+// "HOST:PORT" checked: an IPv4 address (loopback unless allow_remote) and a port 0..65535.
+std::string check_http_spec(const std::string& spec, bool allow_remote) {
   const size_t colon = spec.rfind(':');
   if (colon == std::string::npos) return fmt::format("--http '{}': expected HOST:PORT, e.g. 127.0.0.1:8080", spec);
-  const std::string host = spec.substr(0, colon);
-  int port = -1;
-  try {
-    size_t used = 0;
-    port = std::stoi(spec.substr(colon + 1), &used);
-    if (used != spec.size() - colon - 1) port = -1;
-  } catch (const std::exception&) {
+  const std::string host = spec.substr(0, colon), port_text = spec.substr(colon + 1);
+  if (port_text.empty() || port_text.size() > 5 || !std::all_of(port_text.begin(), port_text.end(), ::isdigit) ||
+      std::stoi(port_text) > 65535) {
+    return fmt::format("--http '{}': the port must be 0..65535", spec);
   }
-  if (port < 0 || port > 65535) return fmt::format("--http '{}': the port must be 0..65535", spec);
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_port = htons(static_cast<std::uint16_t>(port));
-  if (::inet_pton(AF_INET, host.c_str(), &addr.sin_addr) != 1) {
-    return fmt::format("--http '{}': '{}' is not an IPv4 address", spec, host);
-  }
-  if (!allow_remote && (ntohl(addr.sin_addr.s_addr) >> 24) != 127) {
+  in_addr addr{};
+  if (::inet_pton(AF_INET, host.c_str(), &addr) != 1) return fmt::format("--http '{}': '{}' is not an IPv4 address", spec, host);
+  if (!allow_remote && (ntohl(addr.s_addr) >> 24) != 127) {
     return fmt::format("--http '{}': not a loopback address; the viewer has no authentication, pass --allow-remote "
                        "to serve it to the network anyway",
                        spec);
   }
-  const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
-  if (fd < 0) return fmt::format("socket: {}", std::strerror(errno));
-  const int one = 1;
-  ::setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
-  if (::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0 || ::listen(fd, 16) != 0) {
-    const std::string e = std::strerror(errno);
-    ::close(fd);
-    return fmt::format("--http {}: cannot listen: {} (another program on that port? pick another, or port 0)", spec, e);
-  }
-  socklen_t len = sizeof addr;
-  ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
-  out_fd = fd;
-  out_port = ntohs(addr.sin_port);
   return {};
 }
 
 // three.js: the npm copy (viewer/node_modules, `npm ci --prefix viewer`) when present, else Debian's
 // libjs-three.
-fs::path default_three_dir() {
-  const fs::path npm = fs::path(BODYD_VIEWER_DIR) / "node_modules" / "three" / "build";
+fs::path default_three_dir(const fs::path& web_root) {
+  const fs::path npm = web_root / "node_modules" / "three" / "build";
   if (fs::exists(npm / "three.module.js")) return npm;
   return "/usr/share/javascript/three";
 }
 
+// The page, where bodyd's data files are (docs/install.md): PREFIX/share/bodyd/viewer next to an
+// installed bridge, $XDG_DATA_HOME/bodyd/viewer, or viewer/ of the source tree of the build.
+fs::path default_web_root() { return paths::find_data_file("viewer/index.html").path.parent_path(); }
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"Serves bodyd's live 3D viewer: subscribes to the pose stream and pushes poses to the page over a "
-               "WebSocket (docs/viewer.md)."};
+  CLI::App app{"Serves bodyd's live viewer: subscribes to the pose stream, shows the daemon's status from its control "
+               "socket, and pushes both to the page over a WebSocket (docs/viewer.md)."};
   std::string endpoint{protocol::kDefaultPoseEndpoint};
-  std::string control = "none";
+  std::string control{protocol::kDefaultControlEndpoint};
   std::string http = "127.0.0.1:8080";
   bool allow_remote = false;
-  Paths paths{fs::path(BODYD_VIEWER_DIR), default_three_dir()};
+  Paths paths{default_web_root(), {}};
   std::string log_level = "info";
   app.add_option("--endpoint", endpoint, "the daemon's pose stream (PUB) endpoint")->capture_default_str();
-  app.add_option("--control", control, "the daemon's control endpoint, to ask for the skeleton at start; 'none' to wait for "
-                                       "it on the stream (sent every second)")
+  app.add_option("--control", control,
+                 "the daemon's control endpoint: its status for the page, the skeleton at start, the calibrate and "
+                 "reset buttons; 'none' for poses only")
       ->capture_default_str();
   app.add_option("--http", http, "HOST:PORT to serve the page on (port 0: any free port)")->capture_default_str();
   app.add_flag("--allow-remote", allow_remote, "allow a non-loopback --http address");
   app.add_option("--web-root", paths.web_root, "folder with index.html and viewer.js")->capture_default_str();
-  app.add_option("--three-dir", paths.three_dir, "three.js build folder (three.module.js, three.core.js)")
-      ->capture_default_str();
+  app.add_option("--three-dir", paths.three_dir, "three.js build folder (three.module.js, three.core.js)");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error, off")->capture_default_str();
   try {
     app.parse(argc, argv);
@@ -462,56 +449,84 @@ int main(int argc, char** argv) {
     return app.exit(e) == 0 ? 0 : 2;
   }
   spdlog::set_level(spdlog::level::from_str(log_level));
+  if (paths.three_dir.empty()) paths.three_dir = default_three_dir(paths.web_root);
   if (!fs::exists(paths.web_root / "index.html")) {
     fmt::print(stderr, "bodyd-viewer-bridge: {} does not exist (pass --web-root the viewer/ folder)\n",
                (paths.web_root / "index.html").string());
     return 2;
   }
   if (!fs::exists(paths.three_dir / "three.module.js")) {
-    spdlog::warn("three.js is missing ({}); the page cannot draw until 'npm install' is run in viewer/",
+    spdlog::warn("three.js is missing ({}); the page cannot draw until libjs-three is installed",
                  (paths.three_dir / "three.module.js").string());
   }
-  int listen_fd = -1, port = 0;
-  if (std::string e = listen_on(http, allow_remote, listen_fd, port); !e.empty()) {
+  if (std::string e = check_http_spec(http, allow_remote); !e.empty()) {
     fmt::print(stderr, "bodyd-viewer-bridge: {}\n", e);
     return 2;
   }
+
   client::ClientOptions options;
   options.pose_endpoint = endpoint;
   options.control_endpoint = control == "none" ? "" : control;
   std::string error;
-  auto cl = client::Client::connect(options, error);
-  if (!cl) {
+  auto poses = client::Client::connect(options, error);
+  if (!poses) {
     fmt::print(stderr, "bodyd-viewer-bridge: --endpoint {}: {}\n", endpoint, error);
     return 2;
   }
+  // The control socket gets its own client: the pose thread never waits on a control request.
+  std::unique_ptr<client::Client> control_client;
   if (!options.control_endpoint.empty()) {
+    client::ClientOptions control_options = options;
+    control_options.receive_hwm = 1;
+    control_client = client::Client::connect(control_options, error);
+    if (!control_client) {
+      fmt::print(stderr, "bodyd-viewer-bridge: --control {}: {}\n", control, error);
+      return 2;
+    }
     protocol::SkeletonMessage skel;
-    if (auto s = cl->skeleton(skel); !s) spdlog::warn("skeleton from {}: {}; waiting for it on the stream", control, s.error);
+    if (auto s = poses->skeleton(skel); !s) spdlog::warn("skeleton from {}: {}; waiting for it on the stream", control, s.error);
   }
-  int pipe_fds[2];
-  if (::pipe2(pipe_fds, O_NONBLOCK | O_CLOEXEC) != 0) {
-    fmt::print(stderr, "bodyd-viewer-bridge: pipe: {}\n", std::strerror(errno));
-    return 1;
-  }
+
   struct sigaction sa {};
   sa.sa_handler = on_signal;
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
   signal(SIGPIPE, SIG_IGN);
 
+  Bridge bridge(paths, endpoint, *poses, control_client.get(), options.control_endpoint);
+  mg_init_library(0);
+  const std::string threads = "16";  // each WebSocket holds one; browsers also open idle spare connections
+  const char* mg_options[] = {"listening_ports", http.c_str(), "num_threads", threads.c_str(),
+                              "request_timeout_ms", "5000", "websocket_timeout_ms", "3600000",
+                              "enable_keep_alive", "no", nullptr};
+  mg_callbacks callbacks{};
+  callbacks.log_message = log_message;
+  mg_context* ctx = mg_start(&callbacks, nullptr, mg_options);
+  if (!ctx) {
+    fmt::print(stderr, "bodyd-viewer-bridge: --http {}: cannot listen (another program on that port? pick another, or port 0)\n",
+               http);
+    mg_exit_library();
+    return 2;
+  }
+  mg_set_websocket_handler(ctx, "/ws", ws_connect, ws_ready, ws_data, ws_close, &bridge);
+  mg_set_request_handler(ctx, "**", request_handler, &bridge);
+  mg_server_port ports[4];
+  const int port_count = mg_get_server_ports(ctx, 4, ports);
+  const int port = port_count > 0 ? ports[0].port : 0;
+
   const std::string url = fmt::format("http://{}:{}/", http.substr(0, http.rfind(':')), port);
-  fmt::print("bodyd-viewer-bridge: serving {} (poses from {})\n", url, endpoint);
+  fmt::print("bodyd-viewer-bridge: serving {} (poses from {}, status from {})\n", url, endpoint, control);
   std::fflush(stdout);
-  Shared shared;
-  std::thread zmq([&] { zmq_thread(*cl, shared, pipe_fds[1]); });
-  Server server(listen_fd, pipe_fds[0], paths, shared, endpoint);
-  server.run();
-  g_stop.store(true);
-  zmq.join();
-  ::close(listen_fd);
-  ::close(pipe_fds[0]);
-  ::close(pipe_fds[1]);
-  spdlog::info("stopped ({} poses received)", shared.poses);
+  std::thread pose_thread([&] { bridge.pose_thread(); });
+  std::thread status_thread([&] { bridge.status_thread(); });
+  std::thread push_thread([&] { bridge.push_thread(); });
+  while (!g_stop.load()) std::this_thread::sleep_for(50ms);
+  bridge.shared().changed.notify_all();
+  mg_stop(ctx);  // closes the WebSockets first: the push thread then writes to no one
+  pose_thread.join();
+  status_thread.join();
+  push_thread.join();
+  mg_exit_library();
+  spdlog::info("stopped ({} poses received)", bridge.poses_received());
   return 0;
 }
