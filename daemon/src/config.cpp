@@ -1,12 +1,12 @@
 #include "bodyd/daemon/config.h"
+
+#include "bodyd/motion/limits.h"
 #include "bodyd/paths/data_files.h"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
 #include <cctype>
-#include "bodyd/motion/limits.h"
-
 #include <cmath>
 #include <limits>
 #include <fstream>
@@ -335,7 +335,8 @@ std::string validate_config(const DaemonConfig& c) {
            fmt_number(c.rate_hz);
   if (c.queue_capacity < 16 || c.queue_capacity > (1u << 20)) return "queue_capacity must be in 16 .. 1048576";
   if (c.send_hwm < 1) return "send_hwm must be >= 1";
-  if (c.pub_endpoint == c.control_endpoint)
+  // A wildcard port (tcp://127.0.0.1:*) gives each socket its own ephemeral port.
+  if (c.pub_endpoint == c.control_endpoint && !c.pub_endpoint.ends_with(":*") && !c.pub_endpoint.ends_with(":0"))
     return "pub and control are the same endpoint (" + c.pub_endpoint + "): give each socket its own";
   if (c.method != "diffusion" && c.method != "ik") return "method \"" + c.method + "\": expected diffusion or ik";
   for (auto [name, h] : {std::pair{"user_height_m", c.user_height_m}, std::pair{"head_height_m", c.head_height_m}}) {
@@ -451,7 +452,8 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
 
   std::vector<std::string> source_flags, replay_flags, sim_flags, offset_flags;
   app.add_option("--source", source_flags,
-                 "tracker source: replay:FILE, sim:FILE.bvh, hid:VID:PID, usb:VID:PID (docs/drivers.md); repeatable. "
+                 "tracker source: replay:FILE, sim:FILE.bvh, hid:VID:PID, usb:VID:PID, vrchat:[HOST:]PORT, "
+                 "vmc:[HOST:]PORT, udp:[HOST:]PORT (docs/drivers.md, docs/vr-apps.md); repeatable. "
                  "Default: the bundled recording, looped");
   app.add_option("--replay", replay_flags, "replay a tracker log (same as --source replay:LOG)");
   app.add_option("--sim", sim_flags, "simulated trackers from a BVH clip (same as --source sim:FILE.bvh)");
@@ -466,7 +468,9 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
                  "another output, SCHEME:TARGET[?KEY=VALUE&...], e.g. vrchat:127.0.0.1:9000?slots=hip,feet "
                  "(docs/outputs.md); repeatable");
   app.add_option("--control", config.control_endpoint, "control endpoint (REP, JSON), or \"none\"");
-  app.add_flag("--allow-remote", config.allow_remote, "allow binding to non-loopback addresses (use CURVE!)");
+  app.add_flag("--allow-remote", config.allow_remote,
+               "allow binding to non-loopback addresses: ZeroMQ sockets (use CURVE!) and the vrchat:/vmc:/udp: "
+               "inputs (OSC and UDP have no authentication)");
   app.add_option("--curve-secret-key", config.curve_secret_key_file,
                  "CURVE server secret key file (from --gen-keys): encrypt and authenticate both sockets");
   app.add_option("--send-hwm", config.send_hwm, "poses queued per subscriber before dropping")->check(CLI::PositiveNumber);
