@@ -1,0 +1,187 @@
+// `--output vrchat:HOST:PORT`: VRChat's OSC trackers (bodyd/daemon/vrchat.h, docs/outputs.md).
+#include "bodyd/daemon/vrchat.h"
+
+#include "bodyd/daemon/output.h"
+#include "bodyd/motion/humanoid.h"
+#include "osc_sender.h"
+
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include <atomic>
+#include <cmath>
+#include <memory>
+#include <mutex>
+
+namespace bodyd::daemon {
+
+namespace vrchat {
+
+bool parse_slots(std::string_view text, SlotMask& out, std::string& error) {
+  out = 0;
+  std::string_view rest = text;
+  while (true) {
+    const auto comma = rest.find(',');
+    const std::string_view name = rest.substr(0, comma);
+    SlotMask bits = 0;
+    if (name == "feet") bits = 0b0000'0110;
+    else if (name == "knees") bits = 0b0001'1000;
+    else if (name == "elbows") bits = 0b1100'0000;
+    for (const TrackerSlot& s : kSlots)
+      if (s.name == name) bits = static_cast<SlotMask>(1u << (s.number - 1));
+    if (bits == 0) {
+      error = "slot \"" + std::string(name) +
+              "\": expected hip, feet, knees, chest, elbows, left_foot, right_foot, left_knee, right_knee, left_elbow "
+              "or right_elbow";
+      return false;
+    }
+    out |= bits;
+    if (comma == std::string_view::npos) return true;
+    rest = rest.substr(comma + 1);
+  }
+}
+
+std::string slot_names(SlotMask mask) {
+  std::string names;
+  for (const TrackerSlot& s : kSlots)
+    if (mask & (1u << (s.number - 1))) names += (names.empty() ? "" : ",") + std::string(s.name);
+  return names;
+}
+
+Vec3 unity_euler_deg_from_quat(const Quat& q_unity) {
+  const Eigen::Matrix3d r = q_unity.normalized().toRotationMatrix();
+  // R = Ry(y) Rx(x) Rz(z) has   R(1,2) = -sin x,
+  //   R(0,2) = sin y cos x,  R(2,2) = cos y cos x,  R(1,0) = cos x sin z,  R(1,1) = cos x cos z.
+  const double cos_x = std::hypot(r(0, 2), r(2, 2));
+  double x, y, z;
+  if (cos_x > 1e-9) {
+    x = std::atan2(-r(1, 2), cos_x);
+    y = std::atan2(r(0, 2), r(2, 2));
+    z = std::atan2(r(1, 0), r(1, 1));
+  } else {
+    // Gimbal lock: with z = 0, R = Ry(y) Rx(+-90) has R(0,0) = cos y, R(2,0) = -sin y.
+    x = r(1, 2) < 0 ? M_PI / 2 : -M_PI / 2;
+    y = std::atan2(-r(2, 0), r(0, 0));
+    z = 0.0;
+  }
+  // atan2 gives -pi for (-0, negative): the range is (-180, 180], so half a turn is +180.
+  const auto wrap = [](double a) { return a <= -M_PI ? a + 2.0 * M_PI : a; };
+  constexpr double kDeg = 180.0 / M_PI;
+  return Vec3(x * kDeg, wrap(y) * kDeg, wrap(z) * kDeg);
+}
+
+TrackerPose tracker_from_bodyd(const Vec3& position_m, const Quat& rotation) {
+  return TrackerPose{unity_from_bodyd(position_m), unity_euler_deg_from_quat(unity_from_bodyd(rotation))};
+}
+
+}  // namespace vrchat
+
+namespace {
+
+class VrchatOutput final : public Output {
+ public:
+  VrchatOutput(std::string host, std::string port, vrchat::SlotMask slots)
+      : host_(std::move(host)), port_(std::move(port)), slots_(slots) {
+    // Two fixed bundles: with the head messages (valid head sample) and without.
+    for (OscBundle* bundle : {&with_head_, &without_head_}) {
+      for (const vrchat::TrackerSlot& s : vrchat::kSlots) {
+        if (!(slots_ & (1u << (s.number - 1)))) continue;
+        const std::string prefix = "/tracking/trackers/" + std::to_string(s.number);
+        bundle->add_floats(prefix + "/position", 3);
+        bundle->add_floats(prefix + "/rotation", 3);
+      }
+    }
+    with_head_.add_floats("/tracking/trackers/head/position", 3);
+    with_head_.add_floats("/tracking/trackers/head/rotation", 3);
+  }
+
+  std::string name() const override { return "vrchat:" + (sender_.address().empty() ? host_ + ":" + port_ : sender_.address()); }
+
+  std::string open() override { return sender_.open(host_, port_, "--output vrchat:" + host_ + ":" + port_); }
+
+  void set_skeleton(const Skeleton& skeleton, const std::vector<std::uint8_t>&) override {
+    missing_.clear();
+    joints_.clear();
+    for (const vrchat::TrackerSlot& s : vrchat::kSlots) {
+      if (!(slots_ & (1u << (s.number - 1)))) continue;
+      const int j = skeleton.find(s.joint);
+      if (j < 0) missing_ += (missing_.empty() ? "" : ", ") + std::string(s.joint);
+      joints_.push_back(j);
+    }
+    if (!missing_.empty())
+      spdlog::error("--output {}: the skeleton has no joint {} for the configured slots; nothing is sent", name(), missing_);
+  }
+
+  bool send(const OutputFrame& frame, std::string& out_error) override {
+    if (!missing_.empty()) {
+      out_error = "the skeleton has no joint " + missing_;
+      return false;
+    }
+    const TrackerSample& head = frame.head_as_received;
+    OscBundle& bundle = head.valid ? with_head_ : without_head_;
+    const GlobalPose& g = frame.body.global;
+    int message = 0;
+    for (int j : joints_) {
+      if (j >= static_cast<int>(g.positions.size())) {
+        out_error = "the pose has fewer joints than its skeleton";
+        return false;
+      }
+      write(bundle, message, vrchat::tracker_from_bodyd(g.positions[static_cast<std::size_t>(j)], g.rotations[static_cast<std::size_t>(j)]));
+      message += 2;
+    }
+    if (head.valid) write(bundle, message, vrchat::tracker_from_bodyd(head.position_m, head.rotation));
+    const std::vector<std::uint8_t>& bytes = bundle.serialise();
+    if (bytes.empty()) {
+      out_error = "liblo could not serialise the bundle";
+      return false;
+    }
+    if (!sender_.send(bytes.data(), bytes.size(), out_error)) return false;
+    bundles_sent_.fetch_add(1, std::memory_order_relaxed);
+    return true;
+  }
+
+  nlohmann::json status() const override {
+    return {{"slots", vrchat::slot_names(slots_)}, {"bundles_sent", bundles_sent_.load(std::memory_order_relaxed)}};
+  }
+
+  void close() override { sender_.close(); }
+
+ private:
+  static void write(OscBundle& bundle, int message, const vrchat::TrackerPose& t) {
+    for (int k = 0; k < 3; ++k) {
+      bundle.set_float(message, k, static_cast<float>(t.position_unity[k]));
+      bundle.set_float(message + 1, k, static_cast<float>(t.euler_deg_unity[k]));
+    }
+  }
+
+  std::string host_, port_;
+  vrchat::SlotMask slots_;
+  OscSender sender_;
+  OscBundle with_head_, without_head_;
+  std::vector<int> joints_;  // per configured slot, in slot order
+  std::string missing_;      // joints the skeleton lacks ("" when all are there)
+  std::atomic<std::uint64_t> bundles_sent_{0};
+};
+
+}  // namespace
+
+std::unique_ptr<Output> make_vrchat_output(const OutputSpec& spec, const OutputEnv& env, std::string& error) {
+  (void)env;
+  if (std::string e = check_options(spec, {"slots"}); !e.empty()) {
+    error = e;
+    return nullptr;
+  }
+  std::string host, port;
+  if (!split_host_port(spec.target, vrchat::kDefaultHost, vrchat::kDefaultPort, host, port, "--output " + spec.text, error))
+    return nullptr;
+  vrchat::SlotMask slots = vrchat::kDefaultSlots;
+  if (const auto it = spec.options.find("slots"); it != spec.options.end()) {
+    if (!vrchat::parse_slots(it->second, slots, error)) {
+      error = "--output " + spec.text + ": " + error;
+      return nullptr;
+    }
+  }
+  return std::make_unique<VrchatOutput>(host, port, slots);
+}
+
+}  // namespace bodyd::daemon
