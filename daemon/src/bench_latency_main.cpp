@@ -6,6 +6,10 @@
 // (pushed into the queue by its source) to the pose's publication (zmq_send returned), its
 // parts (queue wait, reconstruction, encode + send), and the process's CPU time (getrusage)
 // over the run as a percentage of one core. Not a test: numbers depend on the machine.
+// With --output SPEC (repeatable; docs/outputs.md) the poses also go to those outputs, and
+// two more rows say what they add: arrival -> every output sent, and the outputs' own time
+// after the --pub send. --udp-sink PORT binds 127.0.0.1:PORT (UDP) and never reads it, so an
+// OSC output has a receiver (no ICMP "port unreachable") that costs this process nothing.
 #include "bodyd/daemon/config.h"
 #include "bodyd/daemon/daemon.h"
 #include "bodyd/daemon/reconstructors.h"
@@ -15,7 +19,9 @@
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
+#include <netinet/in.h>
 #include <sys/resource.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -67,6 +73,8 @@ int main(int argc, char** argv) {
   int frames = 3000, warmup = 30;
   double speed = 1.0;
   bool json_out = false;
+  std::vector<std::string> outputs;
+  std::vector<int> udp_sinks;
   app.add_option("--replay", replay, "tracker log to replay, paced, in a loop (default: the bundled recording)");
   app.add_option("--method", method, "diffusion (falls back to ik if the default model is missing) or ik");
   app.add_option("--model", model, "model file for diffusion");
@@ -75,6 +83,9 @@ int main(int argc, char** argv) {
   app.add_option("--warmup", warmup, "poses to skip first")->check(CLI::NonNegativeNumber);
   app.add_option("--speed", speed, "replay speed factor (1: the recorded rate)")->check(CLI::PositiveNumber);
   app.add_flag("--json", json_out, "print the results as one JSON object");
+  app.add_option("--output", outputs, "also send every pose to this output (bodyd --output SPEC), repeatable");
+  app.add_option("--udp-sink", udp_sinks, "bind UDP 127.0.0.1:PORT and never read it (a receiver for an OSC output)")
+      ->check(CLI::Range(1, 65535));
   CLI11_PARSE(app, argc, argv);
 
   spdlog::set_level(spdlog::level::warn);
@@ -89,6 +100,20 @@ int main(int argc, char** argv) {
   config.model_path = model;
   config.pub_endpoint = fmt::format("ipc:///tmp/bodyd-bench-{}/pose", ::getpid());
   config.control_endpoint = "none";
+  config.outputs = outputs;
+  std::vector<int> sink_fds;
+  for (int port : udp_sinks) {
+    const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_port = htons(static_cast<std::uint16_t>(port));
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    if (fd < 0 || ::bind(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof(addr)) != 0) {
+      fmt::print(stderr, "bodyd-bench-latency: --udp-sink {}: cannot bind 127.0.0.1:{} (in use?)\n", port, port);
+      return 2;
+    }
+    sink_fds.push_back(fd);
+  }
   if (std::string e = validate_config(config); !e.empty()) {
     fmt::print(stderr, "bodyd-bench-latency: {}\n", e);
     return 2;
@@ -122,7 +147,7 @@ int main(int argc, char** argv) {
   const nlohmann::json status = daemon.status();
   daemon.stop();
 
-  std::vector<std::int64_t> total_ns, queue_ns, reconstruct_ns, send_ns, overhead_ns;
+  std::vector<std::int64_t> total_ns, queue_ns, reconstruct_ns, send_ns, overhead_ns, all_ns, outputs_ns;
   std::size_t failed = 0;
   for (std::size_t i = std::min<std::size_t>(warmup, timings.size()); i < timings.size(); ++i) {
     const FrameTiming& t = timings[i];
@@ -131,19 +156,26 @@ int main(int argc, char** argv) {
     reconstruct_ns.push_back(t.reconstruct_end_ns - t.reconstruct_start_ns);
     send_ns.push_back(t.published_ns - t.reconstruct_end_ns);
     overhead_ns.push_back(total_ns.back() - reconstruct_ns.back());
+    all_ns.push_back(t.outputs_sent_ns - t.arrival_ns);
+    outputs_ns.push_back(t.outputs_sent_ns - t.published_ns);
     failed += t.sent ? 0 : 1;
   }
   const double cpu_percent = wall_s > 0 ? 100.0 * cpu_s / wall_s : 0.0;
   const double head_rate_hz = wall_s > 0 ? static_cast<double>(timings.size()) / wall_s : 0.0;
-  const auto rows = {std::pair{"arrival -> published", percentiles_us(total_ns)},
-                     std::pair{"  queue wait", percentiles_us(queue_ns)},
-                     std::pair{"  reconstruction", percentiles_us(reconstruct_ns)},
-                     std::pair{"  encode + send", percentiles_us(send_ns)},
-                     std::pair{"latency - reconstruction", percentiles_us(overhead_ns)}};
+  std::vector<std::pair<const char*, Percentiles>> rows = {{"arrival -> published", percentiles_us(total_ns)},
+                                                          {"  queue wait", percentiles_us(queue_ns)},
+                                                          {"  reconstruction", percentiles_us(reconstruct_ns)},
+                                                          {"  encode + send", percentiles_us(send_ns)},
+                                                          {"latency - reconstruction", percentiles_us(overhead_ns)}};
+  if (!outputs.empty()) {
+    rows.emplace_back("arrival -> all outputs", percentiles_us(all_ns));
+    rows.emplace_back("  outputs after --pub", percentiles_us(outputs_ns));
+  }
   if (json_out) {
     nlohmann::json j{{"method", method_name},  {"frames", total_ns.size()},  {"cpu_percent_of_one_core", cpu_percent},
                      {"wall_s", wall_s},        {"cpu_s", cpu_s},              {"pose_rate_hz", head_rate_hz},
                      {"sends_failed", failed},  {"samples_dropped", status.value("samples_dropped", 0)}};
+    if (!outputs.empty()) j["outputs"] = status["outputs"];
     for (const auto& [name, p] : rows)
       j["latency_us"][name] = {{"p50", p.p50}, {"p90", p.p90}, {"p99", p.p99}, {"max", p.max}, {"mean", p.mean}};
     fmt::print("{}\n", j.dump(2));
@@ -153,8 +185,13 @@ int main(int argc, char** argv) {
       fmt::print("{:<26} {:>9.1f} {:>9.1f} {:>9.1f} {:>9.1f} {:>9.1f}\n", name, p.p50, p.p90, p.p99, p.max, p.mean);
     fmt::print("poses: {} measured at {:.1f} Hz; sends failed: {}; samples dropped: {}\n", total_ns.size(), head_rate_hz,
                failed, status.value("samples_dropped", 0));
+    if (!outputs.empty())
+      for (const auto& o : status["outputs"])
+        fmt::print("output {}: {} sent, {} failed{}\n", o.value("name", ""), o.value("sent", 0), o.value("send_failed", 0),
+                   o.value("last_error", "").empty() ? "" : " (" + o.value("last_error", "") + ")");
     fmt::print("CPU: {:.2f} s over {:.2f} s wall = {:.1f}% of one core (whole process: sources, reconstruction, ZeroMQ)\n",
                cpu_s, wall_s, cpu_percent);
   }
+  for (int fd : sink_fds) ::close(fd);
   return 0;
 }
