@@ -2,7 +2,7 @@
 BUILD ?= build
 JOBS ?= $(shell nproc)
 
-.PHONY: all setup build test demo package clean sanitize
+.PHONY: all setup build test demo package clean sanitize fuzz
 
 all: build
 
@@ -30,5 +30,14 @@ sanitize: setup
 	@cmake --build build-asan -j $(JOBS)
 	@cd build-asan && LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp ctest --output-on-failure -j $(JOBS)
 
+# libFuzzer run of every fuzz target, FUZZ_SECONDS each, one after another (clang; in
+# build-fuzz/; docs/reliability.md). FUZZ_TARGETS="bvh config" picks some.
+FUZZ_BUILD ?= build-fuzz
+FUZZ_SECONDS ?= 60
+FUZZ_TARGETS ?=
+fuzz:
+	@BODYD_SETUP_FUZZ=1 scripts/setup
+	@scripts/fuzz --build $(FUZZ_BUILD) --seconds $(FUZZ_SECONDS) --jobs $(JOBS) $(FUZZ_TARGETS)
+
 clean:
-	rm -rf $(BUILD) build-asan
+	rm -rf $(BUILD) build-asan $(FUZZ_BUILD)

@@ -92,7 +92,7 @@ const std::string& require_meta(const std::string& source, const TensorFile& fil
 Json parse_meta_json(const std::string& source, std::string_view key, const std::string& text) {
   try {
     return Json::parse(text);
-  } catch (const Json::parse_error& e) {
+  } catch (const Json::exception& e) {  // parse_error, or out_of_range for a number like 1e999
     fail(source, fmt::format("metadata \"{}\" is not valid JSON ({})", key, e.what()));
   }
 }
@@ -208,6 +208,8 @@ TensorFile parse_tensor_file(std::span<const std::byte> bytes, const std::string
     // Only the position: the parser's message quotes the text it read.
     fail(source, fmt::format("header JSON is malformed at byte {} of the header; not a bodyd model file, or corrupt",
                              e.byte));
+  } catch (const Json::exception&) {  // out_of_range: a number that overflows a double (found by make fuzz)
+    fail(source, "header JSON holds a number that overflows a double; not a bodyd model file, or corrupt");
   }
   if (!header.is_object()) fail(source, "header JSON must be an object");
 
@@ -223,7 +225,10 @@ TensorFile parse_tensor_file(std::span<const std::byte> bytes, const std::string
       }
       continue;
     }
-    auto where = [&](const std::string& what) { fail(source, fmt::format("tensor \"{}\": {}", name, what)); };
+    // The binding is copied: clang 14 cannot capture structured bindings (make fuzz builds with it).
+    auto where = [&, tensor = std::string(name)](const std::string& what) {
+      fail(source, fmt::format("tensor \"{}\": {}", tensor, what));
+    };
     if (!entry.is_object()) where("entry must be an object {dtype, shape, data_offsets}");
     if (!entry.contains("dtype") || !entry["dtype"].is_string()) where("\"dtype\" is missing");
     if (entry["dtype"] != "F32") where(fmt::format("dtype {} is not supported (bodyd model files store F32)", entry["dtype"].dump()));
@@ -304,7 +309,7 @@ void verify_checksum(std::span<const std::byte> length_and_header, std::span<con
     Json sums;
     try {
       sums = Json::parse(it->second);
-    } catch (const Json::parse_error&) {
+    } catch (const Json::exception&) {
     }
     if (sums.is_object()) {
       for (const auto& [name, t] : file.tensors) {
