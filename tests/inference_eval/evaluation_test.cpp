@@ -190,9 +190,12 @@ TEST(Evaluation, JsonHasExactlyTheDocumentedKeys) {
       nlohmann::ordered_json::parse(report_json(evaluate_ik({kBow}, simulator(0.0, 0.0, 1))));
   std::vector<std::string> top;
   for (auto& [k, v] : j.items()) top.push_back(k);
-  EXPECT_EQ(top, (std::vector<std::string>{"clips", "frames", "methods", "ground_truth", "timing"}));
+  EXPECT_EQ(top, (std::vector<std::string>{"clips", "frames", "methods", "ground_truth", "timing", "groups",
+                                           "body_scale", "calibration"}));
+  for (const MetricKey& k : kExtraMetricKeys) EXPECT_TRUE(j["methods"]["ik"].contains(std::string(k.key))) << k.key;
+  EXPECT_TRUE(j["groups"]["dataset"].contains("other"));
   for (const MetricKey& k : kMetricKeys) EXPECT_TRUE(j["methods"]["ik"][std::string(k.key)].is_number()) << k.key;
-  EXPECT_EQ(j["ground_truth"].size(), 2u);
+  EXPECT_EQ(j["ground_truth"].size(), 3u);
   EXPECT_TRUE(j["ground_truth"]["jitter_m_s3"].is_number());
   EXPECT_TRUE(j["ground_truth"]["foot_skate_ratio"].is_number());
   EXPECT_EQ(j["timing"].size(), 2u);
@@ -274,4 +277,27 @@ TEST(BodydEval, CommandLineWritesTheReportAndExplainsMissingMethods) {
   out = run_command(exe + " --methods ik " + (test::fixtures() / "no_such.bvh").string(), status);
   EXPECT_NE(status, 0);
   EXPECT_NE(out.find("no_such.bvh"), std::string::npos) << out;
+}
+
+// Issue 11: a clip with one finite absurd value (1e300) made bodyd-eval print nan/inf metrics
+// and exit 0. Now the clip is refused with its file and line, and no metric is printed.
+TEST(BodydEval, AbsurdClipIsAnErrorNotNanMetrics) {
+  std::ifstream in(kWalk, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  std::string text = ss.str();
+  size_t pos = 0;
+  for (int line = 1; line < 140; ++line) pos = text.find('\n', pos) + 1;
+  text.replace(pos, text.find(' ', pos) - pos, "1e300");  // frame 5's root Xposition
+  const auto bad = std::filesystem::temp_directory_path() / "bodyd_eval_absurd_test.bvh";
+  std::ofstream(bad, std::ios::binary) << text;
+  int status = 0;
+  const std::string out =
+      run_command((test::bin_dir() / "bodyd-eval").string() + " --methods ik " + bad.string(), status);
+  std::filesystem::remove(bad);
+  EXPECT_NE(status, 0) << out;
+  EXPECT_NE(out.find(bad.string() + ":140:"), std::string::npos) << out;
+  EXPECT_EQ(out.find(" nan"), std::string::npos) << out;
+  EXPECT_EQ(out.find(" inf"), std::string::npos) << out;
+  EXPECT_EQ(out.find("mpjpe_cm"), std::string::npos) << out;
 }
