@@ -2,7 +2,7 @@
 // online protocol of docs/conventions.md (docs/evaluation.md).
 //
 //   bodyd-eval --model MODEL --json OUT.json [--seed N] [--noise-mm S] [--dropout-rate P]
-//              [--out-dir DIR] [--methods diffusion,ik] [--split FILE.txt] [FILE.bvh...]
+//              [--body-scale S] [--out-dir DIR] [--methods diffusion,ik] [--split FILE.txt] [FILE.bvh...]
 #include "bodyd/inference/evaluation.h"
 #include "bodyd/simulators/tracker_sim.h"
 
@@ -11,9 +11,11 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <fstream>
+#include <optional>
 #include <sstream>
 
 namespace {
@@ -44,6 +46,7 @@ int main(int argc, char** argv) {
   std::string out_dir;
   std::uint64_t seed = 1;
   double noise_mm = 0.0, noise_deg = 0.0, dropout_rate_hz = 0.0, dropout_mean_ms = 300.0;
+  std::optional<double> body_scale;
   std::vector<std::string> files;
   bodyd::ReconstructorOptions method_options;
   app.add_option("--model", model, "model file (needed by the diffusion method)");
@@ -62,6 +65,10 @@ int main(int argc, char** argv) {
   app.add_option("--dropout-ms", dropout_mean_ms, "mean duration of a tracking-loss episode (ms)")
       ->check(CLI::Range(0.0, 1e6))
       ->capture_default_str();
+  app.add_option("--body-scale", body_scale,
+                 "scale every clip by S (offsets and translations) to act a user S x the data's size; the "
+                 "methods but ik then calibrate from the first still second, as the daemon's auto calibration")
+      ->check(CLI::Range(0.3, 3.0));
   app.add_option("--out-dir", out_dir,
                  "write each clip's reconstruction as <clip>.pred.bvh (diffusion) and <clip>.<method>.pred.bvh");
   app.add_option("--methods", methods_text, "comma-separated methods (diffusion, ik)")->capture_default_str();
@@ -86,6 +93,10 @@ int main(int argc, char** argv) {
     options.model_path = model;
     options.reconstructor = method_options;
     if (!out_dir.empty()) options.out_dir = out_dir;
+    if (body_scale) {
+      options.body_scale = *body_scale;
+      options.calibrate = true;
+    }
     options.on_clip = [](int i, int n, const std::filesystem::path& p) {
       spdlog::info("clip {}/{}: {}", i + 1, n, p.filename().string());
     };
@@ -103,6 +114,22 @@ int main(int argc, char** argv) {
     };
 
     const bodyd::EvalReport report = bodyd::evaluate(clips, options, source);
+    // A NaN or infinite metric is never printed as a result (issue 11: a clip with finite but
+    // absurd values once gave "nan" and exit 0). The BVH reader keeps values in range, so
+    // this is the last wall, against clips too short for a metric and against bugs.
+    auto require_finite = [](double v, const std::string& what) {
+      if (!std::isfinite(v))
+        throw std::runtime_error(fmt::format(
+            "{} is {}: no result is printed. A metric is undefined when every clip is too short for it (jitter "
+            "needs 4 frames, velocities 2); otherwise a clip holds values the metrics cannot use, so check the "
+            "clips with bodyd-bvh, and report it if they read fine",
+            what, v));
+    };
+    for (const bodyd::MethodReport& m : report.methods)
+      for (const bodyd::MetricKey& k : bodyd::kMetricKeys)
+        require_finite(m.metrics.*k.field, fmt::format("metric {} of method {}", k.key, m.name));
+    require_finite(report.ground_truth.jitter_m_s3, "ground truth's jitter_m_s3");
+    require_finite(report.ground_truth.foot_skate_ratio, "ground truth's foot_skate_ratio");
     const std::string json = bodyd::report_json(report);
     if (!json_path.empty()) {
       std::ofstream out(json_path);

@@ -37,7 +37,10 @@ DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::
       sampler_(network_, inference::SamplerOptions{options.steps, options.guidance, 0.0f}, options.seed),
       skeleton_(model_->skeleton),
       user_skeleton_(model_->skeleton),
-      history_(model_scale_history(options.history)) {
+      history_(model_scale_history(options.history)),
+      raw_history_(model_scale_history(options.history)),
+      filter_(options.filter) {
+  if (std::string err = validate(options.filter); !err.empty()) throw std::invalid_argument(err);
   if (std::string err = features::check_skeleton(skeleton_); !err.empty())
     throw std::invalid_argument(fmt::format("{}: model skeleton: {}", model_->source, err));
   if (network_->dim() != features::kDim)
@@ -52,6 +55,7 @@ DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::
   arms_[1] = find_two_bone_chain(skeleton_, "UpperArm_R", "LowerArm_R", "Hand_R");
   legs_[0] = find_two_bone_chain(skeleton_, "UpperLeg_L", "LowerLeg_L", "Foot_L");
   legs_[1] = find_two_bone_chain(skeleton_, "UpperLeg_R", "LowerLeg_R", "Foot_R");
+  upper_body_ = find_upper_body(skeleton_);
 
   const size_t n = static_cast<size_t>(W_) * features::kDim;
   obs_.assign(n, 0.0f);
@@ -80,15 +84,20 @@ void DiffusionReconstructor::push(const TrackerSample& sample) {
   }
   TrackerSample s = sample;
   s.position_m *= scale_;  // into the model's body size
-  (void)history_.push(s);
+  (void)raw_history_.push(s);
+  (void)history_.push(filter_.filter(s));
 }
 
 void DiffusionReconstructor::reset() {
   history_.clear();
+  raw_history_.clear();
+  filter_.reset();
   emitted_head_ = emitted_count_ = 0;
   emitted_dropped_ = false;
   have_last_ = false;
   hand_was_valid_ = {};
+  hand_offset_ = {Vec3::Zero(), Vec3::Zero()};
+  hand_rot_offset_ = {Quat::Identity(), Quat::Identity()};
   foot_locked_ = {};
   foot_release_offset_ = {Vec3::Zero(), Vec3::Zero()};
   sampler_.reseed(options_.seed);
@@ -284,31 +293,75 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
     const float v = newest[features::kContactOffset + static_cast<int>(s)];
     contact[s] = foot_locked_[s] ? v > options_.contact_off : v > options_.contact_on;
   }
-  if (options_.foot_lock) lock_feet(contact, frame_dt_s);
-
-  // Hands on the trackers (BMM: constraints exact in the condition's space), easing in after a loss.
-  const double decay = std::exp2(-frame_dt_s / std::max(1e-6, options_.hand_return_half_life_s));
+  // Hand goals: the raw tracker where valid, the model's hand where lost. When a hand is lost or
+  // comes back, its goal starts where the hand was last emitted and eases to the new source
+  // (offset halving every hand_*_half_life_s, shrinking at most hand_blend_max_speed_m_s), so the
+  // hand never jumps (docs/model.md, "Tracked joints").
+  std::array<bool, 2> hand_goal_valid{};
+  std::array<Vec3, 2> hand_goal_p{Vec3::Zero(), Vec3::Zero()};
+  std::array<Quat, 2> hand_goal_q{Quat::Identity(), Quat::Identity()};
+  TrackedTargets targets;
   for (int side = 0; side < 2; ++side) {
     const Role role = side == 0 ? Role::LeftHand : Role::RightHand;
     const auto r = static_cast<size_t>(role);
     const auto s = static_cast<size_t>(side);
     if (!arms_[side]) continue;
-    if (!valid_now[r]) {
-      hand_was_valid_[s] = false;
-      continue;
+    const auto hand = static_cast<size_t>(arms_[side]->end);
+    const bool valid = valid_now[r];
+    Vec3 base_p = out_global_.positions[hand];
+    Quat base_q = out_global_.rotations[hand];
+    if (valid) {
+      TrackerSample raw;
+      if (options_.exact_tracked_joints && raw_history_.query(role, t_ns, raw)) {
+        base_p = raw.position_m;
+        base_q = raw.rotation;
+      } else {
+        base_p = tracker_p[r];
+        base_q = tracker_q[r];
+      }
     }
-    const int hand = arms_[side]->end;
-    if (!hand_was_valid_[s] && have_last_) {
-      // Coming back: start from where the body had the hand, converge to the tracker.
-      hand_offset_[s] = out_global_.positions[static_cast<size_t>(hand)] - tracker_p[r];
-      hand_rot_offset_[s] = (out_global_.rotations[static_cast<size_t>(hand)] * tracker_q[r].conjugate()).normalized();
+    if (valid != hand_was_valid_[s] && have_last_ && emitted_count_ > 0) {
+      const Emitted& last = emitted(emitted_count_ - 1);
+      hand_offset_[s] = last.global.positions[hand] - base_p;
+      hand_rot_offset_[s] = (last.global.rotations[hand] * base_q.conjugate()).normalized();
     } else {
-      hand_offset_[s] *= decay;
+      const double half_life = valid ? options_.hand_return_half_life_s : options_.hand_loss_half_life_s;
+      const double decay = std::exp2(-frame_dt_s / std::max(1e-6, half_life));
+      const double n = hand_offset_[s].norm();
+      const double shrink = std::min((1.0 - decay) * n, options_.hand_blend_max_speed_m_s * frame_dt_s);
+      hand_offset_[s] *= n > 0.0 ? (n - shrink) / n : 0.0;
       hand_rot_offset_[s] = slerp(Quat::Identity(), hand_rot_offset_[s], decay);
     }
-    hand_was_valid_[s] = true;
+    hand_was_valid_[s] = valid;
+    hand_goal_valid[s] = valid || hand_offset_[s].squaredNorm() > 1e-10;
+    hand_goal_p[s] = base_p + hand_offset_[s];
+    hand_goal_q[s] = (hand_rot_offset_[s] * base_q).normalized();
+    targets.hand_valid[s] = valid && options_.exact_tracked_joints;
+    targets.hand_m[s] = hand_goal_p[s];
+  }
+
+  // The Head joint on the raw head tracker, the body following the filtered one, the shoulders
+  // moved where a hand is out of reach (body_solver.h).
+  if (options_.exact_tracked_joints && upper_body_) {
+    TrackerSample raw;
+    targets.head_valid = head_valid && raw_history_.query(Role::Head, t_ns, raw);
+    if (targets.head_valid) {
+      targets.head_m = raw.position_m;
+      targets.head_rotation = raw.rotation;
+      targets.head_body_m = head_p;
+    }
+    (void)solve_tracked_body(skeleton_, *upper_body_, options_.body, targets, scratch_pose_, out_global_);
+  }
+
+  if (options_.foot_lock) lock_feet(contact, frame_dt_s);
+
+  // Arms by two-bone IK onto the hand goals.
+  for (int side = 0; side < 2; ++side) {
+    const auto s = static_cast<size_t>(side);
+    if (!arms_[side] || !hand_goal_valid[s]) continue;
     TwoBoneTarget target;
-    target.position_m = tracker_p[r] + hand_offset_[s];
+    target.position_m = hand_goal_p[s];
+    if (options_.exact_tracked_joints) target.rotation = hand_goal_q[s];
     {
       // Pole: the elbow as predicted, nudged outward, down and back in the body's frame. A bent
       // elbow keeps its plane; a nearly straight one (whose plane is undefined and would flip

@@ -1,6 +1,7 @@
 #include "bodyd/inference/evaluation.h"
 
 #include "bodyd/inference/factory.h"
+#include "bodyd/inference/ik.h"
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -10,6 +11,7 @@
 #include <cmath>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <stdexcept>
 
 namespace bodyd {
@@ -164,6 +166,59 @@ void remap(const std::vector<int>& map, const BodyPose& in, Pose& pose, GlobalPo
   }
 }
 
+// The daemon's auto calibration around a reconstructor: head samples go to a detector first; when
+// it reports a standing height, calibrate_from_head_height() is applied (resetting the inner
+// reconstructor) before the sample is pushed, so the sample counts at the new scale.
+class Calibrating final : public Reconstructor {
+ public:
+  Calibrating(std::unique_ptr<Reconstructor> inner, const StandingHeightOptions& o)
+      : inner_(std::move(inner)), detector_(o) {}
+  std::string_view name() const override { return inner_->name(); }
+  const Skeleton& skeleton() const override { return inner_->skeleton(); }
+  void push(const TrackerSample& s) override {
+    if (const std::optional<double> h = detector_.push(s)) {
+      if (calibrate_from_head_height(*inner_, *h).empty()) measured_m_ = *h;
+    }
+    inner_->push(s);
+  }
+  bool reconstruct(std::int64_t t_ns, BodyPose& out) override { return inner_->reconstruct(t_ns, out); }
+  void reset() override {
+    inner_->reset();
+    detector_.reset();
+  }
+  void set_user_height(double h) override { inner_->set_user_height(h); }
+  double user_height() const override { return inner_->user_height(); }
+  std::optional<double> measured_m() const { return measured_m_; }
+
+ private:
+  std::unique_ptr<Reconstructor> inner_;
+  StandingHeightDetector detector_;
+  std::optional<double> measured_m_;
+};
+
+// Whether each hand's tracker is valid at each frame time (the newest sample at or before it).
+std::vector<std::array<bool, 2>> hand_validity(std::span<const TrackerSample> samples,
+                                               std::span<const std::int64_t> frame_times_ns) {
+  std::vector<std::array<bool, 2>> valid(frame_times_ns.size(), {false, false});
+  std::array<bool, 2> now{false, false};
+  size_t next = 0;
+  for (size_t f = 0; f < frame_times_ns.size(); ++f) {
+    for (; next < samples.size() && samples[next].t_ns <= frame_times_ns[f]; ++next) {
+      if (samples[next].role == Role::LeftHand) now[0] = samples[next].valid;
+      if (samples[next].role == Role::RightHand) now[1] = samples[next].valid;
+    }
+    valid[f] = now;
+  }
+  return valid;
+}
+
+// Accumulators of one group: one per method.
+struct GroupAcc {
+  int clips = 0;
+  std::int64_t frames = 0;
+  std::vector<MetricsAccumulator> methods;
+};
+
 std::string out_name(const std::filesystem::path& clip, const std::string& method) {
   const std::string stem = clip.stem().string();
   return method == "diffusion" ? stem + ".pred.bvh" : stem + "." + method + ".pred.bvh";
@@ -171,20 +226,59 @@ std::string out_name(const std::filesystem::path& clip, const std::string& metho
 
 }  // namespace
 
+std::array<std::string, 3> clip_groups(const std::filesystem::path& clip) {
+  // dataset-N_{content}_{style}_{take}: four '_'-separated parts, the first "dataset-...".
+  const std::string stem = clip.stem().string();
+  std::array<std::string, 4> parts;
+  size_t start = 0, n = 0;
+  for (; n < 4; ++n) {
+    const size_t end = stem.find('_', start);
+    parts[n] = stem.substr(start, end == std::string::npos ? std::string::npos : end - start);
+    if (end == std::string::npos) {
+      ++n;
+      break;
+    }
+    start = end + 1;
+  }
+  const bool four = n == 4 && stem.find('_', start) == std::string::npos;  // no fifth part
+  bool ok = four && parts[0].rfind("dataset-", 0) == 0;
+  for (const std::string& p : parts) ok = ok && !p.empty();
+  if (!ok) return {"other", "other", "other"};
+  return {parts[0], parts[1], parts[2]};
+}
+
+Motion scale_motion(const Motion& clip, double s) {
+  Motion out = clip;
+  for (size_t j = 0; j < out.skeleton.offsets.size(); ++j) {
+    out.skeleton.offsets[j] *= s;
+    if (out.skeleton.end_sites[j]) *out.skeleton.end_sites[j] *= s;
+  }
+  for (Pose& p : out.frames)
+    for (Vec3& t : p.local_translations) t *= s;
+  return out;
+}
+
 EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOptions& options,
                     const TrackerSource& source) {
   if (options.methods.empty()) throw std::invalid_argument("evaluate: no methods given");
+  if (!(options.body_scale > 0.0) || !std::isfinite(options.body_scale))
+    throw std::invalid_argument(fmt::format("evaluate: body scale must be > 0, got {}", options.body_scale));
   if (options.out_dir) std::filesystem::create_directories(*options.out_dir);
 
   EvalReport report;
+  report.body_scale = options.body_scale;
+  report.calibrate = options.calibrate;
   std::optional<Skeleton> first_skeleton;
   std::vector<MetricsAccumulator> metrics;
   std::vector<std::vector<double>> times(options.methods.size());
   std::vector<std::int64_t> unanswered(options.methods.size(), 0);
+  static constexpr std::array<const char*, 3> kCategories{"dataset", "content", "style"};
+  std::array<std::map<std::string, GroupAcc>, 3> groups;
+  double calibration_error_sum_cm = 0.0;
 
   int index = 0;
   for (const std::filesystem::path& path : clips) {
-    const Motion clip = read_bvh(path);  // BvhError names the file and line
+    const Motion clip = options.body_scale == 1.0 ? read_bvh(path) : scale_motion(read_bvh(path), options.body_scale);
     try {
       if (clip.frame_count() == 0) throw std::runtime_error("the clip has no frames");
       if (!first_skeleton) {
@@ -194,16 +288,40 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
         throw std::runtime_error(
             "its joints (names or order) differ from the first clip's; evaluate clips of one skeleton together");
       }
+      const std::array<std::string, 3> names = clip_groups(path);
+      std::array<GroupAcc*, 3> group{};
+      for (size_t c = 0; c < 3; ++c) {
+        GroupAcc& g = groups[c][names[c]];
+        if (g.methods.empty())
+          for (size_t m = 0; m < options.methods.size(); ++m) g.methods.emplace_back(clip.skeleton);
+        ++g.clips;
+        g.frames += clip.frame_count();
+        group[c] = &g;
+      }
 
       std::vector<GlobalPose> truth(static_cast<size_t>(clip.frame_count()));
       for (size_t f = 0; f < truth.size(); ++f) forward_kinematics(clip.skeleton, clip.frames[f], truth[f]);
       const std::vector<TrackerSample> samples = source(clip, index);
       const std::vector<std::int64_t> frame_times = clip_frame_times_ns(clip);
+      const std::vector<std::array<bool, 2>> hands_valid = hand_validity(samples, frame_times);
+      bool clip_calibrated = false;
 
       for (size_t m = 0; m < options.methods.size(); ++m) {
         const std::string& method = options.methods[m];
-        const auto reconstructor = make_reconstructor(method, options.model_path, &clip.skeleton, options.reconstructor);
+        std::unique_ptr<Reconstructor> reconstructor =
+            make_reconstructor(method, options.model_path, &clip.skeleton, options.reconstructor);
+        Calibrating* calibrating = nullptr;
+        if (options.calibrate && method != "ik") {
+          auto wrapped = std::make_unique<Calibrating>(std::move(reconstructor), options.calibration);
+          calibrating = wrapped.get();
+          reconstructor = std::move(wrapped);
+        }
         const OnlineRun run = run_online(*reconstructor, samples, frame_times);
+        if (calibrating != nullptr && calibrating->measured_m() && !clip_calibrated) {
+          clip_calibrated = true;
+          ++report.calibrated_clips;
+          calibration_error_sum_cm += 100.0 * std::abs(*calibrating->measured_m() - standing_head_height_m(clip.skeleton));
+        }
         if (run.unanswered == clip.frame_count())
           throw std::runtime_error(
               fmt::format("method '{}' produced no pose for any frame (no valid head sample?)", method));
@@ -221,12 +339,15 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
         Pose pose;
         GlobalPose global;
         metrics[m].begin_clip(clip.fps());
+        for (GroupAcc* g : group) g->methods[m].begin_clip(clip.fps());
         for (size_t f = 0; f < truth.size(); ++f) {
           remap(map, run.poses[f], pose, global);
-          metrics[m].add_frame(global, truth[f]);
+          metrics[m].add_frame(global, truth[f], hands_valid[f]);
+          for (GroupAcc* g : group) g->methods[m].add_frame(global, truth[f], hands_valid[f]);
           if (options.out_dir) written.frames[f] = pose;
         }
         (void)metrics[m].end_clip();
+        for (GroupAcc* g : group) (void)g->methods[m].end_clip();
         if (options.out_dir) write_bvh(*options.out_dir / out_name(path, method), written);
       }
     } catch (const ReconstructorError&) {
@@ -252,6 +373,25 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
     if (options.methods[m] == "diffusion") timed = m;
   }
   if (!metrics.empty()) report.ground_truth = metrics[0].truth_result();
+  for (size_t c = 0; c < 3; ++c)
+    for (const auto& [name, g] : groups[c]) {
+      GroupReport r;
+      r.category = kCategories[c];
+      r.name = name;
+      r.clips = g.clips;
+      r.frames = g.frames;
+      for (size_t m = 0; m < options.methods.size(); ++m) {
+        MethodReport mr;
+        mr.name = options.methods[m];
+        mr.metrics = g.methods[m].result();
+        r.methods.push_back(mr);
+      }
+      r.ground_truth = g.methods[0].truth_result();
+      report.groups.push_back(std::move(r));
+    }
+  report.calibration_error_cm = report.calibrated_clips > 0
+                                    ? calibration_error_sum_cm / report.calibrated_clips
+                                    : std::numeric_limits<double>::quiet_NaN();
   report.timing_method = report.methods[timed].name;
   report.ms_per_frame_p50 = report.methods[timed].ms_per_frame_p50;
   report.ms_per_frame_p99 = report.methods[timed].ms_per_frame_p99;
@@ -262,6 +402,19 @@ namespace {
 
 nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
 
+void metric_fields(const AccuracyMetrics& m, nlohmann::ordered_json& o) {
+  for (const MetricKey& k : kMetricKeys) o[std::string(k.key)] = number(m.*k.field);
+  for (const MetricKey& k : kExtraMetricKeys) o[std::string(k.key)] = number(m.*k.field);
+}
+
+nlohmann::ordered_json truth_fields(const MotionQuality& q) {
+  nlohmann::ordered_json o;
+  o["jitter_m_s3"] = number(q.jitter_m_s3);
+  o["foot_skate_ratio"] = number(q.foot_skate_ratio);
+  o["gap_jerk_m_s3"] = number(q.gap_jerk_m_s3);
+  return o;
+}
+
 }  // namespace
 
 std::string report_json(const EvalReport& report) {
@@ -271,16 +424,32 @@ std::string report_json(const EvalReport& report) {
   nlohmann::ordered_json methods = nlohmann::ordered_json::object();
   for (const MethodReport& m : report.methods) {
     nlohmann::ordered_json o;
-    for (const MetricKey& k : kMetricKeys) o[std::string(k.key)] = number(m.metrics.*k.field);
+    metric_fields(m.metrics, o);
     o["ms_per_frame_p50"] = number(m.ms_per_frame_p50);
     o["ms_per_frame_p99"] = number(m.ms_per_frame_p99);
     methods[m.name] = o;
   }
   doc["methods"] = methods;
-  doc["ground_truth"] = {{"jitter_m_s3", number(report.ground_truth.jitter_m_s3)},
-                         {"foot_skate_ratio", number(report.ground_truth.foot_skate_ratio)}};
+  doc["ground_truth"] = truth_fields(report.ground_truth);
   doc["timing"] = {{"ms_per_frame_p50", number(report.ms_per_frame_p50)},
                    {"ms_per_frame_p99", number(report.ms_per_frame_p99)}};
+  nlohmann::ordered_json groups = nlohmann::ordered_json::object();
+  for (const char* category : {"dataset", "content", "style"}) groups[category] = nlohmann::ordered_json::object();
+  for (const GroupReport& g : report.groups) {
+    nlohmann::ordered_json o;
+    o["clips"] = g.clips;
+    o["frames"] = g.frames;
+    nlohmann::ordered_json ms = nlohmann::ordered_json::object();
+    for (const MethodReport& m : g.methods) metric_fields(m.metrics, ms[m.name]);
+    o["methods"] = ms;
+    o["ground_truth"] = truth_fields(g.ground_truth);
+    groups[g.category][g.name] = o;
+  }
+  doc["groups"] = groups;
+  doc["body_scale"] = report.body_scale;
+  doc["calibration"] = {{"enabled", report.calibrate},
+                        {"clips_calibrated", report.calibrated_clips},
+                        {"head_height_error_cm", report.calibrate ? number(report.calibration_error_cm) : nullptr}};
   return doc.dump(2) + "\n";
 }
 
@@ -289,13 +458,17 @@ std::string report_table(const EvalReport& report) {
   out += fmt::format("{:<18}", "metric");
   for (const MethodReport& m : report.methods) out += fmt::format("{:>12}", m.name);
   out += fmt::format("{:>14}\n", "ground truth");
-  for (const MetricKey& k : kMetricKeys) {
+  std::vector<MetricKey> keys(kMetricKeys.begin(), kMetricKeys.end());
+  keys.insert(keys.end(), kExtraMetricKeys.begin(), kExtraMetricKeys.end());
+  for (const MetricKey& k : keys) {
     out += fmt::format("{:<18}", k.key);
     for (const MethodReport& m : report.methods) out += fmt::format("{:>12.4f}", m.metrics.*k.field);
     if (k.key == "jitter_m_s3")
       out += fmt::format("{:>14.4f}", report.ground_truth.jitter_m_s3);
     else if (k.key == "foot_skate_ratio")
       out += fmt::format("{:>14.4f}", report.ground_truth.foot_skate_ratio);
+    else if (k.key == "gap_jerk_m_s3")
+      out += fmt::format("{:>14.4f}", report.ground_truth.gap_jerk_m_s3);
     out += "\n";
   }
   out += fmt::format("{:<18}", "ms/frame p50");
@@ -307,6 +480,24 @@ std::string report_table(const EvalReport& report) {
     if (m.unanswered_frames > 0)
       out += fmt::format("note: {} had no pose for {} frames (scored with its previous pose)\n", m.name,
                          m.unanswered_frames);
+  if (report.calibrate)
+    out += fmt::format("body scale {}: calibrated on {} of {} clips, standing head height error {:.2f} cm (mean)\n",
+                       report.body_scale, report.calibrated_clips, report.clips, report.calibration_error_cm);
+  // Groups, compact: mpjpe, lower and head error per method, then the jitter ratio to the truth.
+  if (!report.groups.empty()) {
+    out += fmt::format("\n{:<28}{:>6}", "group", "clips");
+    for (const MethodReport& m : report.methods)
+      out += fmt::format("{:>10}{:>10}{:>9}", m.name.substr(0, 9), "lower", "jit/gt");
+    out += "\n";
+    for (const GroupReport& g : report.groups) {
+      out += fmt::format("{:<28}{:>6}", (g.category + " " + g.name).substr(0, 27), g.clips);
+      for (const MethodReport& m : g.methods)
+        out += fmt::format("{:>10.2f}{:>10.2f}{:>9.2f}", m.metrics.mpjpe_cm, m.metrics.lower_pe_cm,
+                           m.metrics.jitter_m_s3 / g.ground_truth.jitter_m_s3);
+      out += "\n";
+    }
+    out += "(per method: mpjpe_cm, lower_pe_cm, jitter_m_s3 / ground truth's)\n";
+  }
   return out;
 }
 

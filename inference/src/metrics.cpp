@@ -36,6 +36,7 @@ JointSets joint_sets(const Skeleton& skeleton) {
   s.hands = {body_joint(skeleton, "Hand_L"), body_joint(skeleton, "Hand_R")};
   s.root = {body_joint(skeleton, "Hips")};
   s.toes = {body_joint(skeleton, "Toes_L"), body_joint(skeleton, "Toes_R")};
+  s.head = body_joint(skeleton, "Head");
   return s;
 }
 
@@ -53,9 +54,19 @@ double MetricsAccumulator::Term::finish(int clip_frames) {
 
 double MetricsAccumulator::Term::mean() const { return total_weight > 0.0 ? total / total_weight : kNaN; }
 
+namespace {
+// max() that treats NaN as "nothing yet".
+double max_of(double a, double b) { return std::isnan(a) ? b : (std::isnan(b) ? a : std::max(a, b)); }
+constexpr int kNoGap = -1000000;
+}  // namespace
+
 MetricsAccumulator::MetricsAccumulator(const Skeleton& skeleton) : sets_(joint_sets(skeleton)) {
   pred_hist_.resize(sets_.all.size() * kHistory);
   true_hist_.resize(sets_.all.size() * kHistory);
+  for (size_t h = 0; h < 2; ++h)
+    for (size_t k = 0; k < sets_.all.size(); ++k)
+      if (sets_.all[k] == sets_.hands[h]) hand_slot_[h] = k;
+  hand_max_ = gap_jump_ = kNaN;
 }
 
 void MetricsAccumulator::begin_clip(double fps) {
@@ -67,10 +78,17 @@ void MetricsAccumulator::begin_clip(double fps) {
     t.clip_count = 0;
   }
   clip_frames_ = 0;
+  clip_hand_max_ = clip_gap_jump_ = kNaN;
+  last_invalid_ = {kNoGap, kNoGap};
   in_clip_ = true;
 }
 
 void MetricsAccumulator::add_frame(const GlobalPose& predicted, const GlobalPose& truth) {
+  add_frame(predicted, truth, {true, true});
+}
+
+void MetricsAccumulator::add_frame(const GlobalPose& predicted, const GlobalPose& truth,
+                                   const std::array<bool, 2>& hand_valid) {
   if (!in_clip_) throw std::logic_error("metrics: add_frame() outside begin_clip()/end_clip()");
   const size_t n = sets_.all.size();
   const int f = clip_frames_;
@@ -84,6 +102,17 @@ void MetricsAccumulator::add_frame(const GlobalPose& predicted, const GlobalPose
   for (int j : sets_.lower) terms_[kLower].add(dist_cm(j));
   for (int j : sets_.hands) terms_[kHands].add(dist_cm(j));
   for (int j : sets_.root) terms_[kRoot].add(dist_cm(j));
+  terms_[kHead].add(dist_cm(sets_.head));
+  // A pair (f-1, f) is "around a gap" when the hand was invalid in f-1 or f or within the last
+  // second; the jerk after a gap is taken at valid frames within a second of the last invalid one.
+  const int second = static_cast<int>(std::lround(fps_));
+  std::array<int, 2> since_gap{};
+  for (size_t h = 0; h < 2; ++h) {
+    if (hand_valid[h]) clip_hand_max_ = max_of(clip_hand_max_, dist_cm(sets_.hands[h]));
+    const int before = f - last_invalid_[h];  // frames since the last invalid one, up to f-1
+    if (!hand_valid[h]) last_invalid_[h] = f;
+    since_gap[h] = hand_valid[h] ? before : 0;
+  }
   for (int j : sets_.all)
     terms_[kRot].add(geodesic_angle(predicted.rotations[static_cast<size_t>(j)],
                                     truth.rotations[static_cast<size_t>(j)]) *
@@ -114,6 +143,14 @@ void MetricsAccumulator::add_frame(const GlobalPose& predicted, const GlobalPose
     };
     skate(predicted, pred_hist_, terms_[kSkate]);
     skate(truth, true_hist_, terms_[kTruthSkate]);
+    for (size_t h = 0; h < 2; ++h) {
+      // since_gap 0: invalid now; 1: invalid in f-1; <= second: within a second of a gap.
+      if (since_gap[h] > second) continue;
+      const size_t k = hand_slot_[h];
+      const Vec3 dp = pred_hist_[slot(f) + k] - pred_hist_[slot(f - 1) + k];
+      const Vec3 dg = true_hist_[slot(f) + k] - true_hist_[slot(f - 1) + k];
+      clip_gap_jump_ = max_of(clip_gap_jump_, 100.0 * (dp - dg).norm());
+    }
   }
   if (f >= 3) {
     const double fps3 = fps_ * fps_ * fps_;
@@ -125,6 +162,16 @@ void MetricsAccumulator::add_frame(const GlobalPose& predicted, const GlobalPose
       terms_[kJitter].add(third(pred_hist_));
       terms_[kTruthJitter].add(third(true_hist_));
     }
+    for (size_t h = 0; h < 2; ++h) {
+      if (since_gap[h] < 1 || since_gap[h] > second) continue;
+      const size_t k = hand_slot_[h];
+      const auto third = [&](const std::vector<Vec3>& hist) {
+        return (hist[slot(f) + k] - 3.0 * hist[slot(f - 1) + k] + 3.0 * hist[slot(f - 2) + k] - hist[slot(f - 3) + k])
+                   .norm() * fps3;
+      };
+      terms_[kGapJerk].add(third(pred_hist_));
+      terms_[kTruthGapJerk].add(third(true_hist_));
+    }
   }
   ++clip_frames_;
 }
@@ -134,7 +181,7 @@ AccuracyMetrics MetricsAccumulator::end_clip() {
   AccuracyMetrics m;
   if (clip_frames_ == 0) {
     for (const MetricKey& k : kMetricKeys) m.*k.field = kNaN;
-    last_truth_ = {kNaN, kNaN};
+    last_truth_ = {kNaN, kNaN, kNaN};
     return m;
   }
   m.mpjpe_cm = terms_[kAll].finish(clip_frames_);
@@ -148,6 +195,13 @@ AccuracyMetrics MetricsAccumulator::end_clip() {
   m.foot_skate_ratio = terms_[kSkate].finish(clip_frames_);
   last_truth_.jitter_m_s3 = terms_[kTruthJitter].finish(clip_frames_);
   last_truth_.foot_skate_ratio = terms_[kTruthSkate].finish(clip_frames_);
+  m.head_pe_cm = terms_[kHead].finish(clip_frames_);
+  m.gap_jerk_m_s3 = terms_[kGapJerk].finish(clip_frames_);
+  last_truth_.gap_jerk_m_s3 = terms_[kTruthGapJerk].finish(clip_frames_);
+  m.hand_pe_max_cm = clip_hand_max_;
+  m.gap_hand_jump_cm = clip_gap_jump_;
+  hand_max_ = max_of(hand_max_, clip_hand_max_);
+  gap_jump_ = max_of(gap_jump_, clip_gap_jump_);
   ++clips_;
   frames_ += clip_frames_;
   clip_frames_ = 0;
@@ -165,11 +219,15 @@ AccuracyMetrics MetricsAccumulator::result() const {
   m.mpjve_cm_s = terms_[kVel].mean();
   m.jitter_m_s3 = terms_[kJitter].mean();
   m.foot_skate_ratio = terms_[kSkate].mean();
+  m.head_pe_cm = terms_[kHead].mean();
+  m.hand_pe_max_cm = hand_max_;
+  m.gap_hand_jump_cm = gap_jump_;
+  m.gap_jerk_m_s3 = terms_[kGapJerk].mean();
   return m;
 }
 
 MotionQuality MetricsAccumulator::truth_result() const {
-  return {terms_[kTruthJitter].mean(), terms_[kTruthSkate].mean()};
+  return {terms_[kTruthJitter].mean(), terms_[kTruthSkate].mean(), terms_[kTruthGapJerk].mean()};
 }
 
 }  // namespace bodyd

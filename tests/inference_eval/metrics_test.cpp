@@ -177,3 +177,60 @@ TEST(Metrics, ClipsCombineWeightedByFrameCount) {
   EXPECT_TRUE(std::isnan(acc.end_clip().mpjpe_cm));
   EXPECT_EQ(acc.clips(), 3);
 }
+
+TEST(Metrics, HeadErrorHandMaximumAndTheGapMetrics) {
+  // 60 frames at 30 fps; truth still (every joint at (0, 1, 0)). The prediction: the Head 1 cm
+  // off throughout; the left hand 0.5 cm off while tracked, and its tracker lost for frames
+  // 10..14 during which the hand is 20 cm off (a jump of 19.5 cm into the gap at 9 -> 10 and back
+  // at 14 -> 15). After the gap (frames 15..45) the hand follows x = c (t - t15)^3 from frame 15
+  // on at 0.5 cm off, so its third difference is 6c dt^3 exactly once four frames are on the
+  // cubic (frames 18..45); frames 15..17 mix the gap in (computed below).
+  const Skeleton& sk = walk().skeleton;
+  const auto head = static_cast<size_t>(sk.find("Head")), hand = static_cast<size_t>(sk.find("Hand_L"));
+  const double fps = 30.0, dt = 1.0 / fps, c = 0.2;
+  MetricsAccumulator acc(sk);
+  acc.begin_clip(fps);
+  std::vector<Vec3> hand_path;
+  for (int f = 0; f < 60; ++f) {
+    GlobalPose truth = all_at(Vec3(0, 1, 0)), pred = truth;
+    pred.positions[head] += Vec3(0, 0, 0.01);
+    const bool lost = f >= 10 && f <= 14;
+    Vec3 h = Vec3(0, 1, 0.005);
+    if (lost) h = Vec3(0, 1, 0.2);
+    if (f >= 15) {
+      const double t = (f - 15) * dt;
+      h.x() = c * t * t * t;
+    }
+    pred.positions[hand] = h;
+    hand_path.push_back(h);
+    acc.add_frame(pred, truth, {!lost, true});
+  }
+  const AccuracyMetrics m = acc.end_clip();
+  EXPECT_NEAR(m.head_pe_cm, 1.0, 1e-9);
+  // The largest tracked hand error: the cubic at frame 59 is past the second after the gap but
+  // still counts (tracked); its distance from (0, 1, 0).
+  const double t59 = 44 * dt;
+  EXPECT_NEAR(m.hand_pe_max_cm, 100.0 * std::hypot(c * t59 * t59 * t59, 0.005), 1e-9);
+  // Jumps: into the gap 19.5 cm, out of it 19.5 cm (plus the cubic's first step, 0 at t = 0).
+  EXPECT_NEAR(m.gap_hand_jump_cm, 19.5, 1e-9);
+  // Jerk after the gap: valid frames 15..45 (within 30 frames of frame 14) and f >= 3.
+  double sum = 0.0;
+  int n = 0;
+  for (int f = 15; f <= 44; ++f) {
+    const auto u = static_cast<size_t>(f);
+    sum += (hand_path[u] - 3.0 * hand_path[u - 1] + 3.0 * hand_path[u - 2] - hand_path[u - 3]).norm() * fps * fps * fps;
+    ++n;
+  }
+  EXPECT_NEAR(m.gap_jerk_m_s3, sum / n, 1e-6 * sum / n);
+  EXPECT_NEAR(acc.last_clip_truth().gap_jerk_m_s3, 0.0, 1e-12);
+
+  // No gap: the gap metrics are undefined (NaN), the others as before.
+  acc.begin_clip(fps);
+  for (int f = 0; f < 10; ++f) acc.add_frame(all_at(Vec3(0, 1, 0)), all_at(Vec3(0, 1, 0)), {true, true});
+  const AccuracyMetrics none = acc.end_clip();
+  EXPECT_TRUE(std::isnan(none.gap_hand_jump_cm));
+  EXPECT_TRUE(std::isnan(none.gap_jerk_m_s3));
+  EXPECT_NEAR(none.hand_pe_max_cm, 0.0, 1e-12);
+  // Over both clips the maxima are kept.
+  EXPECT_NEAR(acc.result().gap_hand_jump_cm, 19.5, 1e-9);
+}

@@ -7,11 +7,13 @@
 // uses the simulator of simulators/), so tests can feed any stream.
 #pragma once
 
+#include "bodyd/inference/calibration.h"
 #include "bodyd/inference/metrics.h"
 #include "bodyd/inference/factory.h"
 #include "bodyd/inference/reconstructor.h"
 #include "bodyd/motion/bvh.h"
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -74,6 +76,14 @@ struct EvalOptions {
   std::filesystem::path model_path;         // for methods that need a model
   ReconstructorOptions reconstructor;       // method options (diffusion steps, guidance, seed)
   std::optional<std::filesystem::path> out_dir;  // write <clip>.pred.bvh / <clip>.<method>.pred.bvh
+  // Each clip is scaled by body_scale (skeleton offsets and every translation) before trackers are
+  // simulated and truth is computed, to act a user body_scale x the data's size.
+  double body_scale = 1.0;
+  // Calibrate every method but "ik" (which is given the clip's own skeleton) as the daemon's auto
+  // calibration does: a StandingHeightDetector over the head samples, then
+  // calibrate_from_head_height() at the sample that completes the first still stretch.
+  bool calibrate = false;
+  StandingHeightOptions calibration;
   // Called after each clip (for progress); may be empty.
   std::function<void(int clip_index, int clip_count, const std::filesystem::path& clip)> on_clip;
 };
@@ -86,11 +96,38 @@ struct MethodReport {
   std::int64_t unanswered_frames = 0;
 };
 
+// The results of the clips of one group (docs/evaluation.md, "Groups").
+struct GroupReport {
+  std::string category;  // "dataset", "content" or "style"
+  std::string name;      // e.g. "dataset-1", "walk", "normal"; "other" for an unparsed file name
+  int clips = 0;
+  std::int64_t frames = 0;
+  std::vector<MethodReport> methods;  // metrics only (no timing)
+  MotionQuality ground_truth;
+};
+
+// The groups of a clip from its file name dataset-N_{content}_{style}_{take}.bvh: {dataset,
+// content, style}; {"other", "other", "other"} for a name of another shape.
+[[nodiscard]] std::array<std::string, 3> clip_groups(const std::filesystem::path& clip);
+
+// A copy of `clip` scaled by `s`: skeleton offsets, end sites and every frame's local
+// translations multiplied by s (rotations unchanged).
+[[nodiscard]] Motion scale_motion(const Motion& clip, double s);
+
 struct EvalReport {
   int clips = 0;
   std::int64_t frames = 0;
   std::vector<MethodReport> methods;  // in the order of EvalOptions::methods
   MotionQuality ground_truth;
+  // Per group, by category ("dataset", "content", "style") then name, in sorted order.
+  std::vector<GroupReport> groups;
+  double body_scale = 1.0;
+  bool calibrate = false;
+  // With calibrate: clips where the detector found a standing stretch (per calibrated method,
+  // the same for each), and the mean |measured - true| standing head height over them, cm (the
+  // true one: standing_head_height_m() of the scaled clip's skeleton).
+  int calibrated_clips = 0;
+  double calibration_error_cm = 0.0;
   // Timing of "diffusion" if evaluated, otherwise of the first method.
   std::string timing_method;
   double ms_per_frame_p50 = 0.0;

@@ -10,6 +10,15 @@
 //   jitter_m_s3     mean |p[t+3] - 3 p[t+2] + 3 p[t+1] - p[t]| * fps^3 over frame quadruples
 //   foot_skate_ratio  over both Toes joints and frame pairs (t, t+1): the fraction with
 //                   y < 0.06 m in both frames and horizontal (x, z) speed > 0.075 m/s
+// Beyond CONVENTIONS.md (issue 10; docs/evaluation.md, "Tracked joints and gaps"):
+//   head_pe_cm      mean |p - g| of the Head joint (the head tracker's joint), x100
+//   hand_pe_max_cm  the largest |p - g| of a hand over the frames where its tracker is valid
+//   gap_hand_jump_cm  the largest frame-to-frame hand jump beyond the true hand's motion,
+//                   100 |(p[t+1] - p[t]) - (g[t+1] - g[t])|, over the pairs (t, t+1) where the
+//                   hand's tracker is invalid in t or t+1 or was invalid within the last second
+//   gap_jerk_m_s3   mean third difference (as jitter) of a hand over the frames in the second
+//                   after its tracker came back (the truth's: MotionQuality::gap_jerk_m_s3)
+// hand_pe_max_cm and gap_hand_jump_cm combine over clips as the maximum, the others by frames.
 // Clips are combined by their frame count: result = sum(n_clip * clip_metric) / sum(n_clip),
 // over the clips where the metric is defined (a 1-frame clip has no velocities, a clip of
 // fewer than 4 frames no jitter); a metric no clip defines is NaN.
@@ -34,6 +43,11 @@ struct AccuracyMetrics {
   double mpjve_cm_s = 0.0;
   double jitter_m_s3 = 0.0;
   double foot_skate_ratio = 0.0;
+  // Issue 10's additions (not in CONVENTIONS.md's table; see above).
+  double head_pe_cm = 0.0;
+  double hand_pe_max_cm = 0.0;
+  double gap_hand_jump_cm = 0.0;
+  double gap_jerk_m_s3 = 0.0;
 };
 
 // The metric keys of docs/conventions.md, in its order, with their fields.
@@ -52,11 +66,19 @@ inline constexpr std::array<MetricKey, 9> kMetricKeys{{
     {"jitter_m_s3", &AccuracyMetrics::jitter_m_s3},
     {"foot_skate_ratio", &AccuracyMetrics::foot_skate_ratio},
 }};
+// The keys of the additions, after kMetricKeys in reports.
+inline constexpr std::array<MetricKey, 4> kExtraMetricKeys{{
+    {"head_pe_cm", &AccuracyMetrics::head_pe_cm},
+    {"hand_pe_max_cm", &AccuracyMetrics::hand_pe_max_cm},
+    {"gap_hand_jump_cm", &AccuracyMetrics::gap_hand_jump_cm},
+    {"gap_jerk_m_s3", &AccuracyMetrics::gap_jerk_m_s3},
+}};
 
 // Smoothness and foot skating of one motion on its own (reported for ground truth).
 struct MotionQuality {
   double jitter_m_s3 = 0.0;
   double foot_skate_ratio = 0.0;
+  double gap_jerk_m_s3 = 0.0;  // the true hands' jerk over the frames gap_jerk_m_s3 covers (NaN: no gap)
 };
 
 // Contact thresholds of foot_skate_ratio.
@@ -71,6 +93,7 @@ struct JointSets {
   std::vector<int> hands;  // Hand_L, Hand_R
   std::vector<int> root;   // Hips
   std::array<int, 2> toes{};  // Toes_L, Toes_R
+  int head = -1;              // Head
 };
 // Throws std::invalid_argument naming the first body joint the skeleton lacks.
 [[nodiscard]] JointSets joint_sets(const Skeleton& skeleton);
@@ -84,7 +107,10 @@ class MetricsAccumulator {
 
   // Starts a clip at `fps` frames per second (> 0). An unfinished clip is discarded.
   void begin_clip(double fps);
+  // `hand_valid`: whether the left and right hand trackers were valid at this frame (for the
+  // gap metrics and hand_pe_max_cm); the two-argument form treats both as valid.
   void add_frame(const GlobalPose& predicted, const GlobalPose& truth);
+  void add_frame(const GlobalPose& predicted, const GlobalPose& truth, const std::array<bool, 2>& hand_valid);
   // Finishes the clip; its metrics join the totals weighted by its frame count. Returns them
   // (NaN where undefined for this clip). A clip without frames adds nothing.
   AccuracyMetrics end_clip();
@@ -108,7 +134,10 @@ class MetricsAccumulator {
     double finish(int clip_frames);  // the clip mean (NaN if undefined); folds it into the totals
     [[nodiscard]] double mean() const;
   };
-  enum TermId { kAll, kUpper, kLower, kHands, kRoot, kRot, kVel, kJitter, kSkate, kTruthJitter, kTruthSkate, kTerms };
+  enum TermId {
+    kAll, kUpper, kLower, kHands, kRoot, kRot, kVel, kJitter, kSkate, kTruthJitter, kTruthSkate,
+    kHead, kGapJerk, kTruthGapJerk, kTerms
+  };
 
   JointSets sets_;
   double fps_ = 30.0;
@@ -118,6 +147,12 @@ class MetricsAccumulator {
   std::int64_t frames_ = 0;
   std::array<Term, kTerms> terms_{};
   MotionQuality last_truth_;
+  // Maxima (NaN until defined): per clip and over all clips.
+  double clip_hand_max_ = 0.0, clip_gap_jump_ = 0.0, hand_max_ = 0.0, gap_jump_ = 0.0;
+  // Per hand: the last clip frame whose tracker was invalid (-1000000: none yet).
+  std::array<int, 2> last_invalid_{};
+  // Slots of Hand_L, Hand_R within sets_.all.
+  std::array<size_t, 2> hand_slot_{};
   // Positions of the body joints (sets_.all order) of the last 4 frames, slot = frame % 4.
   std::vector<Vec3> pred_hist_, true_hist_;
 };
