@@ -236,7 +236,7 @@ struct Daemon::Impl final : ControlTarget {
       recorder.record(s);
       if (s.valid) s.rotation = s.rotation.normalized();
     }
-    if (s.role == Role::Head && s.t_ns < last_pose_t_ns - kTimeBaseRestartNs) {
+    if (s.role == Role::Head && last_pose_t_ns != INT64_MIN && s.t_ns < last_pose_t_ns - kTimeBaseRestartNs) {
       // Head time went far back: a replay's time base started over (a loop at the int64 limit,
       // issue 11) or a source restarted. The reconstruction starts over instead of waiting,
       // silently, until time passes the last pose again.
