@@ -10,7 +10,7 @@
 //   jitter_m_s3     mean |p[t+3] - 3 p[t+2] + 3 p[t+1] - p[t]| * fps^3 over frame quadruples
 //   foot_skate_ratio  over both Toes joints and frame pairs (t, t+1): the fraction with
 //                   y < 0.06 m in both frames and horizontal (x, z) speed > 0.075 m/s
-// Beyond CONVENTIONS.md (issue 10; docs/evaluation.md, "Tracked joints and gaps"):
+// Beyond docs/conventions.md (issue 10; docs/evaluation.md, "Tracked joints and gaps"):
 //   head_pe_cm      mean |p - g| of the Head joint (the head tracker's joint), x100
 //   hand_pe_max_cm  the largest |p - g| of a hand over the frames where its tracker is valid
 //   gap_hand_jump_cm  the largest frame-to-frame hand jump beyond the true hand's motion,
@@ -43,7 +43,7 @@ struct AccuracyMetrics {
   double mpjve_cm_s = 0.0;
   double jitter_m_s3 = 0.0;
   double foot_skate_ratio = 0.0;
-  // Issue 10's additions (not in CONVENTIONS.md's table; see above).
+  // Issue 10's additions (not in docs/conventions.md's table; see above).
   double head_pe_cm = 0.0;
   double hand_pe_max_cm = 0.0;
   double gap_hand_jump_cm = 0.0;
