@@ -79,7 +79,10 @@ TEST_F(DebianPackage, HoldsProgramsDataUnitUdevRuleAndClientLibrary) {
                            "./usr/lib/systemd/user/bodyd.service", "./usr/lib/udev/rules.d/70-bodyd.rules",
                            "./usr/include/bodyd_client.h", "libbodyd_client.so", "pkgconfig/bodyd-client.pc",
                            "./usr/share/doc/bodyd/docs/install.md"}) {
-    EXPECT_NE(list.find(std::string(path) + " "), std::string::npos) << path << " not in the package";
+    // dpkg-deb --contents ends a file's line with its path, a symlink's with "PATH -> TARGET".
+    const bool listed = list.find(std::string(path) + "\n") != std::string::npos ||
+                        list.find(std::string(path) + " -> ") != std::string::npos;
+    EXPECT_TRUE(listed) << path << " not in the package:\n" << list.substr(0, 4000);
   }
   // Nothing of the build machine: no source or build paths, nothing outside /usr.
   EXPECT_EQ(list.find(source_dir().string()), std::string::npos);
