@@ -44,6 +44,16 @@ const boneGeometry = new THREE.CylinderGeometry(0.022, 0.022, 1, 10);  // unit l
 // first pose is drawn and the first daemon status is shown (or 10 s have passed), so
 // `chromium --headless --screenshot` captures a skeleton and `--dump-dom` a filled status panel
 // (docs/viewer.md, tests/render/viewer_test.cpp).
+// The load event waits for images in the document: a hidden one whose request the bridge holds
+// until this page posts /api/page-ready (module scripts' top-level await does not delay load).
+const holdLoad = new URLSearchParams(location.search).has('hold-load');
+if (holdLoad) {
+  const hold = document.createElement('img');
+  hold.style.display = 'none';
+  hold.alt = '';
+  hold.src = '/hold';
+  document.body.appendChild(hold);
+}
 let firstPoseDrawn, firstStatusShown;
 const firstPose = new Promise((resolve) => { firstPoseDrawn = resolve; });
 const firstStatus = new Promise((resolve) => { firstStatusShown = resolve; });
@@ -236,6 +246,8 @@ window.addEventListener('resize', () => {
 
 render();
 connect();
-if (new URLSearchParams(location.search).has('hold-load')) {
+if (holdLoad) {
   await Promise.race([Promise.all([firstPose, firstStatus]), new Promise((resolve) => setTimeout(resolve, 10000))]);
+  render();
+  await fetch('/api/page-ready', { method: 'POST' });
 }

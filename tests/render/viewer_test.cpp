@@ -446,3 +446,40 @@ TEST(ViewerBrowser, HeadlessChromiumShowsTheSkeleton) {
   }
 }
 
+
+TEST(ViewerBrowser, HeadlessChromiumShowsTheDaemonsStatus) {
+  const auto chromium = find_chromium();
+  if (!chromium) GTEST_SKIP() << "chromium is not installed (apt-get install chromium); the viewer's browser test is skipped";
+  Stack stack;
+  ASSERT_EQ(stack.error, "");
+  ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
+  // ?hold-load also waits for the first status message, so the DOM Chromium dumps at the load
+  // event holds the status panel as the page filled it.
+  Process browser({*chromium, "--headless", "--no-sandbox", "--disable-gpu-sandbox", "--use-angle=swiftshader",
+                   "--enable-unsafe-swiftshader", "--no-first-run", "--disable-extensions", "--disable-background-networking",
+                   "--disable-sync", "--disable-component-update", "--no-default-browser-check", "--disable-background-networking",
+                   "--disable-sync", "--disable-component-update", "--no-default-browser-check",
+                   "--user-data-dir=" + (stack.dir.path() / "profile").string(), "--timeout=30000", "--dump-dom",
+                   "http://127.0.0.1:" + std::to_string(stack.http_port) + "/?hold-load"},
+                  stack.dir.path(), "chromium");
+  ASSERT_TRUE(browser.started());
+  ASSERT_TRUE(browser.wait(60000ms).has_value()) << "chromium did not finish";
+  const std::string dom = browser.out();
+  ASSERT_NE(dom.find("id=\"daemon\""), std::string::npos) << dom.substr(0, 3000);
+  // The panel's data attributes carry what it shows (docs/viewer.md).
+  const auto attribute = [&](const std::string& name) -> std::string {
+    const std::string key = name + "=\"";
+    const size_t at = dom.find(key);
+    if (at == std::string::npos) return "";
+    return dom.substr(at + key.size(), dom.find('"', at + key.size()) - at - key.size());
+  };
+  EXPECT_EQ(attribute("data-daemon-state"), "answering") << dom.substr(0, 3000);
+  EXPECT_EQ(attribute("data-sources"), "1");
+  const std::string rate = attribute("data-frames-per-s");
+  ASSERT_FALSE(rate.empty());
+  EXPECT_GT(std::stod(rate), 10.0);
+  EXPECT_FALSE(attribute("data-latency-p99-us").empty());
+  EXPECT_NE(dom.find("id=\"calibrate\""), std::string::npos);
+  EXPECT_NE(dom.find("id=\"reset\""), std::string::npos);
+  EXPECT_NE(dom.find("walk.csv"), std::string::npos) << "the source's name is not shown";
+}

@@ -113,6 +113,23 @@ class Bridge {
     const std::string method = ri->request_method ? ri->request_method : "";
     const std::string uri = ri->local_uri ? ri->local_uri : "";
     if (uri == "/api/calibrate" || uri == "/api/reset") return on_button(conn, method, uri);
+    if (uri == "/api/page-ready" && method == "POST") {
+      {
+        std::lock_guard lock(hold_mutex_);
+        ++pages_ready_;
+      }
+      hold_changed_.notify_all();
+      return reply(conn, 200, "text/plain", "ok\n");
+    }
+    if (uri == "/hold" && method == "GET") {
+      // ?hold-load: the page's hidden image; answered once a page has shown its first pose and
+      // status (POST /api/page-ready), at most 10 s later, so the load event waits for both.
+      std::unique_lock lock(hold_mutex_);
+      const std::uint64_t seen = pages_ready_;
+      hold_changed_.wait_for(lock, 10s, [&] { return pages_ready_ > seen || g_stop.load(); });
+      lock.unlock();
+      return reply(conn, 204, "text/plain", "");
+    }
     if (method != "GET" && method != "HEAD") return reply(conn, 405, "text/plain", "only GET (and POST to /api/...)\n");
     if (uri == "/ws") return reply(conn, 400, "text/plain", "/ws is a WebSocket endpoint (Upgrade: websocket)\n");
     if (uri == "/status") return reply(conn, 200, "application/json", status_json().dump() + "\n");
@@ -373,6 +390,9 @@ class Bridge {
   std::vector<WsClient> clients_;
   std::mutex daemon_mutex_;
   DaemonView daemon_;
+  std::mutex hold_mutex_;
+  std::condition_variable hold_changed_;
+  std::uint64_t pages_ready_ = 0;
 };
 
 extern "C" int request_handler(mg_connection* conn, void* self) { return static_cast<Bridge*>(self)->on_request(conn); }
