@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The bodyd diffusion network "mlpwin-v1", its noise schedule, DDIM sampler and model-file writer.
 
-The C++ runtime (inference/src/network.cpp, sampler.cpp, model_file.cpp) implements exactly the
+The C++ runtime (model/src/network.cpp, sampler.cpp, model_file.cpp) implements exactly the
 same network and sampler; tests/inference_engine checks the two against a fixture written by
 training/export_fixture.py. The model file layout is specified in docs/model-file.md.
 
@@ -43,7 +43,7 @@ FORMAT_VERSION = "1"
 # Checksum metadata keys (docs/model-file.md, "Checksum"); the C++ loader requires them in a model.
 CHECKSUM_KEY = "checksum"
 TENSOR_CHECKSUMS_KEY = "tensor_checksums"
-# Mirror of bodyd::features::kVersion (inference/include/bodyd/inference/features.h); the C++ loader
+# Mirror of bodyd::features::kVersion (model/include/bodyd/inference/features.h); the C++ loader
 # rejects a model whose feature_version differs. Pass metadata["feature_version"] to override.
 FEATURE_VERSION = 1
 SKELETON_JOINTS = 22
