@@ -457,7 +457,6 @@ TEST(ViewerBrowser, HeadlessChromiumShowsTheDaemonsStatus) {
   // event holds the status panel as the page filled it.
   Process browser({*chromium, "--headless", "--no-sandbox", "--disable-gpu-sandbox", "--use-angle=swiftshader",
                    "--enable-unsafe-swiftshader", "--no-first-run", "--disable-extensions", "--disable-background-networking",
-                   "--disable-sync", "--disable-component-update", "--no-default-browser-check", "--disable-background-networking",
                    "--disable-sync", "--disable-component-update", "--no-default-browser-check",
                    "--user-data-dir=" + (stack.dir.path() / "profile").string(), "--timeout=30000", "--dump-dom",
                    "http://127.0.0.1:" + std::to_string(stack.http_port) + "/?hold-load"},
