@@ -46,6 +46,11 @@ def parse_args():
     p.add_argument("--full-prefix-prob", type=float, default=0.6,
                    help="probability that all frames but the newest are observed (the online case)")
     p.add_argument("--prefix-noise", type=float, default=0.05, help="noise (normalised units) on observed prefix frames")
+    p.add_argument("--self-prefix", type=float, default=0.0,
+                   help="probability that a sample's observed prefix is the model's own reconstruction (EMA weights, "
+                        "K-step DDIM from the trackers alone) instead of the truth: trains recovery from its own errors, "
+                        "as the online loop feeds back what it emitted")
+    p.add_argument("--self-prefix-steps", type=int, default=2, help="DDIM steps of the --self-prefix reconstruction")
     p.add_argument("--tracker-noise", type=float, default=0.01, help="noise (normalised units) on observed tracker entries")
     p.add_argument("--holdout-every", type=int, default=20, help="every Nth training clip is held out for monitoring")
     p.add_argument("--ema", type=float, default=0.999)
@@ -107,6 +112,7 @@ class Masker:
         plen = torch.randint(0, W, (B,), generator=gen, device=dev)
         plen = torch.where(full, torch.full_like(plen, W - 1), plen)
         prefix = (frame_idx < plen.view(B, 1)).float()  # (B, W)
+        self.last_trackers = m.clone()  # the tracker part alone, for --self-prefix
         m = torch.maximum(m, prefix.unsqueeze(-1).expand(B, W, D))
         uncond = torch.rand(B, generator=gen, device=dev) < a.uncond_prob
         m[uncond] = 0.0
@@ -322,6 +328,19 @@ def main():
         # trackers their noise (both small, in normalised units).
         obs = x0 + a.prefix_noise * prefix.unsqueeze(-1) * torch.randn(x0.shape, generator=g, device=dev)
         obs = obs + a.tracker_noise * torch.randn(x0.shape, generator=g, device=dev)
+        if augment and a.self_prefix > 0:
+            # The online loop's past is what it emitted: the model's own reconstruction, trackers exact. Here it
+            # is approximated by one reconstruction of the whole window from its trackers (no past), by the EMA
+            # weights, with the observed tracker entries imputed as the runtime does.
+            sel = (torch.rand(B, generator=g, device=dev) < a.self_prefix) & (prefix.sum(1) > 0) \
+                & (m.flatten(1).sum(1) > 0)
+            if bool(sel.any()):
+                with torch.no_grad():
+                    ema.eval()
+                    roll = ddim_sample(ema, x0[sel], masker.last_trackers[sel], ab, a.self_prefix_steps, g)
+                pf = prefix[sel].unsqueeze(-1)
+                obs = obs.clone()
+                obs[sel] = pf * roll + (1 - pf) * obs[sel]
         inp = m * obs + (1 - m) * xt
         pred = model(inp, m, t)
         w = 1.0 - 0.9 * m  # the unobserved part is what the model is for
