@@ -176,8 +176,8 @@ class Calibrating final : public Reconstructor {
   std::string_view name() const override { return inner_->name(); }
   const Skeleton& skeleton() const override { return inner_->skeleton(); }
   void push(const TrackerSample& s) override {
-    if (const std::optional<double> h = detector_.push(s)) {
-      if (calibrate_from_head_height(*inner_, *h).empty()) measured_m_ = *h;
+    if (const std::optional<StandingHeight> h = detector_.push(s)) {
+      if (calibrate_from_head_height(*inner_, h->head_height_m).empty()) found_ = *h;
     }
     inner_->push(s);
   }
@@ -188,12 +188,13 @@ class Calibrating final : public Reconstructor {
   }
   void set_user_height(double h) override { inner_->set_user_height(h); }
   double user_height() const override { return inner_->user_height(); }
-  std::optional<double> measured_m() const { return measured_m_; }
+  // The standing height applied, if any.
+  const std::optional<StandingHeight>& found() const { return found_; }
 
  private:
   std::unique_ptr<Reconstructor> inner_;
   StandingHeightDetector detector_;
-  std::optional<double> measured_m_;
+  std::optional<StandingHeight> found_;
 };
 
 // Whether each hand's tracker is valid at each frame time (the newest sample at or before it).
@@ -274,7 +275,7 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
   std::vector<std::int64_t> unanswered(options.methods.size(), 0);
   static constexpr std::array<const char*, 3> kCategories{"dataset", "content", "style"};
   std::array<std::map<std::string, GroupAcc>, 3> groups;
-  double calibration_error_sum_cm = 0.0;
+  double calibration_error_sum_cm = 0.0, scale_error_sum = 0.0, calibration_time_sum_s = 0.0;
 
   int index = 0;
   for (const std::filesystem::path& path : clips) {
@@ -317,10 +318,16 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
           reconstructor = std::move(wrapped);
         }
         const OnlineRun run = run_online(*reconstructor, samples, frame_times);
-        if (calibrating != nullptr && calibrating->measured_m() && !clip_calibrated) {
+        if (calibrating != nullptr && calibrating->found() && !clip_calibrated) {
           clip_calibrated = true;
+          const StandingHeight& h = *calibrating->found();
+          const double truth_m = standing_head_height_m(clip.skeleton);
           ++report.calibrated_clips;
-          calibration_error_sum_cm += 100.0 * std::abs(*calibrating->measured_m() - standing_head_height_m(clip.skeleton));
+          if (h.fallback) ++report.fallback_clips;
+          calibration_error_sum_cm += 100.0 * std::abs(h.head_height_m - truth_m);
+          scale_error_sum += std::abs(h.head_height_m / truth_m - 1.0);
+          report.calibration_scale_error_max = std::max(report.calibration_scale_error_max, std::abs(h.head_height_m / truth_m - 1.0));
+          calibration_time_sum_s += static_cast<double>(h.t_ns - frame_times.front()) * 1e-9;
         }
         if (run.unanswered == clip.frame_count())
           throw std::runtime_error(
@@ -389,9 +396,11 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
       r.ground_truth = g.methods[0].truth_result();
       report.groups.push_back(std::move(r));
     }
-  report.calibration_error_cm = report.calibrated_clips > 0
-                                    ? calibration_error_sum_cm / report.calibrated_clips
-                                    : std::numeric_limits<double>::quiet_NaN();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  report.calibration_error_cm = report.calibrated_clips > 0 ? calibration_error_sum_cm / report.calibrated_clips : nan;
+  report.calibration_scale_error = report.calibrated_clips > 0 ? scale_error_sum / report.calibrated_clips : nan;
+  report.calibration_time_s = report.calibrated_clips > 0 ? calibration_time_sum_s / report.calibrated_clips : nan;
+  if (report.calibrated_clips == 0) report.calibration_scale_error_max = nan;
   report.timing_method = report.methods[timed].name;
   report.ms_per_frame_p50 = report.methods[timed].ms_per_frame_p50;
   report.ms_per_frame_p99 = report.methods[timed].ms_per_frame_p99;
@@ -449,7 +458,11 @@ std::string report_json(const EvalReport& report) {
   doc["body_scale"] = report.body_scale;
   doc["calibration"] = {{"enabled", report.calibrate},
                         {"clips_calibrated", report.calibrated_clips},
-                        {"head_height_error_cm", report.calibrate ? number(report.calibration_error_cm) : nullptr}};
+                        {"clips_fallback", report.fallback_clips},
+                        {"head_height_error_cm", report.calibrate ? number(report.calibration_error_cm) : nullptr},
+                        {"scale_error", report.calibrate ? number(report.calibration_scale_error) : nullptr},
+                        {"scale_error_max", report.calibrate ? number(report.calibration_scale_error_max) : nullptr},
+                        {"time_s", report.calibrate ? number(report.calibration_time_s) : nullptr}};
   return doc.dump(2) + "\n";
 }
 
@@ -481,8 +494,11 @@ std::string report_table(const EvalReport& report) {
       out += fmt::format("note: {} had no pose for {} frames (scored with its previous pose)\n", m.name,
                          m.unanswered_frames);
   if (report.calibrate)
-    out += fmt::format("body scale {}: calibrated on {} of {} clips, standing head height error {:.2f} cm (mean)\n",
-                       report.body_scale, report.calibrated_clips, report.clips, report.calibration_error_cm);
+    out += fmt::format(
+        "body scale {}: calibrated on {} of {} clips ({} by the fallback), standing head height error {:.2f} cm, "
+        "scale error {:.2f}% (mean; max {:.2f}%), {:.2f} s after the clip's start (mean)\n",
+        report.body_scale, report.calibrated_clips, report.clips, report.fallback_clips, report.calibration_error_cm,
+        100.0 * report.calibration_scale_error, 100.0 * report.calibration_scale_error_max, report.calibration_time_s);
   // Groups, compact: mpjpe, lower and head error per method, then the jitter ratio to the truth.
   if (!report.groups.empty()) {
     out += fmt::format("\n{:<28}{:>6}", "group", "clips");

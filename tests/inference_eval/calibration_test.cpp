@@ -6,6 +6,7 @@
 #include "bodyd/motion/bvh.h"
 
 #include "../test_paths.h"
+#include "alloc_counter.h"
 
 #include <gtest/gtest.h>
 
@@ -28,23 +29,23 @@ TrackerSample head_at(double t_s, const Vec3& p, bool valid = true) {
 
 }  // namespace
 
-TEST(StandingHeight, ReportsTheMeanHeightOfTheFirstStillSecondOnce) {
-  // 90 Hz: walking for 0.5 s, then standing at 1.60 m with +-5 mm sway for 2 s.
-  StandingHeightDetector d;
-  std::optional<double> found;
-  double found_at_s = -1.0, sum = 0.0;
+TEST(StandingHeight, ReportsTheFirstStillHalfSecondOnceWithTheStanceCorrection) {
+  // 90 Hz: walking for 0.5 s, then standing at 1.60 m with +-5 mm sway and 1 cm/s drift for 2 s.
+  const StandingHeightOptions o;
+  StandingHeightDetector d(o);
+  std::optional<StandingHeight> found;
+  double sum = 0.0;
   int n = 0, reports = 0;
   for (int k = 0; k < 225; ++k) {
     const double t = k / 90.0;
-    Vec3 p = t < 0.5 ? Vec3(0.8 * t, 1.45, 0.0) : Vec3(0.4, 1.60 + 0.005 * std::sin(7.0 * t), 0.0);
-    if (t >= 0.5 && !found) {
+    const Vec3 p = k < 45 ? Vec3(0.8 * t, 1.45, 0.0) : Vec3(0.4 + 0.01 * t, 1.60 + 0.005 * std::sin(7.0 * t), 0.0);
+    if (k >= 45 && k <= 90) {  // the first half second of standing, both ends included
       sum += p.y();
       ++n;
     }
     if (const auto h = d.push(head_at(t, p))) {
       ++reports;
       found = h;
-      found_at_s = t;
     }
     // Other roles and invalid samples are ignored.
     TrackerSample hand = head_at(t, Vec3(5, 0, 0));
@@ -53,33 +54,78 @@ TEST(StandingHeight, ReportsTheMeanHeightOfTheFirstStillSecondOnce) {
   }
   ASSERT_TRUE(found);
   EXPECT_EQ(reports, 1);
-  // The still stretch starts at the first standing sample (t = 0.5 s, 15 cm above the last step).
-  EXPECT_NEAR(found_at_s, 1.5, 1e-9);
-  EXPECT_NEAR(*found, sum / n, 1e-12);
+  EXPECT_FALSE(found->fallback);
+  // Complete half a second after the first standing sample (t = 0.5 s, 15 cm above the last step).
+  EXPECT_EQ(found->t_ns, head_at(1.0, Vec3::Zero()).t_ns);
+  EXPECT_NEAR(found->measured_m, sum / n, 1e-12);
+  EXPECT_NEAR(found->head_height_m, sum / n / 0.987, 1e-12);
+  EXPECT_NEAR(standing_height_from_head(1.5, o), 1.5 / 0.987, 1e-12);
   EXPECT_TRUE(d.done());
   d.reset();
   EXPECT_FALSE(d.done());
-  EXPECT_FALSE(d.height_m());
+  EXPECT_FALSE(d.result());
 }
 
-TEST(StandingHeight, SittingOrNeverStillGivesUpWithoutAHeight) {
-  StandingHeightOptions o;
-  o.search_s = 3.0;
-  StandingHeightDetector sitting(o), moving(o);
+TEST(StandingHeight, SittingGivesUpAWalkGetsTheFallbackAndGapsAreIgnored) {
+  const StandingHeightOptions o;  // fallback after 1.5 s: the 90th percentile
+  StandingHeightDetector sitting(o), walking(o), swaying(o);
+  std::optional<StandingHeight> walk, sway;
   for (int k = 0; k < 450; ++k) {
     const double t = k / 90.0;
     EXPECT_FALSE(sitting.push(head_at(t, Vec3(0, 0.85, 0))));  // still, but below min_height_m
-    EXPECT_FALSE(moving.push(head_at(t, Vec3(std::sin(3.0 * t), 1.6, 0))));
+    // 1 m/s with the head bobbing 3 cm at 2 steps a second: never still.
+    if (auto h = walking.push(head_at(t, Vec3(t, 1.55 + 0.03 * std::sin(4.0 * M_PI * t), 0)))) walk = h;
+    // In place but bouncing 8 cm up and down once a second: any half second spans at least 4 cm.
+    if (auto h = swaying.push(head_at(t, Vec3(0, 1.60 + 0.04 * std::sin(2.0 * M_PI * t), 0)))) sway = h;
   }
   EXPECT_TRUE(sitting.done());
-  EXPECT_TRUE(moving.done());
-  EXPECT_FALSE(sitting.height_m());
+  EXPECT_FALSE(sitting.result());
+  ASSERT_TRUE(walk);
+  EXPECT_TRUE(walk->fallback);
+  EXPECT_EQ(walk->t_ns, head_at(1.5, Vec3::Zero()).t_ns);
+  // The 90th percentile of 1.55 + 0.03 sin over three whole periods: sin exceeds v for a fraction
+  // (pi - 2 asin v) / (2 pi) of the time, 10% at v = sin(0.4 pi). Within a sample step (1.3 mm)
+  // and the 1 mm bin.
+  EXPECT_NEAR(walk->measured_m, 1.55 + 0.03 * std::sin(0.4 * M_PI), 0.003);
+  EXPECT_NEAR(walk->head_height_m, walk->measured_m / o.stance_ratio, 1e-12);
+  ASSERT_TRUE(sway);
+  EXPECT_TRUE(sway->fallback);
+
+  // Without the fallback a walk never gives a height.
+  StandingHeightOptions no_fallback = o;
+  no_fallback.fallback_after_s = 0.0;
+  StandingHeightDetector never(no_fallback);
+  for (int k = 0; k < 900; ++k) EXPECT_FALSE(never.push(head_at(k / 90.0, Vec3(k / 90.0, 1.55, 0))));
+  EXPECT_FALSE(never.done());
+
   // A gap (invalid samples) neither starts nor ends a stretch.
   StandingHeightDetector gap;
-  std::optional<double> h;
-  for (int k = 0; k <= 90 && !h; ++k) h = gap.push(head_at(k / 90.0, Vec3(0, 1.5, 0), k % 10 != 3));
+  std::optional<StandingHeight> h;
+  for (int k = 0; k <= 45 && !h; ++k) h = gap.push(head_at(k / 90.0, Vec3(0, 1.5, 0), k % 10 != 3));
   ASSERT_TRUE(h);
-  EXPECT_NEAR(*h, 1.5, 1e-12);
+  EXPECT_NEAR(h->measured_m, 1.5, 1e-12);
+  EXPECT_EQ(h->t_ns, head_at(0.5, Vec3::Zero()).t_ns);
+}
+
+TEST(StandingHeight, AnySampleRateWithoutAllocatingAndBadOptionsRefused) {
+  // 1 kHz (above the detector's 250 Hz spacing): found at 0.5 s all the same, no allocation.
+  StandingHeightDetector d;
+  std::optional<StandingHeight> h;
+  {
+    test::AllocationCounter allocations;
+    for (int k = 0; k <= 600 && !h; ++k) h = d.push(head_at(k / 1000.0, Vec3(0.001 * (k % 3), 1.7, 0)));
+    EXPECT_EQ(allocations.count(), 0);
+  }
+  ASSERT_TRUE(h);
+  EXPECT_NEAR(h->t_ns * 1e-9, 0.5, 0.0045);
+  EXPECT_NEAR(h->measured_m, 1.7, 1e-12);
+  StandingHeightOptions bad;
+  bad.still_s = 0.0;
+  EXPECT_NE(validate(bad).find("still_s"), std::string::npos);
+  bad = {};
+  bad.fallback_percentile = 120.0;
+  EXPECT_NE(validate(bad).find("fallback_percentile"), std::string::npos);
+  EXPECT_THROW(StandingHeightDetector{bad}, std::invalid_argument);
 }
 
 TEST(StandingHeight, CalibrationAppliesPlausibleHeightsOnly) {

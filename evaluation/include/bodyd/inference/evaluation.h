@@ -123,11 +123,15 @@ struct EvalReport {
   std::vector<GroupReport> groups;
   double body_scale = 1.0;
   bool calibrate = false;
-  // With calibrate: clips where the detector found a standing stretch (per calibrated method,
+  // With calibrate: clips where the detector found a standing height (a still stretch or the fallback) (per calibrated method,
   // the same for each), and the mean |measured - true| standing head height over them, cm (the
   // true one: standing_head_height_m() of the scaled clip's skeleton).
   int calibrated_clips = 0;
+  int fallback_clips = 0;              // of those, calibrated by the detector's fallback estimate
   double calibration_error_cm = 0.0;
+  double calibration_scale_error = 0.0;      // mean |measured / true - 1| (0.01: 1%)
+  double calibration_scale_error_max = 0.0;  // the largest
+  double calibration_time_s = 0.0;     // mean time from a clip's first frame to its calibration
   // Timing of "diffusion" if evaluated, otherwise of the first method.
   std::string timing_method;
   double ms_per_frame_p50 = 0.0;

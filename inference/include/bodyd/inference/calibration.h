@@ -3,11 +3,12 @@
 // The reconstructors scale by the user's standing head height (Reconstructor::set_user_height).
 // Two ways to measure it, both ending in calibrate_from_head_height():
 //  - on request: the control socket's {"cmd":"calibrate","from":"head"} takes the head's
-//    current height;
+//    current height (standing_height_from_head(), the same stance correction as below);
 //  - automatically: StandingHeightDetector watches the head samples from the start of a session
-//    and reports the head's height once it has held still for `still_s` seconds.
-// bodyd-eval --body-scale uses the same detector and the same function, so the evaluation
-// measures what the daemon does.
+//    and reports the standing head height once the head has held still (or, failing that, a
+//    fallback estimate after a few seconds).
+// The daemon's auto calibration and bodyd-eval --body-scale both run StandingHeightDetector then
+// calibrate_from_head_height(), so the evaluation measures what the daemon does.
 #pragma once
 
 #include "bodyd/inference/reconstructor.h"
@@ -16,6 +17,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace bodyd {
 
@@ -25,40 +27,79 @@ namespace bodyd {
 // is left unchanged. set_user_height() resets the reconstructor's history.
 [[nodiscard]] std::string calibrate_from_head_height(Reconstructor& reconstructor, double head_height_m);
 
+struct StandingHeightOptions;
+// The standing head height (reconstructor's sense) of a head measured at `measured_m` while
+// the user stands: measured_m / options.stance_ratio.
+[[nodiscard]] double standing_height_from_head(double measured_m, const StandingHeightOptions& options);
+
 struct StandingHeightOptions {
-  double still_s = 1.0;             // the head must hold still this long
-  double max_travel_m = 0.04;       // "still": every head position of the stretch within this
-                                    // distance of the stretch's first one (metres)
-  double search_s = 10.0;           // only within this long after the first valid head sample
-  double min_height_m = 0.9;        // a still head lower than this is not standing (sitting,
-                                    // crouching): keep looking
+  // "Still": a stretch of `still_s` seconds in which the head's height varies by at most
+  // `max_height_range_m` and its floor position by at most `max_floor_travel_m` (from the
+  // stretch's first sample), with every sample at least `min_height_m` high. Chosen on the
+  // held-out training clips (training/heldout.txt; docs/evaluation.md, "Calibration"): every clip
+  // that starts standing passes within its first half second, at body scales 0.8 to 1.2, and no
+  // walking, running or crouching start does.
+  double still_s = 0.5;
+  double max_height_range_m = 0.03;
+  double max_floor_travel_m = 0.15;  // 0.3 m/s over half a second: sway passes, a slow walk does not
+  double min_height_m = 0.9;         // a still head lower than this is not standing (sitting, crouching)
+  // Without a still stretch by `fallback_after_s` (seconds after the first valid head sample),
+  // the height is the `fallback_percentile` of the head's heights so far (a walking head bobs
+  // up to about its standing height); 0 turns the fallback off. Reported as such.
+  double fallback_after_s = 1.5;
+  double fallback_percentile = 90.0;
+  // A still head in a relaxed stance is this fraction of the reference standing pose's head
+  // height (ik.h, standing_reference), the "standing head height" the reconstructors scale by:
+  // 0.987 measured on the held-out training clips (the median over their still starts). The
+  // reported height is the measured one divided by this.
+  double stance_ratio = 0.987;
+};
+// Empty when usable, otherwise what is wrong (names the field).
+[[nodiscard]] std::string validate(const StandingHeightOptions& options);
+
+// What StandingHeightDetector found.
+struct StandingHeight {
+  double head_height_m = 0.0;      // standing head height to calibrate with (stance_ratio applied)
+  double measured_m = 0.0;         // the head's height as measured (mean of the still stretch, or
+                                   // the fallback percentile)
+  bool fallback = false;           // no still stretch: the fallback percentile
+  std::int64_t t_ns = 0;           // the sample that completed it
 };
 
-// Finds the first stretch of `still_s` seconds in which the head holds still (from the first
-// valid head sample on, within `search_s`), and reports the mean head height over it. Pure: times
-// come from the samples. Does not allocate. Not thread-safe: one thread drives one object.
+// Finds the first still stretch of the head (from the first valid head sample on) and reports the
+// standing head height from it, or the fallback estimate. Pure: times come from the samples.
+// Buffers are allocated in the constructor; push() does not allocate. Not thread-safe: one thread
+// drives one object.
 class StandingHeightDetector {
  public:
-  explicit StandingHeightDetector(const StandingHeightOptions& options = {}) : options_(options) {}
+  explicit StandingHeightDetector(const StandingHeightOptions& options = {});
 
-  // Feeds a sample (other roles and invalid samples are ignored). Returns the standing head
-  // height (metres) exactly once: at the sample completing the first still stretch.
-  [[nodiscard]] std::optional<double> push(const TrackerSample& sample);
-  // Whether the detector has reported a height or given up (search_s passed).
+  // Feeds a sample (other roles, invalid and non-finite samples, and samples not later than the
+  // previous head sample are ignored). Returns the result exactly once: at the sample completing
+  // the first still stretch, or at the first sample `fallback_after_s` after the first one.
+  [[nodiscard]] std::optional<StandingHeight> push(const TrackerSample& sample);
+  // Whether the detector has reported (or given up: fallback off, or no plausible height).
   [[nodiscard]] bool done() const { return done_; }
-  [[nodiscard]] std::optional<double> height_m() const { return height_m_; }
+  [[nodiscard]] const std::optional<StandingHeight>& result() const { return result_; }
   // Starts over (a new session).
   void reset();
 
  private:
+  struct Entry {
+    std::int64_t t_ns;
+    Vec3 p;
+  };
+  [[nodiscard]] bool window_still(std::int64_t t_ns) const;
+  [[nodiscard]] double fallback_height() const;
+
   StandingHeightOptions options_;
   bool started_ = false, done_ = false;
-  std::int64_t first_t_ns_ = 0;     // first valid head sample
-  std::int64_t anchor_t_ns_ = 0;    // start of the current still stretch
-  Vec3 anchor_p_ = Vec3::Zero();
-  double sum_y_ = 0.0;
-  std::int64_t count_ = 0;
-  std::optional<double> height_m_;
+  std::int64_t first_t_ns_ = 0;
+  std::vector<Entry> ring_;              // recent head samples, at least kMinSpacingNs apart
+  std::size_t ring_head_ = 0, ring_count_ = 0;
+  std::vector<std::uint32_t> histogram_;  // head heights, 1 mm bins from 0 (fallback)
+  std::uint64_t histogram_count_ = 0;
+  std::optional<StandingHeight> result_;
 };
 
 }  // namespace bodyd
