@@ -235,6 +235,7 @@ std::string apply_config_json(const json& j, const std::string& source, DaemonCo
     else if (key == "record_trackers") ok = get_value(value, w, config.record_trackers_file, error);
     else if (key == "rate_hz") ok = get_value(value, w, config.rate_hz, error);
     else if (key == "queue_capacity") ok = get_value(value, w, config.queue_capacity, error);
+    else if (key == "queue_max_age_ms") ok = get_value(value, w, config.queue_max_age_ms, error);
     else if (key == "method") ok = get_value(value, w, config.method, error);
     else if (key == "model") ok = get_value(value, w, config.model_path, error);
     else if (key == "models_dir") ok = get_value(value, w, config.models_dir, error);
@@ -334,6 +335,9 @@ std::string validate_config(const DaemonConfig& c) {
     return "rate_hz must be between 0 (one pose per head sample) and " + fmt_number(limits::kMaxRateHz) + ", not " +
            fmt_number(c.rate_hz);
   if (c.queue_capacity < 16 || c.queue_capacity > (1u << 20)) return "queue_capacity must be in 16 .. 1048576";
+  if (!(c.queue_max_age_ms >= 0.0) || !(c.queue_max_age_ms <= 60000.0))
+    return "queue_max_age_ms (--queue-max-age-ms) must be between 0 (never drop for age) and 60000, not " +
+           fmt_number(c.queue_max_age_ms);
   if (c.send_hwm < 1) return "send_hwm must be >= 1";
   // A wildcard port (tcp://127.0.0.1:*) gives each socket its own ephemeral port.
   if (c.pub_endpoint == c.control_endpoint && !c.pub_endpoint.ends_with(":*") && !c.pub_endpoint.ends_with(":0"))
@@ -395,6 +399,7 @@ json config_to_json(const DaemonConfig& c) {
       {"outputs", c.outputs},
       {"rate_hz", c.rate_hz},
       {"queue_capacity", c.queue_capacity},
+      {"queue_max_age_ms", c.queue_max_age_ms},
       {"method", c.method},
       {"model", c.model_path},
       {"models_dir", c.models_dir},
@@ -483,6 +488,8 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
                  "write every tracker sample received to FILE (tracker log v1; replay it with --replay FILE --fast)");
   app.add_option("--rate-hz", config.rate_hz, "output rate limit; 0: one pose per head sample")->check(CLI::NonNegativeNumber);
   app.add_option("--queue-capacity", config.queue_capacity, "tracker samples the queue holds");
+  app.add_option("--queue-max-age-ms", config.queue_max_age_ms,
+                 "drop queued samples that arrived more than this before the newest (0: never)");
   app.add_option("--method", config.method, "reconstruction: diffusion (default) or ik");
   app.add_option("--model", config.model_path, "model file (default models/bodyd-default.safetensors)");
   app.add_option("--models-dir", config.models_dir,

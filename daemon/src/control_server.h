@@ -1,4 +1,5 @@
-// The control socket (docs/control.md): a REP socket and the thread that answers it. The
+// The control socket (docs/control.md): a ROUTER socket answering REQ clients, each request
+// with its own envelope, and the thread that answers it. The
 // requests are parsed by control.h's handle_control_request, which calls the ControlTarget.
 #pragma once
 

@@ -53,6 +53,13 @@ namespace {
 constexpr auto kPopTimeout = std::chrono::milliseconds(20);
 constexpr std::int64_t kOutputErrorLogPeriodNs = 10'000'000'000;  // one log line per output per 10 s
 
+// config.queue_max_age_ms as the queue takes it (validate_config checks 0 .. 60000; a Daemon
+// built from an unchecked config gets it clamped, never a throw).
+std::chrono::nanoseconds queue_max_age(const DaemonConfig& config) {
+  const double ms = std::clamp(std::isfinite(config.queue_max_age_ms) ? config.queue_max_age_ms : 0.0, 0.0, 60000.0);
+  return std::chrono::nanoseconds(static_cast<std::int64_t>(ms * 1e6));
+}
+
 // One output and what the daemon keeps for it: its rate gate and counters.
 struct OutputSlot {
   std::unique_ptr<Output> output;
@@ -156,7 +163,7 @@ struct Daemon::Impl final : ControlTarget {
   Impl(DaemonConfig c, ReconstructorFactory f)
       : config(std::move(c)),
         factory(std::move(f)),
-        queue(std::max<std::size_t>(config.queue_capacity, 16)),
+        queue(std::max<std::size_t>(config.queue_capacity, 16), queue_max_age(config)),
         rate_gate(config.rate_hz) {
     for (const auto& o : config.offsets) offsets_configured |= o.has_value();
   }
@@ -527,6 +534,7 @@ struct Daemon::Impl final : ControlTarget {
     j["sources_started"] = sources_started.load();
     stats.to_json(j);
     j["samples_dropped"] = queue.dropped();
+    j["samples_dropped_stale"] = queue.dropped_stale();
     j["queue_depth"] = queue.size();
     j["queue_capacity"] = queue.capacity();
     if (pub) j["sends_failed"] = j["sends_failed"].get<std::uint64_t>() + pub->skeleton_sends_failed();
@@ -771,8 +779,8 @@ void Daemon::stop() {
   d.recorder.close();
   d.control.stop();
   if (d.started)
-    spdlog::info("stopped: {} samples in, {} poses out, {} samples dropped", d.stats.samples_in.get(),
-                 d.stats.frames_out.get(), d.queue.dropped());
+    spdlog::info("stopped: {} samples in, {} poses out, {} samples dropped ({} of them stale)", d.stats.samples_in.get(),
+                 d.stats.frames_out.get(), d.queue.dropped() + d.queue.dropped_stale(), d.queue.dropped_stale());
   d.started = false;
   d.close_outputs();
 }

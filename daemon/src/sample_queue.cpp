@@ -4,25 +4,44 @@
 
 namespace bodyd::daemon {
 
-SampleQueue::SampleQueue(std::size_t capacity) : ring_(capacity) {
+SampleQueue::SampleQueue(std::size_t capacity, std::chrono::nanoseconds max_age)
+    : ring_(capacity), may_drop_stale_(capacity, 0), max_age_(max_age) {
   if (capacity == 0) throw std::invalid_argument("SampleQueue: capacity must be > 0");
+  if (max_age < std::chrono::nanoseconds::zero()) throw std::invalid_argument("SampleQueue: max_age must be >= 0");
 }
 
-void SampleQueue::push_locked(const drivers::SourceSample& sample) {
+void SampleQueue::push_locked(const drivers::SourceSample& sample, bool may_drop_stale) {
   if (count_ == ring_.size()) {  // full: drop the oldest
     head_ = (head_ + 1) % ring_.size();
     --count_;
     ++dropped_;
   }
-  ring_[(head_ + count_) % ring_.size()] = sample;
+  const std::size_t slot = (head_ + count_) % ring_.size();
+  ring_[slot] = sample;
+  may_drop_stale_[slot] = may_drop_stale ? 1 : 0;
   ++count_;
   ++pushed_;
+}
+
+void SampleQueue::drop_stale_locked() {
+  if (max_age_ <= std::chrono::nanoseconds::zero() || count_ < 2) return;
+  const std::int64_t newest_ns = ring_[(head_ + count_ - 1) % ring_.size()].arrival_ns;
+  const std::int64_t max_age_ns = max_age_.count();
+  // The newest sample always stays: at least one sample is taken. Arrival times come from one
+  // monotonic clock but from several source threads, so they may be slightly out of order; a
+  // sample newer than the newest is never stale. (newest - oldest cannot overflow: both are
+  // monotonic-clock readings.)
+  while (count_ > 1 && may_drop_stale_[head_] && newest_ns - ring_[head_].arrival_ns > max_age_ns) {
+    head_ = (head_ + 1) % ring_.size();
+    --count_;
+    ++dropped_stale_;
+  }
 }
 
 void SampleQueue::push(const drivers::SourceSample& sample) {
   {
     std::lock_guard lock(mutex_);
-    push_locked(sample);
+    push_locked(sample, true);
   }
   not_empty_.notify_one();
 }
@@ -31,7 +50,7 @@ bool SampleQueue::push_wait(const drivers::SourceSample& sample, std::chrono::na
   {
     std::unique_lock lock(mutex_);
     if (!not_full_.wait_for(lock, timeout, [this] { return count_ < ring_.size(); })) return false;
-    push_locked(sample);
+    push_locked(sample, false);
   }
   not_empty_.notify_one();
   return true;
@@ -41,6 +60,7 @@ bool SampleQueue::pop(drivers::SourceSample& out, std::chrono::nanoseconds timeo
   {
     std::unique_lock lock(mutex_);
     if (!not_empty_.wait_for(lock, timeout, [this] { return count_ > 0; })) return false;
+    drop_stale_locked();
     out = ring_[head_];
     head_ = (head_ + 1) % ring_.size();
     --count_;
@@ -62,6 +82,11 @@ std::uint64_t SampleQueue::pushed() const {
 std::uint64_t SampleQueue::dropped() const {
   std::lock_guard lock(mutex_);
   return dropped_;
+}
+
+std::uint64_t SampleQueue::dropped_stale() const {
+  std::lock_guard lock(mutex_);
+  return dropped_stale_;
 }
 
 }  // namespace bodyd::daemon

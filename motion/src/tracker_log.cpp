@@ -65,6 +65,12 @@ std::optional<TrackerSample> TrackerLogParser::feed_line(std::string_view raw) {
 
   switch (state_) {
     case State::Version:
+      // A UTF-8 byte order mark (EF BB BF, what some Windows editors put first) is skipped, as
+      // the config reader does; a UTF-16 one means the file is not UTF-8 at all.
+      if (line_ == 1 && line.starts_with("\xEF\xBB\xBF")) line.remove_prefix(3);
+      if (line_ == 1 && (line.starts_with("\xFF\xFE") || line.starts_with("\xFE\xFF")))
+        fail("the file is UTF-16 text (it starts with a UTF-16 byte order mark): save it as UTF-8 "
+             "(docs/tracker-log.md)");
       if (line == kTrackerLogVersionLine) {
         state_ = State::Preamble;
         return std::nullopt;

@@ -53,6 +53,66 @@ TEST(SampleQueue, KeepsOrderAndDropsOldestWhenFull) {
   EXPECT_FALSE(q.pop(out, 1ms));
 }
 
+// Issue 11: under overload the queue filled with seconds of old samples and every pose came
+// that late. With a max age, pop skips (and counts) what arrived more than max_age before the
+// newest queued sample. The arrival stamps are set here: no clock, no timing.
+SourceSample arrived_at(std::int64_t arrival_ms, Role role = Role::Head) {
+  SourceSample s = sample_at(arrival_ms * 1'000'000, role);
+  s.arrival_ns = arrival_ms * 1'000'000;
+  return s;
+}
+
+TEST(SampleQueue, DropsSamplesMoreThanMaxAgeBehindTheNewest) {
+  SampleQueue q(1024, 100ms);
+  // A consumer that fell behind: 11 ms apart, 300 samples = 3.3 s queued.
+  for (int i = 0; i < 300; ++i) q.push(arrived_at(11 * i, static_cast<Role>(i % 3)));
+  EXPECT_EQ(q.size(), 300u);
+  SourceSample out;
+  ASSERT_TRUE(q.pop(out, 0ms));
+  // Newest arrived at 3289 ms: everything before 3189 ms is stale; the first kept is 3190 ms.
+  EXPECT_EQ(out.arrival_ns, 3190'000'000);
+  EXPECT_EQ(q.dropped_stale(), 290u);
+  EXPECT_EQ(q.dropped(), 0u);
+  // The rest come in order, none dropped (all within 100 ms of the newest).
+  for (int i = 291; i < 300; ++i) {
+    ASSERT_TRUE(q.pop(out, 0ms));
+    EXPECT_EQ(out.arrival_ns, 11'000'000LL * i);
+  }
+  EXPECT_EQ(q.dropped_stale(), 290u);
+  // Exactly max_age behind is not stale; a lone sample is never dropped, however old.
+  q.push(arrived_at(10'000));
+  q.push(arrived_at(10'100));
+  ASSERT_TRUE(q.pop(out, 0ms));
+  EXPECT_EQ(out.arrival_ns, 10'000'000'000);
+  ASSERT_TRUE(q.pop(out, 0ms));
+  q.push(arrived_at(0));
+  ASSERT_TRUE(q.pop(out, 0ms));
+  EXPECT_EQ(out.arrival_ns, 0);
+  EXPECT_EQ(q.dropped_stale(), 290u);
+}
+
+TEST(SampleQueue, WithoutMaxAgeOrWithPushWaitNothingIsDroppedForAge) {
+  SampleQueue plain(1024);
+  for (int i = 0; i < 300; ++i) plain.push(arrived_at(11 * i));
+  SourceSample out;
+  ASSERT_TRUE(plain.pop(out, 0ms));
+  EXPECT_EQ(out.arrival_ns, 0);  // the old behaviour: the oldest first
+  EXPECT_EQ(plain.dropped_stale(), 0u);
+
+  // A lossless replay (push_wait) loses nothing to age, even mixed with a live source's samples.
+  SampleQueue q(1024, 100ms);
+  for (int i = 0; i < 100; ++i) ASSERT_TRUE(q.push_wait(arrived_at(11 * i), 0ms));
+  q.push(arrived_at(5000));
+  for (int i = 0; i < 100; ++i) {
+    ASSERT_TRUE(q.pop(out, 0ms));
+    EXPECT_EQ(out.arrival_ns, 11'000'000LL * i);
+  }
+  ASSERT_TRUE(q.pop(out, 0ms));
+  EXPECT_EQ(out.arrival_ns, 5'000'000'000);
+  EXPECT_EQ(q.dropped_stale(), 0u);
+  EXPECT_THROW(SampleQueue(4, -1ms), std::invalid_argument);
+}
+
 TEST(SampleQueue, PushWaitTimesOutWhenFullAndSucceedsWhenDrained) {
   SampleQueue q(2);
   ASSERT_TRUE(q.push_wait(sample_at(1), 0ms));
@@ -186,7 +246,7 @@ TEST(Config, FileSetsEveryKeyAndFlagsOverrideIt) {
     "exit_at_end": true, "sim": {"rate_hz": 72, "left_hand_rate_hz": 60, "position_noise_mm": 2, "seed": 7},
     "pub": "tcp://127.0.0.1:6000", "control": "none", "allow_remote": false, "curve_secret_key": "",
     "send_hwm": 50, "wait_for_subscriber": true, "endpoints_file": "e.json", "rate_hz": 30,
-    "queue_capacity": 256, "method": "ik", "model": "m.safetensors", "skeleton": "s.bvh",
+    "queue_capacity": 256, "queue_max_age_ms": 40, "method": "ik", "model": "m.safetensors", "skeleton": "s.bvh",
     "head_height_m": 1.6, "log_level": "debug",
     "offsets": {"left_hand": {"position_m": [0, 0, -0.1], "rotation_xyzw": [0, 0.7071068, 0, 0.7071068]}}
   })";
@@ -210,6 +270,7 @@ TEST(Config, FileSetsEveryKeyAndFlagsOverrideIt) {
   EXPECT_TRUE(c.wait_for_subscriber);
   EXPECT_EQ(c.rate_hz, 0.0);  // flag over file
   EXPECT_EQ(c.queue_capacity, 256u);
+  EXPECT_EQ(c.queue_max_age_ms, 40.0);
   EXPECT_EQ(c.method, "ik");
   EXPECT_EQ(c.model_path, "m.safetensors");
   EXPECT_EQ(c.skeleton_path, "s.bvh");
@@ -342,6 +403,23 @@ TEST(Config, LimitsOnRatesSpeedsAndOffsets) {
   EXPECT_NE(daemon::parse_offset_flag("left_hand=inf,0,0", c), "");
   EXPECT_FALSE(c.offsets[1].has_value());
   EXPECT_EQ(daemon::parse_offset_flag("left_hand=2,-2,0.5", c), "");  // the limit itself is fine
+}
+
+TEST(Config, QueueMaxAge) {
+  daemon::DaemonConfig c;
+  EXPECT_EQ(c.queue_max_age_ms, 100.0);  // on by default (docs/daemon.md)
+  EXPECT_EQ(daemon::validate_config(c), "");
+  c.queue_max_age_ms = 0;  // off
+  EXPECT_EQ(daemon::validate_config(c), "");
+  for (double bad : {-1.0, 60001.0, std::nan("")}) {
+    c.queue_max_age_ms = bad;
+    EXPECT_NE(daemon::validate_config(c).find("queue_max_age_ms"), std::string::npos) << bad;
+  }
+  const char* argv[] = {"bodyd", "--queue-max-age-ms", "250"};
+  daemon::DaemonConfig f;
+  const auto r = daemon::parse_command_line(3, argv, f);
+  EXPECT_EQ(r.action, daemon::CliResult::Action::Run);
+  EXPECT_EQ(f.queue_max_age_ms, 250.0);
 }
 
 // Issue 11, item 9: every bad command line exits 2, as docs/daemon.md says (CLI11 used 105, 109).

@@ -182,6 +182,32 @@ TEST(TrackerLog, AcceptsCrlfCommentsBlankLinesAndZeroPoseForInvalid) {
   EXPECT_TRUE(c.metadata.empty());
 }
 
+// Issue 11: a UTF-8 byte order mark was refused as "missing version line" (config files accept
+// it). It is skipped on the first line only; UTF-16 is refused with what to do.
+TEST(TrackerLog, SkipsAUtf8ByteOrderMarkAndRefusesUtf16WithAHint) {
+  const TrackerLog plain = parse_tracker_log(kGood, "plain");
+  const TrackerLog bom = parse_tracker_log("\xEF\xBB\xBF" + std::string(kGood), "bom");
+  ASSERT_EQ(bom.samples.size(), plain.samples.size());
+  for (std::size_t i = 0; i < plain.samples.size(); ++i) {
+    EXPECT_EQ(bom.samples[i].t_ns, plain.samples[i].t_ns);
+    EXPECT_EQ(bom.samples[i].position_m, plain.samples[i].position_m);
+  }
+  EXPECT_EQ(bom.metadata, plain.metadata);
+  // The file reader too.
+  TempDir dir;
+  {
+    std::ofstream out(dir.path / "bom.csv", std::ios::binary);
+    out << "\xEF\xBB\xBF" << kGood;
+  }
+  EXPECT_EQ(read_tracker_log(dir.path / "bom.csv").samples.size(), plain.samples.size());
+  TrackerLogReader reader(dir.path / "bom.csv");
+  EXPECT_TRUE(reader.next().has_value());
+  // Only at the very start: a mark on a later line is not whitespace.
+  expect_error(with_line(3, "\xEF\xBB\xBFt_ns,role,valid,px,py,pz,qx,qy,qz,qw"), 3, "wrong column header");
+  expect_error(std::string("\xFF\xFE#\0 \0b\0", 8), 1, "UTF-16");
+  expect_error("\xEF\xBB\xBF\xEF\xBB\xBF" + std::string(kGood), 1, "missing version line");
+}
+
 TEST(TrackerLog, RejectsMissingOrWrongVersionAndHeader) {
   expect_error("", 1, "empty input");
   expect_error("t_ns,role,valid,px,py,pz,qx,qy,qz,qw\n0,head,1,0,0,0,0,0,0,1\n", 1, "missing version line");

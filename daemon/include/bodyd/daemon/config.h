@@ -67,6 +67,10 @@ struct DaemonConfig {
 
   double rate_hz = 0.0;      // 0: one pose per head sample; > 0: at most this many per second
   std::size_t queue_capacity = 1024;
+  // A queued sample that arrived more than this before the newest queued one is dropped
+  // (samples_dropped_stale in status): poses lag the trackers by at most about this when the
+  // reconstruction cannot keep up (issue 11). 0: never (only a full queue drops).
+  double queue_max_age_ms = 100.0;
 
   std::string method = "diffusion";  // "diffusion" or "ik"
   std::string model_path;            // "": default_model_path()

@@ -6,6 +6,13 @@
 // push_wait lets a source that can wait (a file replayed as fast as possible) wait for room
 // instead, so nothing is lost. A mutex + condition variable: the critical sections are a
 // few copies, far below the reconstruction time, and the consumer sleeps while idle.
+//
+// Stale samples (issue 11): when the consumer falls behind (a reconstruction slower than the
+// trackers), a full queue would hold seconds of old samples and every pose would come that
+// late. With max_age > 0, pop() first drops the oldest samples that arrived more than max_age
+// before the newest one queued (SourceSample::arrival_ns), counted in dropped_stale(), so a
+// pose is never built from a sample more than max_age behind the trackers. Samples pushed with
+// push_wait (a lossless replay) are never dropped for their age.
 #pragma once
 
 #include "bodyd/drivers/source.h"
@@ -21,30 +28,38 @@ namespace bodyd::daemon {
 
 class SampleQueue final : public drivers::SampleSink {
  public:
-  explicit SampleQueue(std::size_t capacity);
+  // max_age: zero = keep every sample until the queue is full.
+  explicit SampleQueue(std::size_t capacity, std::chrono::nanoseconds max_age = std::chrono::nanoseconds::zero());
 
   void push(const drivers::SourceSample& sample) override;
   [[nodiscard]] bool push_wait(const drivers::SourceSample& sample, std::chrono::nanoseconds timeout) override;
 
-  // Takes the oldest sample; waits up to `timeout` for one. False on timeout.
+  // Takes the oldest sample that is not stale (see above); waits up to `timeout` for one.
+  // False on timeout.
   [[nodiscard]] bool pop(drivers::SourceSample& out, std::chrono::nanoseconds timeout);
 
   [[nodiscard]] std::size_t size() const;
   [[nodiscard]] std::size_t capacity() const { return ring_.size(); }
   [[nodiscard]] std::uint64_t pushed() const;   // samples accepted (including later dropped ones)
   [[nodiscard]] std::uint64_t dropped() const;  // samples dropped because the queue was full
+  [[nodiscard]] std::uint64_t dropped_stale() const;  // samples dropped as more than max_age behind
+  [[nodiscard]] std::chrono::nanoseconds max_age() const { return max_age_; }
 
  private:
-  void push_locked(const drivers::SourceSample& sample);
+  void push_locked(const drivers::SourceSample& sample, bool may_drop_stale);
+  void drop_stale_locked();
 
   mutable std::mutex mutex_;
   std::condition_variable not_empty_;
   std::condition_variable not_full_;
   std::vector<drivers::SourceSample> ring_;
+  std::vector<std::uint8_t> may_drop_stale_;  // per slot: pushed with push() (not push_wait)
+  std::chrono::nanoseconds max_age_;
   std::size_t head_ = 0;  // index of the oldest sample
   std::size_t count_ = 0;
   std::uint64_t pushed_ = 0;
   std::uint64_t dropped_ = 0;
+  std::uint64_t dropped_stale_ = 0;
 };
 
 }  // namespace bodyd::daemon
