@@ -38,7 +38,6 @@ DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::
       skeleton_(model_->skeleton),
       user_skeleton_(model_->skeleton),
       history_(model_scale_history(options.history)),
-      raw_history_(model_scale_history(options.history)),
       filter_(options.filter) {
   if (std::string err = validate(options.filter); !err.empty()) throw std::invalid_argument(err);
   if (std::string err = features::check_skeleton(skeleton_); !err.empty())
@@ -84,13 +83,11 @@ void DiffusionReconstructor::push(const TrackerSample& sample) {
   }
   TrackerSample s = sample;
   s.position_m *= scale_;  // into the model's body size
-  (void)raw_history_.push(s);
   (void)history_.push(filter_.filter(s));
 }
 
 void DiffusionReconstructor::reset() {
   history_.clear();
-  raw_history_.clear();
   filter_.reset();
   emitted_head_ = emitted_count_ = 0;
   emitted_dropped_ = false;
@@ -293,7 +290,7 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
     const float v = newest[features::kContactOffset + static_cast<int>(s)];
     contact[s] = foot_locked_[s] ? v > options_.contact_off : v > options_.contact_on;
   }
-  // Hand goals: the raw tracker where valid, the model's hand where lost. When a hand is lost or
+  // Hand goals: the (filtered) tracker where valid, the model's hand where lost. When a hand is lost or
   // comes back, its goal starts where the hand was last emitted and eases to the new source
   // (offset halving every hand_*_half_life_s, shrinking at most hand_blend_max_speed_m_s), so the
   // hand never jumps (docs/model.md, "Tracked joints").
@@ -311,18 +308,23 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
     Vec3 base_p = out_global_.positions[hand];
     Quat base_q = out_global_.rotations[hand];
     if (valid) {
-      TrackerSample raw;
-      if (options_.exact_tracked_joints && raw_history_.query(role, t_ns, raw)) {
-        base_p = raw.position_m;
-        base_q = raw.rotation;
-      } else {
-        base_p = tracker_p[r];
-        base_q = tracker_q[r];
-      }
+      base_p = tracker_p[r];
+      base_q = tracker_q[r];
     }
     if (valid != hand_was_valid_[s] && have_last_ && emitted_count_ > 0) {
+      // The ease starts where the hand would be now had it kept its last velocity (the last two
+      // emitted frames), not where it was: a hand frozen for a frame while the body moves (a run
+      // carries it 10-20 cm a frame) is itself a jump.
       const Emitted& last = emitted(emitted_count_ - 1);
-      hand_offset_[s] = last.global.positions[hand] - base_p;
+      Vec3 start = last.global.positions[hand];
+      if (emitted_count_ > 1) {
+        const Emitted& prev = emitted(emitted_count_ - 2);
+        const std::int64_t step_ns = last.t_ns - prev.t_ns;
+        if (step_ns > 0 && step_ns <= 2 * frame_dt_ns_ && t_ns - last.t_ns <= 2 * frame_dt_ns_)
+          start += (last.global.positions[hand] - prev.global.positions[hand]) *
+                   (static_cast<double>(t_ns - last.t_ns) / static_cast<double>(step_ns));
+      }
+      hand_offset_[s] = start - base_p;
       hand_rot_offset_[s] = (last.global.rotations[hand] * base_q.conjugate()).normalized();
     } else {
       const double half_life = valid ? options_.hand_return_half_life_s : options_.hand_loss_half_life_s;
@@ -340,14 +342,15 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
     targets.hand_m[s] = hand_goal_p[s];
   }
 
-  // The Head joint on the raw head tracker, the body following the filtered one, the shoulders
-  // moved where a hand is out of reach (body_solver.h).
+  // The Head joint on the head tracker, the shoulders moved where a hand is out of reach
+  // (body_solver.h). The trackers are the filtered ones: the filter passes clean samples
+  // unchanged (its noise gate, one_euro.h), and on noisy ones the body and the tracked joints
+  // follow one smooth signal instead of the neck and hips taking up the noise.
   if (options_.exact_tracked_joints && upper_body_) {
-    TrackerSample raw;
-    targets.head_valid = head_valid && raw_history_.query(Role::Head, t_ns, raw);
+    targets.head_valid = head_valid;
     if (targets.head_valid) {
-      targets.head_m = raw.position_m;
-      targets.head_rotation = raw.rotation;
+      targets.head_m = head_p;
+      targets.head_rotation = head_q;
       targets.head_body_m = head_p;
     }
     (void)solve_tracked_body(skeleton_, *upper_body_, options_.body, targets, scratch_pose_, out_global_);

@@ -13,6 +13,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <optional>
 
 using namespace bodyd;
 
@@ -210,6 +211,115 @@ TEST_F(DefaultModel, UserHeightScalesTheBody) {
   const double toe = std::min(run.poses.back().global.positions[features::kToesL].y(),
                               run.poses.back().global.positions[features::kToesR].y());
   EXPECT_LT(toe, 0.12);
+}
+
+namespace {
+
+// Mean norm of the third difference of every body joint's position x fps^3 (the jitter of
+// docs/conventions.md), over frames [first, poses.size()).
+double jitter_m_s3(const std::vector<GlobalPose>& poses, double fps, size_t first = 0) {
+  double sum = 0;
+  int n = 0;
+  for (size_t f = std::max<size_t>(first, 3); f < poses.size(); ++f)
+    for (size_t j = 1; j < poses[f].positions.size(); ++j) {
+      sum += (poses[f].positions[j] - 3.0 * poses[f - 1].positions[j] + 3.0 * poses[f - 2].positions[j] -
+              poses[f - 3].positions[j]).norm() * fps * fps * fps;
+      ++n;
+    }
+  return sum / n;
+}
+
+std::vector<GlobalPose> globals(const Outputs& run) {
+  std::vector<GlobalPose> out;
+  for (const BodyPose& p : run.poses) out.push_back(p.global);
+  return out;
+}
+
+}  // namespace
+
+// Issue 10 item 3: on clean trackers (no noise) the Head joint is on the head tracker within
+// 1 mm and 0.5 degrees and the hands within 1 mm, every frame: the tracker filter must not put
+// its lag between the tracked joints and their trackers. (Samples at the clip's 30 Hz, as
+// bodyd-eval feeds them: the simulator's 90 Hz samples interpolate the 30 Hz clip linearly, and
+// its kinks read as about a millimetre of noise, docs/model.md.)
+TEST_F(DefaultModel, HeadAndHandsExactlyOnCleanTrackers) {
+  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
+  const auto samples = trackers(clip);
+  const auto times = frame_times(clip);
+  DiffusionReconstructor r(model_);
+  const Outputs run = feed_and_reconstruct(r, samples, times);
+  double head_m = 0, head_deg = 0, hand_m = 0;
+  for (size_t f = 0; f < times.size(); ++f) {
+    const GlobalPose truth = forward_kinematics(clip.skeleton, clip.frames[f]);
+    const auto head = static_cast<size_t>(features::kHead);
+    head_m = std::max(head_m, (run.poses[f].global.positions[head] - truth.positions[head]).norm());
+    head_deg = std::max(head_deg, geodesic_angle(run.poses[f].global.rotations[head], truth.rotations[head]) * 180 / M_PI);
+    for (int j : {features::kHandL, features::kHandR})
+      hand_m = std::max(hand_m, (run.poses[f].global.positions[static_cast<size_t>(j)] -
+                                 truth.positions[static_cast<size_t>(j)]).norm());
+  }
+  EXPECT_LT(head_m, 0.001);
+  EXPECT_LT(head_deg, 0.5);
+  EXPECT_LT(hand_m, 0.001);
+}
+
+// Issue 10 item 4: 2 mm / 1 degree tracker noise (30 Hz) must not shake the body: the output's
+// jitter stays within 2.5 x the clean run's (the tracked joints on the raw noisy samples gave
+// about 4 x) and the mean joint error grows by less than 1 cm.
+TEST_F(DefaultModel, TrackerNoiseDoesNotShakeTheBody) {
+  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
+  const auto times = frame_times(clip);
+  SimOptions o;
+  o.rate_hz = clip.fps();
+  o.seed = 3;
+  const auto clean = simulate_trackers(clip, o);
+  o.position_noise_mm = 2.0;
+  o.rotation_noise_deg = 1.0;
+  const auto noisy = simulate_trackers(clip, o);
+  DiffusionReconstructor a(model_), b(model_);
+  const Outputs ra = feed_and_reconstruct(a, clean, times), rb = feed_and_reconstruct(b, noisy, times);
+  // From 0.5 s on: the filter measures the noise over its first samples.
+  const double j_clean = jitter_m_s3(globals(ra), clip.fps(), 15), j_noisy = jitter_m_s3(globals(rb), clip.fps(), 15);
+  EXPECT_LT(j_noisy, 2.5 * j_clean) << "clean " << j_clean << " noisy " << j_noisy;
+  double err_clean = 0, err_noisy = 0;
+  for (size_t f = 0; f < times.size(); ++f) {
+    const GlobalPose truth = forward_kinematics(clip.skeleton, clip.frames[f]);
+    for (size_t j = 1; j < truth.positions.size(); ++j) {
+      err_clean += (ra.poses[f].global.positions[j] - truth.positions[j]).norm();
+      err_noisy += (rb.poses[f].global.positions[j] - truth.positions[j]).norm();
+    }
+  }
+  const double n = static_cast<double>(times.size() * (clip.skeleton.names.size() - 1));
+  EXPECT_LT(err_noisy / n - err_clean / n, 0.01);
+}
+
+// Issue 10 item 4: a hand back from a gap moves to its tracker without a jump: on every frame
+// its motion differs from the real hand's by less than 3 cm (the hand neither freezes while the
+// body walks on nor snaps back), and it is on its tracker again within 0.5 s.
+TEST_F(DefaultModel, AHandBackFromAGapEasesToItsTrackerWithoutAJump) {
+  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
+  auto samples = trackers(clip);
+  const auto times = frame_times(clip);
+  // The right hand is lost from 0.5 s to 1.0 s.
+  constexpr std::int64_t kLost = 500'000'000, kBack = 1'000'000'000;
+  for (TrackerSample& s : samples)
+    if (s.role == Role::RightHand && s.t_ns >= kLost && s.t_ns < kBack) s.valid = false;
+  DiffusionReconstructor r(model_);
+  const Outputs run = feed_and_reconstruct(r, samples, times);
+  const auto hand = static_cast<size_t>(features::kHandR);
+  double worst = 0;
+  std::optional<std::int64_t> on_tracker_ns;
+  for (size_t f = 1; f < times.size(); ++f) {
+    const GlobalPose a = forward_kinematics(clip.skeleton, clip.frames[f - 1]);
+    const GlobalPose b = forward_kinematics(clip.skeleton, clip.frames[f]);
+    const Vec3 step = run.poses[f].global.positions[hand] - run.poses[f - 1].global.positions[hand];
+    worst = std::max(worst, (step - (b.positions[hand] - a.positions[hand])).norm());
+    if (times[f] >= kBack && !on_tracker_ns && (run.poses[f].global.positions[hand] - b.positions[hand]).norm() < 0.002)
+      on_tracker_ns = times[f];
+  }
+  EXPECT_LT(worst, 0.03) << "worst " << worst;
+  ASSERT_TRUE(on_tracker_ns.has_value()) << "the hand never got back onto its tracker";
+  EXPECT_LE(*on_tracker_ns - kBack, 500'000'000);
 }
 
 namespace {

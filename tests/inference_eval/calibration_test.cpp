@@ -164,9 +164,39 @@ TEST(OneEuro, StillNoiseIsRemovedAndFastMotionFollowedClosely) {
     if (k >= 90) lag = std::max(lag, 1.5 * t - r.position_m.x());
   }
   EXPECT_LT(std::sqrt(out_sq / n), 0.5 * std::sqrt(in_sq / n));
-  // Lag at speed tends to 1 / (2 pi beta) m (8 mm for beta 20) and stays below it.
-  EXPECT_GT(lag, 0.0);
-  EXPECT_LT(lag, 1.0 / (2.0 * M_PI * o.beta_per_m_s));
+  EXPECT_NEAR(still.position_noise_mm(), 2.0, 0.4);  // the noise gate measured it
+  EXPECT_EQ(still.position_gain(), 1.0);
+  // A clean tracker passes unchanged (the gate stays shut), so it has no lag at all.
+  EXPECT_LT(ramp.position_noise_mm(), o.noise_gate_low_mm);
+  EXPECT_LT(std::abs(lag), 1e-9);
+}
+
+TEST(OneEuro, NoiseGateTellsVigorousCleanMotionFromNoise) {
+  // A clean 3 Hz wave of 20 cm sampled at 30 Hz (jerk 1,300 m/s^3) is not noise; the same wave
+  // with 2 mm of noise is. The third differences alone could not tell them apart (docs/model.md).
+  OneEuroOptions o;
+  OneEuroFilter clean(o), noisy(o);
+  std::mt19937_64 rng(9);
+  std::normal_distribution<double> noise(0.0, 0.002);
+  double worst_clean_step = 0.0;
+  for (int k = 0; k < 150; ++k) {
+    const double t = k / 30.0;
+    const Vec3 p(0.2 * std::sin(2 * M_PI * 3 * t), 1.2, 0.0);
+    const TrackerSample c = clean.filter(head_at(t, p));
+    worst_clean_step = std::max(worst_clean_step, (c.position_m - p).norm());
+    (void)noisy.filter(head_at(t, p + Vec3(noise(rng), noise(rng), noise(rng))));
+  }
+  EXPECT_LT(clean.position_noise_mm(), o.noise_gate_low_mm);
+  EXPECT_EQ(worst_clean_step, 0.0);
+  EXPECT_GT(noisy.position_noise_mm(), o.noise_gate_high_mm);  // 2 mm (plus a little of the wave)
+  EXPECT_LT(noisy.position_noise_mm(), 3.0);
+  EXPECT_EQ(noisy.position_gain(), 1.0);
+  OneEuroOptions bad;
+  bad.noise_gate_high_mm = bad.noise_gate_low_mm;
+  EXPECT_NE(validate(bad).find("noise_gate"), std::string::npos);
+  bad = {};
+  bad.noise_window = 3;
+  EXPECT_NE(validate(bad).find("noise_window"), std::string::npos);
 }
 
 TEST(OneEuro, RotationsAreSmoothedAndAGapStartsOver) {

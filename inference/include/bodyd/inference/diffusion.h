@@ -33,7 +33,7 @@ struct DiffusionOptions {
   double elbow_pole_bias_m = 0.3;  // the elbow pole is pushed this far outward/down/back (see .cpp)
   double hand_return_half_life_s = 0.08;  // a hand that comes back eases from where the body had it
   double hand_loss_half_life_s = 0.15;    // a hand that is lost eases from its last place to the model's
-  double hand_blend_max_speed_m_s = 1.0;  // ... and those eases move the hand at most this much faster
+  double hand_blend_max_speed_m_s = 0.6;  // ... and those eases move the hand at most this much faster
   float contact_on = 0.5f, contact_off = 0.5f;  // contact hysteresis on the predicted contact value
   bool foot_lock = true;       // planted feet (predicted contact) do not slide (the leg swings about the hip)
   double foot_contact_speed_m_s = 0.0;    // a planted toe follows the prediction at most this fast
@@ -41,8 +41,8 @@ struct DiffusionOptions {
   double foot_release_half_life_s = 0.15; // a lifted foot eases from its planted spot to the prediction
   int emitted_capacity = 512;  // emitted frames kept for feedback (>= W * output rate / model fps)
   TrackerHistoryOptions history;
-  OneEuroOptions filter;       // tracker samples the network sees (the tracked joints use the raw ones)
-  bool exact_tracked_joints = true;  // Head and hands on the raw trackers (body_solver.h)
+  OneEuroOptions filter;       // tracker samples (network and tracked joints); clean ones pass unchanged
+  bool exact_tracked_joints = true;  // Head and hands on the (filtered) trackers (body_solver.h)
   BodySolverOptions body;
 };
 
@@ -91,8 +91,7 @@ class DiffusionReconstructor final : public Reconstructor {
   double scale_ = 1.0;      // model / user
   std::int64_t frame_dt_ns_ = 0;
   int W_ = 0;
-  TrackerHistory history_;      // filtered samples (model scale): the network's observations
-  TrackerHistory raw_history_;  // raw samples (model scale): where the tracked joints go
+  TrackerHistory history_;      // filtered samples (model scale): observations and tracked joints
   TrackerFilter filter_;
   std::optional<UpperBody> upper_body_;
   std::optional<TwoBoneChain> arms_[2];

@@ -5,11 +5,24 @@
 // model sees (docs/model.md, "Tracker filter"); the tracked joints are still placed on the raw
 // samples (body_solver.h).
 //
-// Position: cutoff_hz = min_cutoff_hz + beta_per_m_s * |v|, v the speed low-passed at
-// d_cutoff_hz; each step x = x_prev + a (x_in - x_prev) with a = 1 / (1 + 1 / (2 pi cutoff dt)).
+// Position: cutoff_hz = min_cutoff_hz + beta_per_m_s * |v|, v the velocity low-passed at
+// d_cutoff_hz; each step x = x_pred + a (x_in - x_pred) with a = 1 / (1 + 1 / (2 pi cutoff dt))
+// and x_pred = x_prev + v dt (predict_velocity; the paper's filter has x_pred = x_prev and lags
+// a steady motion by speed / (2 pi cutoff)).
 // Rotation: the same with the angular velocity (rad/s), by slerp from the previous output.
 // Time steps come from the samples' timestamps; a tracker that was invalid or silent for more
 // than `restart_after_s` starts over at its next valid sample (no smoothing across a gap).
+//
+// Noise gate: any low-pass lags, and a lag of millimetres on a clean tracker puts the tracked
+// joints off their trackers and shakes the body as the lag changes with speed. So the filter
+// measures each tracker's noise and filters only as much as it finds: the noise level is taken
+// from the third differences of the samples (for white noise of sigma per axis, E|D3|^2 =
+// 60 sigma^2 whatever the rate; human motion adds jerk * dt^3, small at tracker rates) as a low
+// quantile over the last `noise_window` samples (robust to bursts of motion), and the output is
+// raw + g * (filtered - raw) with the gain g rising from 0 at `noise_gate_low_mm` to 1 at
+// `noise_gate_high_mm` (rotations likewise, in degrees). A clean tracker (e.g. a headset with
+// sub-millimetre noise) passes unchanged; a noisy one gets the full filter. The noise
+// measurement survives gaps and starts over only at reset().
 // Pure, no allocation; not thread-safe (one thread drives one object).
 #pragma once
 
@@ -24,12 +37,23 @@ namespace bodyd {
 struct OneEuroOptions {
   bool enabled = true;
   double min_cutoff_hz = 1.0;        // position cutoff of a still tracker
-  double beta_per_m_s = 20.0;        // cutoff increase per m/s of speed (lag at speed -> 1/(2 pi beta) m)
+  double beta_per_m_s = 5.0;         // cutoff increase per m/s of speed
   double rot_min_cutoff_hz = 1.0;    // rotation cutoff of a still tracker
   double rot_beta_per_rad_s = 2.0;   // cutoff increase per rad/s of angular speed
   double d_cutoff_hz = 1.0;          // cutoff of the speed estimate
   double restart_after_s = 0.25;     // a gap longer than this restarts the filter
+  // Predict each step with the filtered velocity (x += v dt before the low-pass): a tracker
+  // moving steadily is followed without lag, so the cutoff can stay low (less noise) at speed.
+  bool predict_velocity = true;
+  // Noise gate (see above): no filtering below the low level, the full filter from the high one.
+  double noise_gate_low_mm = 1.25;   // measured position noise (sigma per axis)
+  double noise_gate_high_mm = 1.75;
+  double rot_noise_gate_low_deg = 0.5;   // measured rotation noise (sigma per axis)
+  double rot_noise_gate_high_deg = 0.8;
+  int noise_window = 64;             // samples the noise is measured over (16..kMaxNoiseWindow)
 };
+inline constexpr int kMaxNoiseWindow = 256;
+inline constexpr int kNoiseOrder = 6;  // the order of the differences the noise is measured by
 // Empty when usable, otherwise what is wrong (names the field).
 [[nodiscard]] std::string validate(const OneEuroOptions& options);
 
@@ -40,15 +64,36 @@ class OneEuroFilter {
   // The filtered sample (time, role and validity unchanged). Invalid samples pass unchanged and
   // mark a gap; samples not later than the previous one pass unchanged.
   [[nodiscard]] TrackerSample filter(const TrackerSample& in);
-  void reset() { started_ = false; }
+  void reset() {
+    started_ = false;
+    recent_count_ = noise_count_ = noise_next_ = 0;
+    position_gain_ = rotation_gain_ = 0.0;
+  }
+  // The measured noise (sigma per axis; 0 until noise_window / 4 differences are in) and the
+  // gains of the noise gate now.
+  [[nodiscard]] double position_noise_mm() const { return position_noise_mm_; }
+  [[nodiscard]] double rotation_noise_deg() const { return rotation_noise_deg_; }
+  [[nodiscard]] double position_gain() const { return position_gain_; }
+  [[nodiscard]] double rotation_gain() const { return rotation_gain_; }
 
  private:
+  void measure_noise(const TrackerSample& in);
+
   OneEuroOptions options_;
   bool started_ = false;
+  bool first_step_ = false;  // the next sample is the first after a (re)start
   std::int64_t last_t_ns_ = 0;
   Vec3 x_ = Vec3::Zero(), dx_ = Vec3::Zero();  // filtered position, filtered velocity (m/s)
   Quat q_ = Quat::Identity();
   Vec3 w_ = Vec3::Zero();                      // filtered angular velocity (rad/s, world)
+  // Noise measurement: the last valid samples of an uninterrupted stretch (oldest first) and a
+  // ring of squared third differences (position m^2, rotation rad^2).
+  std::array<TrackerSample, kNoiseOrder + 1> recent_{};
+  int recent_count_ = 0;
+  std::array<double, kMaxNoiseWindow> d3_position_{}, d3_rotation_{}, scratch_{};
+  int noise_count_ = 0, noise_next_ = 0;
+  double position_noise_mm_ = 0.0, rotation_noise_deg_ = 0.0;
+  double position_gain_ = 0.0, rotation_gain_ = 0.0;
 };
 
 // The filters of the three tracker roles.
@@ -62,6 +107,7 @@ class TrackerFilter {
   void reset() {
     for (OneEuroFilter& f : filters_) f.reset();
   }
+  [[nodiscard]] const OneEuroFilter& of(Role role) const { return filters_[static_cast<size_t>(role)]; }
 
  private:
   std::array<OneEuroFilter, kRoleCount> filters_;
