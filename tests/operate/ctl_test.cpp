@@ -1,6 +1,7 @@
 // bodyd-ctl against a running bodyd (docs/ctl.md): every control request, the human-readable
 // and JSON output, usage errors, and the message when no daemon answers.
 #include "../install/process.h"
+#include "operate_helpers.h"
 #include "../test_paths.h"
 
 #include "bodyd/protocol/pose_message.h"
@@ -18,9 +19,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-
-const std::string kBodyd = (bin_dir() / "bodyd").string();
-const std::string kCtl = (bin_dir() / "bodyd-ctl").string();
 
 // A bodyd (ik, the bundled recording looped at its pace) for the whole suite.
 class Ctl : public ::testing::Test {

@@ -5,6 +5,7 @@
 #include "bodyd/daemon/endpoint.h"
 #include "bodyd/protocol/pose_message.h"
 #include "../install/process.h"
+#include "operate_helpers.h"
 #include "../test_paths.h"
 
 #include <gtest/gtest.h>
@@ -16,9 +17,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-
-const std::string kBodyd = (bin_dir() / "bodyd").string();
-const std::string kCtl = (bin_dir() / "bodyd-ctl").string();
 
 std::string key_of(const fs::path& file) {
   std::string key;

@@ -3,6 +3,7 @@
 #include "bodyd/motion/tracker_log.h"
 #include "bodyd/protocol/pose_message.h"
 #include "../install/process.h"
+#include "operate_helpers.h"
 #include "../test_paths.h"
 
 #include <gtest/gtest.h>
@@ -20,8 +21,6 @@ namespace bodyd::test {
 namespace {
 
 namespace fs = std::filesystem;
-
-const std::string kBodyd = (bin_dir() / "bodyd").string();
 
 // Runs bodyd with `args` plus a pose endpoint, --exit-at-end and --wait-for-subscriber, and
 // returns every pose it published.
@@ -42,11 +41,7 @@ std::vector<protocol::PoseMessage> run_and_collect(std::vector<std::string> args
     return poses;
   }
   zmq::context_t ctx;
-  zmq::socket_t sub(ctx, zmq::socket_type::sub);
-  sub.set(zmq::sockopt::linger, 0);
-  sub.set(zmq::sockopt::rcvhwm, 0);
-  sub.set(zmq::sockopt::subscribe, std::string(protocol::kPoseTopic));
-  sub.connect(pub);
+  zmq::socket_t sub = pose_subscriber(ctx, pub);
   for (;;) {
     zmq::pollitem_t item{sub.handle(), 0, ZMQ_POLLIN, 0};
     if (zmq::poll(&item, 1, std::chrono::milliseconds(poses.empty() ? 10000 : 2000)) <= 0) break;
@@ -128,11 +123,7 @@ TEST(RecordTrackers, LiveUdpSessionReplaysToBitIdenticalPoses) {
                 {.output_dir = dir.path, .name = "live"});
   ASSERT_TRUE(wait_for_file(dir.path / "live.json", 20000)) << bodyd.log();
   zmq::context_t ctx;
-  zmq::socket_t sub(ctx, zmq::socket_type::sub);
-  sub.set(zmq::sockopt::linger, 0);
-  sub.set(zmq::sockopt::rcvhwm, 0);
-  sub.set(zmq::sockopt::subscribe, std::string(protocol::kPoseTopic));
-  sub.connect(pub);
+  zmq::socket_t sub = pose_subscriber(ctx, pub);
   std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the subscription reaches bodyd
 
   // 2 s of the bundled recording, paced.

@@ -2,6 +2,7 @@
 // datagram socket itself and checks READY=1, the watchdog pings and STOPPING=1; the user
 // config read by --user-config (what the unit runs).
 #include "../install/process.h"
+#include "operate_helpers.h"
 #include "../test_paths.h"
 
 #include <gtest/gtest.h>
@@ -15,9 +16,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-
-const std::string kBodyd = (bin_dir() / "bodyd").string();
-const std::string kCtl = (bin_dir() / "bodyd-ctl").string();
 
 // The service manager's end of NOTIFY_SOCKET: a bound AF_UNIX datagram socket.
 class NotifySocket {
