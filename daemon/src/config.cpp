@@ -130,6 +130,28 @@ std::string apply_offsets(const json& j, const std::string& where, DaemonConfig&
   return {};
 }
 
+// "filter": {"enabled": true, "min_cutoff_hz": 1.0, ...}: the diffusion's tracker filter.
+// Values are checked by validate_config (validate(OneEuroOptions)).
+std::string apply_filter(const json& j, const std::string& where, OneEuroOptions& filter) {
+  if (!j.is_object()) return where + ": expected an object like {\"enabled\": true, \"min_cutoff_hz\": 1.0}";
+  std::string error;
+  for (const auto& [key, value] : j.items()) {
+    const std::string w = where + "." + key;
+    bool ok = true;
+    if (key == "enabled") ok = get_value(value, w, filter.enabled, error);
+    else if (key == "min_cutoff_hz") ok = get_value(value, w, filter.min_cutoff_hz, error);
+    else if (key == "beta_per_m_s") ok = get_value(value, w, filter.beta_per_m_s, error);
+    else if (key == "d_cutoff_hz") ok = get_value(value, w, filter.d_cutoff_hz, error);
+    else if (key == "rot_min_cutoff_hz") ok = get_value(value, w, filter.rot_min_cutoff_hz, error);
+    else if (key == "rot_beta_per_rad_s") ok = get_value(value, w, filter.rot_beta_per_rad_s, error);
+    else
+      return w + ": unknown key (expected enabled, min_cutoff_hz, beta_per_m_s, d_cutoff_hz, rot_min_cutoff_hz, "
+                 "rot_beta_per_rad_s; docs/daemon.md, \"Tracker filter\")";
+    if (!ok) return error;
+  }
+  return {};
+}
+
 std::string apply_sim(const json& j, const std::string& where, SimOptions& sim) {
   if (!j.is_object()) return where + ": expected an object";
   std::string error;
@@ -241,6 +263,10 @@ std::string apply_config_json(const json& j, const std::string& source, DaemonCo
     else if (key == "models_dir") ok = get_value(value, w, config.models_dir, error);
     else if (key == "user_height_m") ok = get_value(value, w, config.user_height_m, error);
     else if (key == "head_height_m") ok = get_value(value, w, config.head_height_m, error);
+    else if (key == "auto_calibrate") ok = get_value(value, w, config.auto_calibrate, error);
+    else if (key == "filter") {
+      if (std::string e = apply_filter(value, w, config.filter); !e.empty()) return e;
+    }
     else if (key == "skeleton") ok = get_value(value, w, config.skeleton_path, error);
     else if (key == "offsets") {
       if (std::string e = apply_offsets(value, w, config); !e.empty()) return e;
@@ -351,6 +377,8 @@ std::string validate_config(const DaemonConfig& c) {
   }
   if (c.user_height_m > 0.0 && c.head_height_m > 0.0)
     return "give user_height_m (body height) or head_height_m (standing head height), not both";
+  if (std::string e = validate(c.filter); !e.empty())
+    return e + " (the \"filter\" keys: docs/daemon.md, \"Tracker filter\")";
   static const char* kLevels[] = {"trace", "debug", "info", "warn", "error", "critical", "off"};
   bool level_ok = false;
   for (const char* l : kLevels) level_ok |= c.log_level == l;
@@ -406,6 +434,14 @@ json config_to_json(const DaemonConfig& c) {
       {"skeleton", c.skeleton_path},
       {"user_height_m", c.user_height_m},
       {"head_height_m", c.head_height_m},
+      {"auto_calibrate", c.auto_calibrate},
+      {"filter",
+       {{"enabled", c.filter.enabled},
+        {"min_cutoff_hz", c.filter.min_cutoff_hz},
+        {"beta_per_m_s", c.filter.beta_per_m_s},
+        {"d_cutoff_hz", c.filter.d_cutoff_hz},
+        {"rot_min_cutoff_hz", c.filter.rot_min_cutoff_hz},
+        {"rot_beta_per_rad_s", c.filter.rot_beta_per_rad_s}}},
       {"offsets", offsets},
       {"log_level", c.log_level},
   };
@@ -499,6 +535,11 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
                  "user's body height in metres (approximate scaling; 0: the model's size)");
   app.add_option("--head-height-m", config.head_height_m,
                  "user's standing head height in metres (exact scaling; 0: the model's size)");
+  app.add_flag("!--no-auto-calibrate", config.auto_calibrate,
+               "do not calibrate the user's size from the head's first still half second (docs/daemon.md, "
+               "\"Calibration\")");
+  bool no_filter = false;
+  app.add_flag("--no-filter", no_filter, "no One Euro filter on the tracker samples (config \"filter\": {\"enabled\": false})");
   app.add_option("--offset", offset_flags,
                  "device offset ROLE=x,y,z[,qx,qy,qz,qw] (metres; rotation x,y,z,w), repeatable");
   app.add_option("--log-level", config.log_level, "trace, debug, info, warn, error, off");
@@ -526,6 +567,7 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
   for (const auto& s : sim_flags) sources.push_back("sim:" + s);
   if (!sources.empty()) config.sources = sources;
   if (!output_flags.empty()) config.outputs = output_flags;
+  if (no_filter) config.filter.enabled = false;
   for (const auto& o : offset_flags) {
     if (std::string e = parse_offset_flag(o, config); !e.empty()) {
       std::cerr << "bodyd: " << e << "\n";

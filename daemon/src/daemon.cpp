@@ -8,6 +8,7 @@
 #include "bodyd/daemon/output.h"
 #include "bodyd/daemon/sample_queue.h"
 #include "bodyd/daemon/tracker_recorder.h"
+#include "bodyd/inference/calibration.h"
 #include "bodyd/inference/features.h"
 #include "bodyd/drivers/open_source.h"
 #include "bodyd/protocol/pose_message.h"
@@ -131,6 +132,11 @@ struct Daemon::Impl final : ControlTarget {
   std::string method_name, model_path_text;
   double head_height_m = 0.0;
   bool height_calibrated = false;
+  // Where the height came from: "none" (the model's size), "config", "control" or "auto"; and the
+  // auto calibration's state: "off", "waiting", "still", "fallback", "superseded" (a height came
+  // from the config or the control socket first) or "refused" (an implausible height).
+  std::string calibration_source = "none";
+  std::string auto_calibration = "off";
   bool offsets_configured = false;
 
   // Reconstruction-thread state.
@@ -159,6 +165,11 @@ struct Daemon::Impl final : ControlTarget {
   std::int64_t last_valid_head_arrival_ns = 0;
 
   TrackerRecorder recorder;  // --record-trackers (reconstruction thread once started)
+
+  // Auto calibration (config.auto_calibrate): reconstruction thread. The same detector and
+  // calibrate_from_head_height() as bodyd-eval --body-scale (inference/calibration.h).
+  StandingHeightDetector height_detector;
+  bool auto_calibrating = false;
 
   Impl(DaemonConfig c, ReconstructorFactory f)
       : config(std::move(c)),
@@ -250,6 +261,7 @@ struct Daemon::Impl final : ControlTarget {
       spdlog::warn("head time went back by {:.3f} s: the reconstruction starts over", (last_pose_t_ns - s.t_ns) * 1e-9);
       stats.time_restarts.add();
       recon->reset();
+      if (auto_calibrating) height_detector.reset();  // its times went back too
       last_pose_t_ns = INT64_MIN;
       rate_gate = RateGate(rate_gate.rate_hz());
       for (auto& slot : outputs) slot->gate = RateGate(slot->gate.rate_hz());
@@ -258,6 +270,7 @@ struct Daemon::Impl final : ControlTarget {
       last_valid_head = s;
       last_valid_head_arrival_ns = in.arrival_ns;
     }
+    if (auto_calibrating && s.role == Role::Head) auto_calibrate(s);
     const std::int64_t refused_before = recon->refused_samples();
     recon->push(s);
     if (recon->refused_samples() != refused_before) stats.samples_refused.add();
@@ -333,14 +346,61 @@ struct Daemon::Impl final : ControlTarget {
     if (observer) observer(timing);
   }
 
+  // Feeds the head sample `s` (as the reconstructor gets it) to the detector; when it reports,
+  // calibrates before `s` is pushed (so `s` counts at the new size), as bodyd-eval does.
+  void auto_calibrate(const TrackerSample& s) {
+    const std::optional<StandingHeight> h = height_detector.push(s);
+    if (!h) {
+      if (height_detector.done()) {
+        auto_calibrating = false;
+        set_calibration(std::nullopt, "refused");
+        spdlog::warn("auto calibration: no plausible standing head height in the first {:.1f} s (sitting?): the "
+                     "model's size stays; stand up and run `bodyd-ctl calibrate --from-head`",
+                     StandingHeightOptions{}.fallback_after_s);
+      }
+      return;
+    }
+    auto_calibrating = false;
+    if (std::string e = calibrate_from_head_height(*recon, h->head_height_m); !e.empty()) {
+      set_calibration(std::nullopt, "refused");
+      spdlog::warn("auto calibration refused: {}", e);
+      return;
+    }
+    set_calibration("auto", h->fallback ? "fallback" : "still");
+    refresh_skeleton();
+    pub->publish_skeleton(monotonic_ns());
+    const std::string how =
+        h->fallback ? fmt::format("no still half second: the head's {:.0f}th percentile height {:.3f} m over the first {:.1f} s",
+                                  StandingHeightOptions{}.fallback_percentile, h->measured_m,
+                                  StandingHeightOptions{}.fallback_after_s)
+                    : fmt::format("the head held still at {:.3f} m", h->measured_m);
+    spdlog::info("auto calibrated: standing head height {:.3f} m ({})", recon->user_height(), how);
+    recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {} (auto: {})", s.t_ns, recon->user_height(), how));
+  }
+
+  // Records where the height came from (`source`: empty keeps it) and the auto state (empty keeps it).
+  void set_calibration(std::optional<std::string> source, std::string auto_state) {
+    std::lock_guard lock(shared_mutex);
+    if (source) {
+      calibration_source = *source;
+      height_calibrated = *source != "none";
+    }
+    if (!auto_state.empty()) auto_calibration = std::move(auto_state);
+  }
+
+  // A calibration from the control socket replaces the auto one (and stops it if it is waiting).
+  void manual_calibration_applied() {
+    const bool waiting = auto_calibrating;
+    auto_calibrating = false;
+    set_calibration("control", waiting ? "superseded" : std::string());
+  }
+
   json apply_command(Command& c) {
     switch (c.kind) {
       case Command::Kind::Height: {
         recon->set_user_height(c.height_m);
-        {
-          std::lock_guard lock(shared_mutex);
-          height_calibrated = c.height_m > 0.0;
-        }
+        if (c.height_m > 0.0) manual_calibration_applied();
+        else set_calibration("none", "");
         refresh_skeleton();
         spdlog::info("calibrated: standing head height {:.3f} m", recon->user_height());
         recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {}", last_valid_head.t_ns, recon->user_height()));
@@ -350,16 +410,13 @@ struct Daemon::Impl final : ControlTarget {
         const std::int64_t arrival_ns = stats.last_head_arrival_ns.load();
         if (arrival_ns == 0 || monotonic_ns() - arrival_ns > 2'000'000'000)
           return control_error("no valid head sample in the last 2 s: wear the headset, stand up straight, and retry");
-        // The reconstructors scale by the standing head height: the Head joint's height now.
+        // The Head joint's height now, as a standing height: the same correction and checks as
+        // the auto calibration and bodyd-eval (inference/calibration.h).
         const double measured_m = stats.last_head_y_m.load();
-        if (!(measured_m >= kMinUserHeightM && measured_m <= kMaxUserHeightM))
-          return control_error("the head is at y = " + std::to_string(measured_m) +
-                               " m, not a plausible standing head height: stand up straight on the floor (y = 0) and retry");
-        recon->set_user_height(measured_m);
-        {
-          std::lock_guard lock(shared_mutex);
-          height_calibrated = true;
-        }
+        if (std::string e = calibrate_from_head_height(*recon, standing_height_from_head(measured_m, StandingHeightOptions{}));
+            !e.empty())
+          return control_error(e);
+        manual_calibration_applied();
         refresh_skeleton();
         spdlog::info("calibrated from the standing head height: {:.3f} m", recon->user_height());
         recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {}", last_valid_head.t_ns, recon->user_height()));
@@ -419,6 +476,8 @@ struct Daemon::Impl final : ControlTarget {
                 {"head_height_m", head_height_m},
                 {"user_height_m", head_height_m / kHeadHeightPerStature},
                 {"height_calibrated", height_calibrated},
+                {"calibration_source", calibration_source},
+                {"auto_calibration", auto_calibration},
                 {"skeleton_id", skeleton_msg.skeleton_id}};
   }
 
@@ -509,6 +568,8 @@ struct Daemon::Impl final : ControlTarget {
       j["head_height_m"] = head_height_m;
       j["user_height_m"] = head_height_m / kHeadHeightPerStature;
       j["height_calibrated"] = height_calibrated;
+      j["calibration_source"] = calibration_source;
+      j["auto_calibration"] = auto_calibration;
       j["skeleton_id"] = skeleton_msg.skeleton_id;
     }
     j["offsets_configured"] = offsets_configured;
@@ -639,6 +700,12 @@ std::string Daemon::start() {
   if (const double head_height_m = configured_head_height_m(d.config); head_height_m > 0.0) {
     d.recon->set_user_height(head_height_m);
     d.height_calibrated = true;
+    d.calibration_source = "config";
+    if (d.config.auto_calibrate) d.auto_calibration = "superseded";
+  } else if (d.config.auto_calibrate) {
+    d.auto_calibrating = true;
+    d.auto_calibration = "waiting";
+    spdlog::info("auto calibration: the user's size from the head's first still half second (off: --no-auto-calibrate)");
   }
   d.model_path_text = choice.method == "ik" ? std::string() : choice.model_path.string();
   d.refresh_skeleton();

@@ -123,7 +123,9 @@ int main(int argc, char** argv) {
 
   const std::filesystem::path skeleton =
       config.skeleton_path.empty() ? bundled_skeleton_path() : std::filesystem::path(config.skeleton_path);
-  Daemon daemon(config, make_default_factory(skeleton));
+  bodyd::ReconstructorOptions reconstructor_options;
+  reconstructor_options.filter = config.filter;
+  Daemon daemon(config, make_default_factory(skeleton, reconstructor_options));
   if (std::string e = daemon.start(); !e.empty()) {
     spdlog::critical("{}", e);
     notifier.status("failed to start: " + e);

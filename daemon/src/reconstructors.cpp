@@ -5,8 +5,8 @@
 
 namespace bodyd::daemon {
 
-ReconstructorFactory make_default_factory(const std::filesystem::path& skeleton_bvh) {
-  return [skeleton_bvh](const ModelChoice& choice, std::string& error) -> std::unique_ptr<Reconstructor> {
+ReconstructorFactory make_default_factory(const std::filesystem::path& skeleton_bvh, const ReconstructorOptions& options) {
+  return [skeleton_bvh, options](const ModelChoice& choice, std::string& error) -> std::unique_ptr<Reconstructor> {
     Skeleton skeleton;
     const Skeleton* hint = nullptr;
     if (choice.method == "ik") {
@@ -19,7 +19,7 @@ ReconstructorFactory make_default_factory(const std::filesystem::path& skeleton_
       }
     }
     try {
-      return make_reconstructor(choice.method, choice.model_path, hint);
+      return make_reconstructor(choice.method, choice.model_path, hint, options);
     } catch (const std::exception& e) {
       error = e.what();
       if (choice.method == "diffusion")

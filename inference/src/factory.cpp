@@ -38,6 +38,7 @@ std::unique_ptr<Reconstructor> make_reconstructor(std::string_view method, const
     d.steps = options.diffusion_steps;
     d.guidance = options.guidance;
     d.seed = options.seed;
+    d.filter = options.filter;
     try {
       return std::make_unique<DiffusionReconstructor>(std::move(model), d);
     } catch (const std::invalid_argument& e) {

@@ -16,7 +16,8 @@ namespace {
 const std::string kBodyd = (test::bin_dir() / "bodyd").string();
 
 std::vector<std::string> bodyd_args(std::initializer_list<std::string> extra) {
-  std::vector<std::string> args{kBodyd, "--method", "ik", "--log-level", "debug"};
+  // Without auto calibration: the references are at the model's size.
+  std::vector<std::string> args{kBodyd, "--method", "ik", "--log-level", "debug", "--no-auto-calibrate"};
   args.insert(args.end(), extra);
   return args;
 }

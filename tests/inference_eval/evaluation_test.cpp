@@ -301,3 +301,87 @@ TEST(BodydEval, AbsurdClipIsAnErrorNotNanMetrics) {
   EXPECT_EQ(out.find(" inf"), std::string::npos) << out;
   EXPECT_EQ(out.find("mpjpe_cm"), std::string::npos) << out;
 }
+
+// Groups come from dataset-N_{content}_{style}_{take}.bvh names: copies of the fixtures under such
+// names give known counts, and a group's metrics are those of its clips alone.
+TEST(Evaluation, GroupsFromDatasetFileNamesHaveTheirClipsAndFrames) {
+  const auto dir = std::filesystem::temp_directory_path() / "bodyd_eval_groups_test";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const auto walk_a = dir / "dataset-2_walk_normal_002.bvh", walk_b = dir / "dataset-2_walk_normal_003.bvh";
+  const auto bow = dir / "dataset-1_bow_active_001.bvh";
+  std::filesystem::copy_file(kWalk, walk_a);
+  std::filesystem::copy_file(kWalk, walk_b);
+  std::filesystem::copy_file(kBow, bow);
+  const nlohmann::json j = without_timing(evaluate_ik({walk_a, bow, walk_b}, simulator(0.0, 0.0, 1)));
+  const nlohmann::json& g = j["groups"];
+  const auto expect_group = [&](const char* category, const char* name, int clips, int frames) {
+    SCOPED_TRACE(std::string(category) + " " + name);
+    ASSERT_TRUE(g[category].contains(name)) << g[category].dump();
+    EXPECT_EQ(g[category][name]["clips"], clips);
+    EXPECT_EQ(g[category][name]["frames"], frames);
+  };
+  expect_group("dataset", "dataset-2", 2, 120);
+  expect_group("dataset", "dataset-1", 1, 30);
+  expect_group("content", "walk", 2, 120);
+  expect_group("content", "bow", 1, 30);
+  expect_group("style", "normal", 2, 120);
+  expect_group("style", "active", 1, 30);
+  for (const char* category : {"dataset", "content", "style"}) EXPECT_EQ(g[category].size(), 2u) << category;
+  // The bow's groups hold exactly the bow clip evaluated alone.
+  const nlohmann::json alone = without_timing(evaluate_ik({kBow}, simulator(0.0, 0.0, 1)));
+  EXPECT_DOUBLE_EQ(g["content"]["bow"]["methods"]["ik"]["mpjpe_cm"].get<double>(),
+                   alone["methods"]["ik"]["mpjpe_cm"].get<double>());
+  EXPECT_DOUBLE_EQ(g["style"]["active"]["methods"]["ik"]["lower_pe_cm"].get<double>(),
+                   alone["methods"]["ik"]["lower_pe_cm"].get<double>());
+  std::filesystem::remove_all(dir);
+}
+
+// --body-scale: the bow starts standing, so the detector calibrates from its first still half
+// second; the walk never stands still, so the fallback does. Both land within 2% of the scaled
+// skeleton's standing head height, and the report is the same on a second run.
+TEST(Evaluation, BodyScaleCalibratesNearTheTrueScaleAndIsDeterministic) {
+  const auto run = [&](double scale) {
+    EvalOptions o;
+    o.methods = {"diffusion"};
+    o.model_path = test::fixtures() / "tiny_model.safetensors";
+    o.body_scale = scale;
+    o.calibrate = true;
+    return evaluate(std::vector<std::filesystem::path>{kBow, kWalk}, o, simulator(2.0, 0.0, 7));
+  };
+  for (double scale : {0.8, 1.2}) {
+    SCOPED_TRACE(scale);
+    const EvalReport r = run(scale);
+    EXPECT_EQ(r.calibrated_clips, 2);
+    EXPECT_EQ(r.fallback_clips, 1);
+    EXPECT_LT(r.calibration_scale_error_max, 0.02);
+    EXPECT_GE(r.calibration_scale_error, 0.0);
+    // The head height error: at most 2% of a standing head height (under 1.5 m x scale).
+    EXPECT_LT(r.calibration_error_cm, 100.0 * 0.02 * 1.5 * scale);
+    EXPECT_GT(r.calibration_error_cm, 0.0);
+    EXPECT_GT(r.calibration_time_s, 0.4);
+    const nlohmann::json a = without_timing(r), b = without_timing(run(scale));
+    EXPECT_EQ(a.dump(), b.dump());
+    EXPECT_EQ(a["body_scale"], scale);
+    EXPECT_EQ(a["calibration"]["clips_fallback"], 1);
+  }
+}
+
+TEST(BodydEval, BodyScaleFlagCalibrates) {
+  const auto json = std::filesystem::temp_directory_path() / "bodyd_eval_scale_test.json";
+  std::filesystem::remove(json);
+  int status = 0;
+  const std::string out = run_command((test::bin_dir() / "bodyd-eval").string() + " --methods diffusion --model " +
+                                          (test::fixtures() / "tiny_model.safetensors").string() +
+                                          " --body-scale 1.2 --json " + json.string() + " " + kBow.string(),
+                                      status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("body scale 1.2: calibrated on 1 of 1 clips (0 by the fallback)"), std::string::npos) << out;
+  std::ifstream in(json);
+  const nlohmann::json j = nlohmann::json::parse(in);
+  EXPECT_EQ(j["body_scale"], 1.2);
+  EXPECT_EQ(j["calibration"]["enabled"], true);
+  EXPECT_EQ(j["calibration"]["clips_calibrated"], 1);
+  EXPECT_LT(j["calibration"]["scale_error"].get<double>(), 0.02);
+  std::filesystem::remove(json);
+}

@@ -3,6 +3,7 @@
 // defaults below.
 #pragma once
 
+#include "bodyd/inference/one_euro.h"
 #include "bodyd/motion/rotation.h"
 #include "bodyd/motion/tracker.h"
 #include "bodyd/simulators/tracker_sim.h"
@@ -83,6 +84,14 @@ struct DaemonConfig {
   // kHeadHeightPerStature. At most one of the two may be set; 0: the model's own size.
   double user_height_m = 0.0;        // body height (stature), metres
   double head_height_m = 0.0;        // standing head height, metres (exact)
+  // Auto calibration (docs/daemon.md, "Calibration"): the standing head height from the head's
+  // first still half second (StandingHeightDetector, inference/calibration.h), unless a height
+  // is configured above or the control socket calibrates first; a later calibrate replaces it.
+  bool auto_calibrate = true;
+  // The diffusion method's One Euro tracker filter (config "filter"; docs/daemon.md, "Tracker
+  // filter"). Only enabled, min_cutoff_hz, beta_per_m_s, d_cutoff_hz, rot_min_cutoff_hz and
+  // rot_beta_per_rad_s are configurable; the rest keep the defaults of one_euro.h.
+  OneEuroOptions filter;
   std::array<std::optional<DeviceOffset>, kRoleCount> offsets{};  // by Role
 
   std::string log_level = "info";    // trace, debug, info, warn, error, off

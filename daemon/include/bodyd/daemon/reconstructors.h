@@ -3,12 +3,15 @@
 #pragma once
 
 #include "bodyd/daemon/daemon.h"
+#include "bodyd/inference/factory.h"
 
 #include <filesystem>
 
 namespace bodyd::daemon {
 
-// `skeleton_bvh` gives the skeleton of the ik method (its first lines; the motion is not used).
-[[nodiscard]] ReconstructorFactory make_default_factory(const std::filesystem::path& skeleton_bvh);
+// `skeleton_bvh` gives the skeleton of the ik method (its first lines; the motion is not used);
+// `options` go to every reconstructor made (the diffusion's tracker filter: config "filter").
+[[nodiscard]] ReconstructorFactory make_default_factory(const std::filesystem::path& skeleton_bvh,
+                                                        const ReconstructorOptions& options = {});
 
 }  // namespace bodyd::daemon

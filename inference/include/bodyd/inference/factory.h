@@ -2,6 +2,7 @@
 // tools turn "ik" or "diffusion" into an object.
 #pragma once
 
+#include "bodyd/inference/one_euro.h"
 #include "bodyd/inference/reconstructor.h"
 
 #include <cstdint>
@@ -29,6 +30,7 @@ struct ReconstructorOptions {
   int diffusion_steps = 2;      // DDIM steps K (docs/models.md)
   float guidance = 1.0f;        // classifier-free guidance scale (1 = off)
   std::uint64_t seed = 1;       // the diffusion's noise
+  OneEuroOptions filter;        // the diffusion's tracker filter (one_euro.h; the daemon's "filter" keys)
 };
 
 // method "ik": the fixed-rule baseline (ik.h) on `skeleton_hint` (required; model_path unused).
