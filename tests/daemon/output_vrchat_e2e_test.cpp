@@ -200,10 +200,7 @@ TEST(VrchatOutput, OscJsReceivesTheZmqPoseAndTheHeadAsReceived) {
   const auto endpoints = test::wait_endpoints(dir.path / "endpoints.json", 20000);
   ASSERT_TRUE(endpoints) << daemon.log();
   zmq::context_t ctx;
-  zmq::socket_t sub(ctx, zmq::socket_type::sub);
-  sub.set(zmq::sockopt::linger, 0);
-  sub.set(zmq::sockopt::subscribe, "");
-  sub.connect((*endpoints)["pub"].get<std::string>());
+  zmq::socket_t sub = test::sub_socket(ctx, (*endpoints)["pub"].get<std::string>());
   protocol::SkeletonMessage skeleton;
   std::vector<protocol::PoseMessage> poses;
   collect(sub, skeleton, poses, [&] { return daemon.wait(0).has_value(); });
@@ -265,10 +262,7 @@ TEST(VrchatOutput, FullLoopFromVrchatInputToVrchatTrackers) {
   const auto endpoints = test::wait_endpoints(dir.path / "endpoints.json", 20000);
   ASSERT_TRUE(endpoints) << daemon.log();
   zmq::context_t ctx;
-  zmq::socket_t sub(ctx, zmq::socket_type::sub);
-  sub.set(zmq::sockopt::linger, 0);
-  sub.set(zmq::sockopt::subscribe, "");
-  sub.connect((*endpoints)["pub"].get<std::string>());
+  zmq::socket_t sub = test::sub_socket(ctx, (*endpoints)["pub"].get<std::string>());
   std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the subscription reaches the publisher
 
   ::setenv("NODE_PATH", (test::source_dir() / "tests" / "node" / "node_modules").c_str(), 1);  // for send_trackers.js

@@ -52,6 +52,15 @@ inline std::optional<protocol::PoseMessage> recv_pose(zmq::socket_t& sub, int ti
   return pose;
 }
 
+// A SUB socket connected to `endpoint`, subscribed to `topic` ("": every message), no linger.
+inline zmq::socket_t sub_socket(zmq::context_t& ctx, const std::string& endpoint, const std::string& topic = "") {
+  zmq::socket_t sub(ctx, zmq::socket_type::sub);
+  sub.set(zmq::sockopt::linger, 0);
+  sub.set(zmq::sockopt::subscribe, topic);
+  sub.connect(endpoint);
+  return sub;
+}
+
 // One control request (fresh REQ socket); nullopt when no reply within timeout_ms.
 inline std::optional<nlohmann::json> control_request(zmq::context_t& ctx, const std::string& endpoint,
                                                      const std::string& request, int timeout_ms = 3000) {

@@ -9,6 +9,7 @@
 #include "bodyd/motion/bvh.h"
 
 #include "../test_paths.h"
+#include "sink_helpers.h"
 
 #include <gtest/gtest.h>
 
@@ -23,29 +24,7 @@ namespace {
 
 using namespace std::chrono_literals;
 
-class CollectingSink final : public SampleSink {
- public:
-  void push(const SourceSample& s) override {
-    std::lock_guard lock(mutex_);
-    samples_.push_back(s);
-  }
-  bool push_wait(const SourceSample& s, std::chrono::nanoseconds) override {
-    push(s);
-    return true;
-  }
-  std::vector<SourceSample> samples() const {
-    std::lock_guard lock(mutex_);
-    return samples_;
-  }
-  std::size_t size() const {
-    std::lock_guard lock(mutex_);
-    return samples_.size();
-  }
-
- private:
-  mutable std::mutex mutex_;
-  std::vector<SourceSample> samples_;
-};
+using test::CollectingSink;
 
 // Polls `done` every 5 ms for up to `timeout`; true when it became true.
 bool eventually(const std::function<bool()>& done, std::chrono::milliseconds timeout) {

@@ -8,6 +8,7 @@
 #include "bodyd/simulators/tracker_sim.h"
 
 #include "../test_paths.h"
+#include "osc_helpers.h"
 
 #include <gtest/gtest.h>
 #include <lo/lo.h>
@@ -100,27 +101,9 @@ int free_port(int type = SOCK_DGRAM) {
   return ntohs(a.sin_port);
 }
 
-Bytes serialise(lo_message m, const char* path) {
-  std::size_t n = 0;
-  void* data = lo_message_serialise(m, path, nullptr, &n);
-  Bytes out(static_cast<std::uint8_t*>(data), static_cast<std::uint8_t*>(data) + n);
-  std::free(data);
-  lo_message_free(m);
-  return out;
-}
-
-Bytes floats(const char* path, std::initializer_list<float> values) {
-  lo_message m = lo_message_new();
-  for (float v : values) lo_message_add_float(m, v);
-  return serialise(m, path);
-}
-
-Bytes vmc(const char* path, const char* serial, std::initializer_list<float> values) {
-  lo_message m = lo_message_new();
-  lo_message_add_string(m, serial);
-  for (float v : values) lo_message_add_float(m, v);
-  return serialise(m, path);
-}
+using test::osc_floats;
+using test::osc_serialise;
+using test::osc_vmc;
 
 Bytes wrap_in_bundle(const std::vector<Bytes>& elements) {
   Bytes out{'#', 'b', 'u', 'n', 'd', 'l', 'e', 0, 0, 0, 0, 0, 0, 0, 0, 1};
@@ -140,22 +123,22 @@ struct Bad {
 
 std::vector<Bad> bad_packets() {
   const float nan = std::numeric_limits<float>::quiet_NaN();
-  const Bytes good = floats("/tracking/vrsystem/head/pose", {0, 1.6f, 0, 0, 0, 0});
+  const Bytes good = osc_floats("/tracking/vrsystem/head/pose", {0, 1.6f, 0, 0, 0, 0});
   std::vector<Bad> b;
   b.push_back({0, Bytes(good.begin(), good.end() - 5), "truncated"});
   b.push_back({0, Bytes{'G', 'E', 'T', ' ', '/', 0, 0, 0}, "not_osc"});
   {
     lo_message m = lo_message_new();
     for (int i = 0; i < 6; ++i) lo_message_add_int32(m, 1);
-    b.push_back({0, serialise(m, "/tracking/vrsystem/head/pose"), "bad_type_tags"});
+    b.push_back({0, osc_serialise(m, "/tracking/vrsystem/head/pose"), "bad_type_tags"});
   }
-  b.push_back({0, floats("/tracking/vrsystem/head/pose", {0, 1.6f, 0}), "wrong_arg_count"});
-  b.push_back({0, floats("/tracking/vrsystem/head/pose", {nan, 1.6f, 0, 0, 0, 0}), "non_finite"});
-  b.push_back({0, floats("/tracking/vrsystem/head/pose", {0, 3e8f, 0, 0, 0, 0}), "absurd_value"});
+  b.push_back({0, osc_floats("/tracking/vrsystem/head/pose", {0, 1.6f, 0}), "wrong_arg_count"});
+  b.push_back({0, osc_floats("/tracking/vrsystem/head/pose", {nan, 1.6f, 0, 0, 0, 0}), "non_finite"});
+  b.push_back({0, osc_floats("/tracking/vrsystem/head/pose", {0, 3e8f, 0, 0, 0, 0}), "absurd_value"});
   b.push_back({0, wrap_in_bundle(std::vector<Bytes>(600, good)), "oversized"});
-  b.push_back({1, vmc("/VMC/Ext/Hmd/Pos", "H", {0, 1.6f, 0, 0, 0, 0, 5}), "absurd_value"});
-  b.push_back({1, vmc("/VMC/Ext/Con/Pos", "C", {0, 1, 0, nan, 0, 0, 1}), "non_finite"});
-  b.push_back({1, floats("/VMC/Ext/Con/Pos", {0, 1, 0, 0, 0, 0, 1}), "wrong_arg_count"});
+  b.push_back({1, osc_vmc("/VMC/Ext/Hmd/Pos", "H", {0, 1.6f, 0, 0, 0, 0, 5}), "absurd_value"});
+  b.push_back({1, osc_vmc("/VMC/Ext/Con/Pos", "C", {0, 1, 0, nan, 0, 0, 1}), "non_finite"});
+  b.push_back({1, osc_floats("/VMC/Ext/Con/Pos", {0, 1, 0, 0, 0, 0, 1}), "wrong_arg_count"});
   const std::string lines[] = {"1,head,1,0,1.6,0,0,0,0", "not a tracker-log line"};
   for (const std::string& l : lines) b.push_back({2, Bytes(l.begin(), l.end()), "bad_line"});
   return b;
@@ -199,9 +182,9 @@ TEST(DaemonNetworkInputs, BadPacketsAreCountedWhilePosesKeepComing) {
     for (int frame = 0; frame < 180; ++frame) {
       const float t = static_cast<float>(frame) / 90.0f;
       const float sway = 0.05f * std::sin(t * 3.0f);
-      send_to(ports[0], wrap_in_bundle({floats("/tracking/vrsystem/head/pose", {sway, 1.6f, 0, 0, 0, 0}),
-                                        floats("/tracking/vrsystem/leftwrist/pose", {-0.35f + sway, 1.0f, 0.1f, 0, 0, 0}),
-                                        floats("/tracking/vrsystem/rightwrist/pose", {0.35f + sway, 1.0f, 0.1f, 0, 0, 0})}));
+      send_to(ports[0], wrap_in_bundle({osc_floats("/tracking/vrsystem/head/pose", {sway, 1.6f, 0, 0, 0, 0}),
+                                        osc_floats("/tracking/vrsystem/leftwrist/pose", {-0.35f + sway, 1.0f, 0.1f, 0, 0, 0}),
+                                        osc_floats("/tracking/vrsystem/rightwrist/pose", {0.35f + sway, 1.0f, 0.1f, 0, 0, 0})}));
       if (frame >= 45 && next_bad < bad.size() && frame % 4 == 0) {
         send_to(ports[bad[next_bad].port_index], bad[next_bad].bytes);
         if (++next_bad == bad.size()) bad_sent.store(true);

@@ -12,6 +12,8 @@
 
 #include "../../drivers/src/oscquery.h"
 #include "../test_paths.h"
+#include "osc_helpers.h"
+#include "sink_helpers.h"
 
 #include <gtest/gtest.h>
 #include <lo/lo.h>
@@ -39,27 +41,9 @@ namespace fs = std::filesystem;
 using Bytes = std::vector<std::uint8_t>;
 
 // ---- packets built by liblo -------------------------------------------------------------------
-Bytes serialise(lo_message m, const char* path) {
-  std::size_t n = 0;
-  void* data = lo_message_serialise(m, path, nullptr, &n);
-  Bytes out(static_cast<std::uint8_t*>(data), static_cast<std::uint8_t*>(data) + n);
-  std::free(data);
-  lo_message_free(m);
-  return out;
-}
-
-Bytes floats_message(const char* path, std::initializer_list<float> values) {
-  lo_message m = lo_message_new();
-  for (float v : values) lo_message_add_float(m, v);
-  return serialise(m, path);
-}
-
-Bytes vmc_message(const char* path, const char* serial, std::initializer_list<float> values) {
-  lo_message m = lo_message_new();
-  lo_message_add_string(m, serial);
-  for (float v : values) lo_message_add_float(m, v);
-  return serialise(m, path);
-}
+using test::osc_floats;
+using test::osc_serialise;
+using test::osc_vmc;
 
 // A bundle of the given (path, message-builder) pairs; liblo owns the messages until freed.
 Bytes bundle(const std::vector<std::pair<const char*, lo_message>>& messages) {
@@ -100,25 +84,7 @@ InputReject decode(const Bytes& b, std::vector<OscMessage>& out) {
 }
 
 // ---- sockets, sinks, waiting ---------------------------------------------------------------------
-class CaptureSink final : public SampleSink {
- public:
-  void push(const SourceSample& s) override {
-    std::lock_guard lock(mutex_);
-    samples_.push_back(s);
-  }
-  bool push_wait(const SourceSample& s, std::chrono::nanoseconds) override {
-    push(s);
-    return true;
-  }
-  std::vector<SourceSample> samples() const {
-    std::lock_guard lock(mutex_);
-    return samples_;
-  }
-
- private:
-  mutable std::mutex mutex_;
-  std::vector<SourceSample> samples_;
-};
+using CaptureSink = test::CollectingSink;
 
 class UdpSender {
  public:
@@ -190,7 +156,7 @@ NodeRun run_node(const std::string& script, const std::string& args) {
 // =============================================================================================
 TEST(OscDecode, VrchatMessageAndBundles) {
   std::vector<OscMessage> out;
-  ASSERT_EQ(decode(floats_message("/tracking/vrsystem/head/pose", {0.1f, 1.6f, 0.2f, 10, 20, 30}), out),
+  ASSERT_EQ(decode(osc_floats("/tracking/vrsystem/head/pose", {0.1f, 1.6f, 0.2f, 10, 20, 30}), out),
             InputReject::None);
   ASSERT_EQ(out.size(), 1u);
   EXPECT_EQ(out[0].address, "/tracking/vrsystem/head/pose");
@@ -213,24 +179,24 @@ TEST(OscDecode, VrchatMessageAndBundles) {
     ASSERT_EQ(decode_vrchat_message(out[i], pose, why), MessageUse::Use);
     EXPECT_EQ(pose.role, roles[i]);
   }
-  ASSERT_EQ(decode(wrap_in_bundle({three, floats_message("/avatar/parameters/x", {1})}), out), InputReject::None);
+  ASSERT_EQ(decode(wrap_in_bundle({three, osc_floats("/avatar/parameters/x", {1})}), out), InputReject::None);
   EXPECT_EQ(out.size(), 4u);
   // Other VRChat traffic is ignored, not rejected.
   EXPECT_EQ(decode_vrchat_message(out[3], pose, why), MessageUse::Ignore);
-  ASSERT_EQ(decode(floats_message("/tracking/vrsystem/hip/pose", {0, 0, 0, 0, 0, 0}), out), InputReject::None);
+  ASSERT_EQ(decode(osc_floats("/tracking/vrsystem/hip/pose", {0, 0, 0, 0, 0, 0}), out), InputReject::None);
   EXPECT_EQ(decode_vrchat_message(out[0], pose, why), MessageUse::Ignore);
 }
 
 TEST(OscDecode, VmcMessage) {
   std::vector<OscMessage> out;
-  ASSERT_EQ(decode(vmc_message("/VMC/Ext/Con/Pos", "LHR-1", {0.5f, 1, 2, 0, 0, 0, 1}), out), InputReject::None);
+  ASSERT_EQ(decode(osc_vmc("/VMC/Ext/Con/Pos", "LHR-1", {0.5f, 1, 2, 0, 0, 0, 1}), out), InputReject::None);
   VmcPose pose;
   InputReject why;
   ASSERT_EQ(decode_vmc_message(out[0], pose, why), MessageUse::Use);
   EXPECT_EQ(pose.device, VmcDevice::Controller);
   EXPECT_EQ(pose.serial, "LHR-1");
   EXPECT_EQ(pose.position_m, Vec3(0.5, 1, -2));  // Unity z forward -> bodyd -z
-  ASSERT_EQ(decode(vmc_message("/VMC/Ext/Bone/Pos", "Hips", {0, 1, 0, 0, 0, 0, 1}), out), InputReject::None);
+  ASSERT_EQ(decode(osc_vmc("/VMC/Ext/Bone/Pos", "Hips", {0, 1, 0, 0, 0, 0, 1}), out), InputReject::None);
   EXPECT_EQ(decode_vmc_message(out[0], pose, why), MessageUse::Ignore);
 }
 
@@ -242,7 +208,7 @@ struct BadPacket {
 };
 
 std::vector<BadPacket> bad_vrchat_packets() {
-  const Bytes good = floats_message("/tracking/vrsystem/head/pose", {0, 1.6f, 0, 0, 0, 0});
+  const Bytes good = osc_floats("/tracking/vrsystem/head/pose", {0, 1.6f, 0, 0, 0, 0});
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const float inf = std::numeric_limits<float>::infinity();
   std::vector<BadPacket> bad;
@@ -256,17 +222,17 @@ std::vector<BadPacket> bad_vrchat_packets() {
     lo_message m = lo_message_new();
     for (int i = 0; i < 5; ++i) lo_message_add_float(m, 0);
     lo_message_add_int32(m, 7);
-    bad.push_back({"wrong type tags", serialise(m, "/tracking/vrsystem/head/pose"), InputReject::BadTypeTags});
+    bad.push_back({"wrong type tags", osc_serialise(m, "/tracking/vrsystem/head/pose"), InputReject::BadTypeTags});
   }
-  bad.push_back({"wrong argument count", floats_message("/tracking/vrsystem/head/pose", {0, 1.6f, 0, 0, 0}),
+  bad.push_back({"wrong argument count", osc_floats("/tracking/vrsystem/head/pose", {0, 1.6f, 0, 0, 0}),
                  InputReject::WrongArgCount});
-  bad.push_back({"NaN position", floats_message("/tracking/vrsystem/head/pose", {nan, 1.6f, 0, 0, 0, 0}),
+  bad.push_back({"NaN position", osc_floats("/tracking/vrsystem/head/pose", {nan, 1.6f, 0, 0, 0, 0}),
                  InputReject::NonFinite});
-  bad.push_back({"infinite angle", floats_message("/tracking/vrsystem/leftwrist/pose", {0, 1, 0, 0, inf, 0}),
+  bad.push_back({"infinite angle", osc_floats("/tracking/vrsystem/leftwrist/pose", {0, 1, 0, 0, inf, 0}),
                  InputReject::NonFinite});
-  bad.push_back({"absurd position", floats_message("/tracking/vrsystem/rightwrist/pose", {0, 1e6f, 0, 0, 0, 0}),
+  bad.push_back({"absurd position", osc_floats("/tracking/vrsystem/rightwrist/pose", {0, 1e6f, 0, 0, 0, 0}),
                  InputReject::AbsurdValue});
-  bad.push_back({"absurd angle", floats_message("/tracking/vrsystem/head/pose", {0, 1.6f, 0, 1e7f, 0, 0}),
+  bad.push_back({"absurd angle", osc_floats("/tracking/vrsystem/head/pose", {0, 1.6f, 0, 1e7f, 0, 0}),
                  InputReject::AbsurdValue});
   std::vector<Bytes> many(600, good);
   bad.push_back({"600 messages in one bundle", wrap_in_bundle(many), InputReject::Oversized});
@@ -296,10 +262,10 @@ TEST(OscDecode, EveryMalformedKindIsRejectedWithItsReason) {
   std::vector<OscMessage> out;
   VmcPose pose;
   InputReject why;
-  ASSERT_EQ(decode(vmc_message("/VMC/Ext/Hmd/Pos", "H", {0, 1.6f, 0, 0, 0, 0, 0}), out), InputReject::None);
+  ASSERT_EQ(decode(osc_vmc("/VMC/Ext/Hmd/Pos", "H", {0, 1.6f, 0, 0, 0, 0, 0}), out), InputReject::None);
   EXPECT_EQ(decode_vmc_message(out[0], pose, why), MessageUse::Reject);
   EXPECT_EQ(why, InputReject::AbsurdValue);
-  ASSERT_EQ(decode(floats_message("/VMC/Ext/Hmd/Pos", {0, 0, 1.6f, 0, 0, 0, 0, 1}), out), InputReject::None);
+  ASSERT_EQ(decode(osc_floats("/VMC/Ext/Hmd/Pos", {0, 0, 1.6f, 0, 0, 0, 0, 1}), out), InputReject::None);
   EXPECT_EQ(decode_vmc_message(out[0], pose, why), MessageUse::Reject);
   EXPECT_EQ(why, InputReject::BadTypeTags);
 }
@@ -445,7 +411,7 @@ TEST(NetworkSource, MalformedPacketsAreCountedAndNeverReachTheSink) {
     sender.send(good);
     sender.send(b.bytes);
   }
-  sender.send(floats_message("/avatar/parameters/VRMode", {1}));  // other VRChat traffic
+  sender.send(osc_floats("/avatar/parameters/VRMode", {1}));  // other VRChat traffic
   const std::uint64_t datagrams = 2 * bad.size() + 1;
   ASSERT_TRUE(wait_for([&] { return source->stats().datagrams == datagrams; })) << source->stats().datagrams;
   source->stop();
@@ -487,11 +453,11 @@ TEST(NetworkSource, VmcAssignsHandsByTheHeadsLeftAndRight) {
     // Unity quaternion of a yaw about +y.
     const auto half = static_cast<float>(head_yaw_deg * M_PI / 360);
     // Controllers before the head: unassigned until the head is seen.
-    sender.send(vmc_message("/VMC/Ext/Con/Pos", "A", {0.3f, 1.0f, 0.2f, 0, 0, 0, 1}));
-    sender.send(vmc_message("/VMC/Ext/Hmd/Pos", "HMD", {0, 1.6f, 0, 0, std::sin(half), 0, std::cos(half)}));
-    sender.send(vmc_message("/VMC/Ext/Con/Pos", "B", {-0.3f, 1.0f, 0.2f, 0, 0, 0, 1}));
-    sender.send(vmc_message("/VMC/Ext/Con/Pos", "A", {0.3f, 1.0f, 0.2f, 0, 0, 0, 1}));
-    sender.send(vmc_message("/VMC/Ext/Tra/Pos", "T", {0, 0.1f, 0, 0, 0, 0, 1}));  // trackers: configured only
+    sender.send(osc_vmc("/VMC/Ext/Con/Pos", "A", {0.3f, 1.0f, 0.2f, 0, 0, 0, 1}));
+    sender.send(osc_vmc("/VMC/Ext/Hmd/Pos", "HMD", {0, 1.6f, 0, 0, std::sin(half), 0, std::cos(half)}));
+    sender.send(osc_vmc("/VMC/Ext/Con/Pos", "B", {-0.3f, 1.0f, 0.2f, 0, 0, 0, 1}));
+    sender.send(osc_vmc("/VMC/Ext/Con/Pos", "A", {0.3f, 1.0f, 0.2f, 0, 0, 0, 1}));
+    sender.send(osc_vmc("/VMC/Ext/Tra/Pos", "T", {0, 0.1f, 0, 0, 0, 0, 1}));  // trackers: configured only
     ASSERT_TRUE(wait_for([&] { return source->stats().datagrams == 5; }));
     source->stop();
     const auto samples = sink.samples();
@@ -513,8 +479,8 @@ TEST(NetworkSource, VmcConfiguredSerials) {
   CaptureSink sink;
   ASSERT_EQ(source->start(sink, 0), "");
   UdpSender sender(source->bound_port());
-  sender.send(vmc_message("/VMC/Ext/Tra/Pos", "T1", {0.3f, 1, 0, 0, 0, 0, 1}));
-  sender.send(vmc_message("/VMC/Ext/Con/Pos", "C9", {-0.3f, 1, 0, 0, 0, 0, 1}));
+  sender.send(osc_vmc("/VMC/Ext/Tra/Pos", "T1", {0.3f, 1, 0, 0, 0, 0, 1}));
+  sender.send(osc_vmc("/VMC/Ext/Con/Pos", "C9", {-0.3f, 1, 0, 0, 0, 0, 1}));
   ASSERT_TRUE(wait_for([&] { return sink.samples().size() == 2; }));
   source->stop();
   EXPECT_EQ(sink.samples()[0].sample.role, Role::LeftHand);
