@@ -76,6 +76,13 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::Range(1, 1000));
   app.add_option("--guidance", method_options.guidance, "diffusion: classifier-free guidance scale (1 = off)")
       ->capture_default_str()->check(CLI::Range(0.0, 20.0));
+  bool no_filter = false;
+  app.add_flag("--no-filter", no_filter, "diffusion: no One Euro tracker filter (the daemon's \"filter\": {\"enabled\": false})");
+  app.add_option("--filter-min-cutoff-hz", method_options.filter.min_cutoff_hz,
+                 "diffusion: the tracker filter's min_cutoff_hz (docs/daemon.md, \"Tracker filter\")")
+      ->capture_default_str();
+  app.add_option("--filter-beta", method_options.filter.beta_per_m_s, "diffusion: the tracker filter's beta_per_m_s")
+      ->capture_default_str();
   app.add_option("--split", split, "split file: BVH paths relative to its folder's parent (e.g. splits/val.txt)");
   app.add_option("files", files, "BVH files (besides or instead of --split)");
   CLI11_PARSE(app, argc, argv);
@@ -91,6 +98,8 @@ int main(int argc, char** argv) {
     options.methods = split_list(methods_text);
     if (options.methods.empty()) throw std::runtime_error("--methods names no method");
     options.model_path = model;
+    if (no_filter) method_options.filter.enabled = false;
+    if (const std::string e = bodyd::validate(method_options.filter); !e.empty()) throw std::runtime_error(e);
     options.reconstructor = method_options;
     if (!out_dir.empty()) options.out_dir = out_dir;
     if (body_scale) {

@@ -384,4 +384,12 @@ TEST(BodydEval, BodyScaleFlagCalibrates) {
   EXPECT_EQ(j["calibration"]["clips_calibrated"], 1);
   EXPECT_LT(j["calibration"]["scale_error"].get<double>(), 0.02);
   std::filesystem::remove(json);
+
+  // The tracker filter's flags: a bad value is refused, naming it.
+  const std::string bad = run_command((test::bin_dir() / "bodyd-eval").string() + " --methods diffusion --model " +
+                                          (test::fixtures() / "tiny_model.safetensors").string() +
+                                          " --filter-min-cutoff-hz 0 " + kBow.string(),
+                                      status);
+  EXPECT_NE(status, 0) << bad;
+  EXPECT_NE(bad.find("min_cutoff_hz must be > 0"), std::string::npos) << bad;
 }
