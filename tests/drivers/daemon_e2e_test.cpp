@@ -5,6 +5,7 @@
 #include "bodyd/protocol/pose_message.h"
 
 #include "../test_paths.h"
+#include "pose_sub_helpers.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -119,16 +120,9 @@ int receive_until(zmq::socket_t& sub, std::uint32_t want, int timeout_ms, bool& 
   int count = 0;
   const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
   while (std::chrono::steady_clock::now() < end) {
-    zmq::pollitem_t item{sub.handle(), 0, ZMQ_POLLIN, 0};
-    if (zmq::poll(&item, 1, std::chrono::milliseconds(50)) == 0) continue;
-    zmq::message_t topic, payload;
-    if (!sub.recv(topic, zmq::recv_flags::dontwait) || !topic.more()) continue;
-    (void)sub.recv(payload);
-    while (payload.more()) (void)sub.recv(payload);
-    if (topic.to_string_view() != protocol::kPoseTopic) continue;
-    protocol::PoseMessage pose;
-    const auto* p = static_cast<const std::uint8_t*>(payload.data());
-    if (!protocol::decode_pose(std::vector<std::uint8_t>(p, p + payload.size()), pose).ok()) continue;
+    const std::optional<protocol::PoseMessage> next = test::poll_pose(sub, std::chrono::milliseconds(50));
+    if (!next) continue;
+    const protocol::PoseMessage& pose = *next;
     ++count;
     if ((pose.flags & want) == want) {
       out_found = true;

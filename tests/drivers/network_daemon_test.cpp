@@ -8,6 +8,7 @@
 #include "bodyd/simulators/tracker_sim.h"
 
 #include "../test_paths.h"
+#include "pose_sub_helpers.h"
 #include "osc_helpers.h"
 
 #include <gtest/gtest.h>
@@ -197,16 +198,9 @@ TEST(DaemonNetworkInputs, BadPacketsAreCountedWhilePosesKeepComing) {
   int poses = 0, poses_after_bad = 0, non_finite = 0;
   const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(4);
   while (std::chrono::steady_clock::now() < end) {
-    zmq::pollitem_t item{sub.handle(), 0, ZMQ_POLLIN, 0};
-    if (zmq::poll(&item, 1, std::chrono::milliseconds(50)) == 0) continue;
-    zmq::message_t topic, payload;
-    if (!sub.recv(topic, zmq::recv_flags::dontwait) || !topic.more()) continue;
-    (void)sub.recv(payload);
-    while (payload.more()) (void)sub.recv(payload);
-    if (topic.to_string_view() != protocol::kPoseTopic) continue;
-    protocol::PoseMessage pose;
-    const auto* p = static_cast<const std::uint8_t*>(payload.data());
-    if (!protocol::decode_pose(std::vector<std::uint8_t>(p, p + payload.size()), pose).ok()) continue;
+    const std::optional<protocol::PoseMessage> next = test::poll_pose(sub, std::chrono::milliseconds(50));
+    if (!next) continue;
+    const protocol::PoseMessage& pose = *next;
     ++poses;
     if (bad_sent.load()) ++poses_after_bad;
     for (const auto& j : pose.joints)
@@ -292,16 +286,9 @@ TEST(DaemonNetworkInputs, VrchatSenderDrivesThePoseStream) {
   int poses = 0, tracked = 0;
   const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(5);
   while (std::chrono::steady_clock::now() < end) {
-    zmq::pollitem_t item{sub.handle(), 0, ZMQ_POLLIN, 0};
-    if (zmq::poll(&item, 1, std::chrono::milliseconds(50)) == 0) continue;
-    zmq::message_t topic, payload;
-    if (!sub.recv(topic, zmq::recv_flags::dontwait) || !topic.more()) continue;
-    (void)sub.recv(payload);
-    while (payload.more()) (void)sub.recv(payload);
-    if (topic.to_string_view() != protocol::kPoseTopic) continue;
-    protocol::PoseMessage pose;
-    const auto* p = static_cast<const std::uint8_t*>(payload.data());
-    if (!protocol::decode_pose(std::vector<std::uint8_t>(p, p + payload.size()), pose).ok()) continue;
+    const std::optional<protocol::PoseMessage> next = test::poll_pose(sub, std::chrono::milliseconds(50));
+    if (!next) continue;
+    const protocol::PoseMessage& pose = *next;
     ++poses;
     if ((pose.flags & all) == all) ++tracked;
   }
