@@ -183,6 +183,12 @@ std::string calibration_text(const json& r) {
     s = fmt::format("head height {:.3f} m (body about {:.2f} m), calibrated", head, r.value("user_height_m", 0.0));
   else
     s = fmt::format("head height {:.3f} m: the model's own size, not calibrated (bodyd-ctl calibrate)", head);
+  // Where it came from (docs/control.md: calibration_source, auto_calibration).
+  const std::string source = r.value("calibration_source", ""), automatic = r.value("auto_calibration", "");
+  if (source == "auto") s += fmt::format(" automatically ({})", automatic == "fallback" ? "never still: from the head's 90th percentile height" : "from a still half second");
+  else if (source == "control") s += " by bodyd-ctl calibrate";
+  else if (source == "config") s += " by the configuration";
+  if (automatic == "waiting") s += "; auto calibration waiting for the head to hold still";
   if (r.contains("offsets_configured"))
     s += r["offsets_configured"].get<bool>() ? "; device offsets configured" : "; no device offsets";
   if (r.contains("recentred")) s += r["recentred"].get<bool>() ? "; re-centred" : "; not re-centred";
