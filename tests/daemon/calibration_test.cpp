@@ -54,15 +54,6 @@ DaemonConfig replay_config(const std::filesystem::path& log, const std::filesyst
   return c;
 }
 
-zmq::socket_t subscriber(zmq::context_t& ctx, const std::string& endpoint) {
-  zmq::socket_t sub(ctx, zmq::socket_type::sub);
-  sub.set(zmq::sockopt::linger, 0);
-  sub.set(zmq::sockopt::rcvhwm, 0);
-  sub.set(zmq::sockopt::subscribe, "pose");
-  sub.connect(endpoint);
-  return sub;
-}
-
 // Receives every pose of the replay (until none comes for a while).
 std::vector<protocol::PoseMessage> all_poses(zmq::socket_t& sub) {
   std::vector<protocol::PoseMessage> poses;
@@ -89,7 +80,7 @@ TEST(AutoCalibration, AScaledReplayCalibratesFromTheStillStartAndAManualCalibrat
   EXPECT_EQ(d.status()["calibration_source"], "none");
   const double model_height_m = d.status()["head_height_m"].get<double>();
   zmq::context_t ctx;
-  auto sub = subscriber(ctx, d.pub_endpoint());
+  auto sub = test::sub_socket(ctx, d.pub_endpoint(), "pose");
   std::thread runner([&] { d.run(); });
   const auto poses = all_poses(sub);
 
@@ -166,7 +157,7 @@ TEST(AutoCalibration, AManualOrConfiguredHeightWinsAndTheFlagTurnsItOff) {
       ASSERT_TRUE(reply);
       EXPECT_EQ((*reply)["calibration_source"], "control") << *reply;
     }
-    auto sub = subscriber(ctx, d.pub_endpoint());
+    auto sub = test::sub_socket(ctx, d.pub_endpoint(), "pose");
     const auto poses = all_poses(sub);
     EXPECT_EQ(poses.size(), head_count(samples));
     const json status = d.status();

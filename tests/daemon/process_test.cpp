@@ -22,15 +22,6 @@ std::vector<std::string> bodyd_args(std::initializer_list<std::string> extra) {
   return args;
 }
 
-zmq::socket_t subscribe(zmq::context_t& ctx, const std::string& endpoint) {
-  zmq::socket_t sub(ctx, zmq::socket_type::sub);
-  sub.set(zmq::sockopt::linger, 0);
-  sub.set(zmq::sockopt::rcvhwm, 0);
-  sub.set(zmq::sockopt::subscribe, "pose");
-  sub.connect(endpoint);
-  return sub;
-}
-
 // The bundled recording's first `samples` samples as a log in `dir`.
 std::vector<TrackerSample> short_log(const std::filesystem::path& path, std::size_t samples) {
   auto all = read_tracker_log(daemon::bundled_recording_path()).samples;
@@ -55,7 +46,7 @@ void replay_end_to_end(const std::string& pub, bool paced) {
     EXPECT_NE(bound, pub);  // the port was chosen
   }
   zmq::context_t ctx;
-  auto sub = subscribe(ctx, bound);
+  auto sub = test::sub_socket(ctx, bound, "pose");
 
   std::vector<protocol::PoseMessage> poses;
   while (auto pose = test::recv_pose(sub, poses.empty() ? 5000 : 1500)) poses.push_back(*pose);
@@ -108,7 +99,7 @@ TEST(BodydProcess, StopsCleanlyOnSigtermSigintAndShutdownRequest) {
     const auto endpoints = test::wait_endpoints(endpoints_file, 10000);
     ASSERT_TRUE(endpoints) << child.log();
     zmq::context_t ctx;
-    auto sub = subscribe(ctx, (*endpoints)["pub"]);
+    auto sub = test::sub_socket(ctx, (*endpoints)["pub"], "pose");
     ASSERT_TRUE(test::recv_pose(sub, 5000)) << child.log();
     if (std::string(how) == "shutdown") {
       // A malformed request first: answered, and the daemon keeps running.
@@ -143,7 +134,7 @@ TEST(BodydProcess, ASubscriberSurvivesARestart) {
   ASSERT_TRUE(endpoints) << first->log();
   const std::string endpoint = (*endpoints)["pub"];
   zmq::context_t ctx;
-  auto sub = subscribe(ctx, endpoint);
+  auto sub = test::sub_socket(ctx, endpoint, "pose");
   std::uint64_t last_seq = 0;
   int before = 0;
   while (auto pose = test::recv_pose(sub, 1500)) last_seq = pose->seq, ++before;

@@ -56,6 +56,7 @@ inline std::optional<protocol::PoseMessage> recv_pose(zmq::socket_t& sub, int ti
 inline zmq::socket_t sub_socket(zmq::context_t& ctx, const std::string& endpoint, const std::string& topic = "") {
   zmq::socket_t sub(ctx, zmq::socket_type::sub);
   sub.set(zmq::sockopt::linger, 0);
+  sub.set(zmq::sockopt::rcvhwm, 0);  // a test that reads slowly must not lose poses
   sub.set(zmq::sockopt::subscribe, topic);
   sub.connect(endpoint);
   return sub;
