@@ -86,7 +86,8 @@ def git_commit():
 
 class Masker:
     """Random observation masks (B, W, D): trackers always (with random hand-loss spans), a random-length
-    prefix of fully observed frames (the frames the online loop has already emitted), some unconditioned."""
+    prefix of fully observed frames (the frames the online loop has already emitted), some unconditioned.
+    Returns (mask, prefix (B, W): the prefix frames, trackers: the mask's tracker part alone)."""
 
     def __init__(self, meta, W, D, args, device):
         self.W, self.D, self.args, self.device = W, D, args, device
@@ -112,11 +113,11 @@ class Masker:
         plen = torch.randint(0, W, (B,), generator=gen, device=dev)
         plen = torch.where(full, torch.full_like(plen, W - 1), plen)
         prefix = (frame_idx < plen.view(B, 1)).float()  # (B, W)
-        self.last_trackers = m.clone()  # the tracker part alone, for --self-prefix
+        trackers = m.clone()  # the tracker part alone (--self-prefix reconstructs the past from it)
         m = torch.maximum(m, prefix.unsqueeze(-1).expand(B, W, D))
         uncond = torch.rand(B, generator=gen, device=dev) < a.uncond_prob
         m[uncond] = 0.0
-        return m, prefix
+        return m, prefix, trackers
 
 
 # Left/right pairs of the skeleton (features::kJointNames).
@@ -319,7 +320,7 @@ def main():
     def loss_on(model, idx, g, augment=False):
         x0 = draw(idx, g, augment)
         B = x0.shape[0]
-        m, prefix = masker(B, g)
+        m, prefix, trackers = masker(B, g)
         t = torch.randint(0, a.T, (B,), generator=g, device=dev)
         noise = torch.randn(x0.shape, generator=g, device=dev)
         abt = ab[t].view(B, 1, 1)
@@ -337,7 +338,7 @@ def main():
             if bool(sel.any()):
                 with torch.no_grad():
                     ema.eval()
-                    roll = ddim_sample(ema, x0[sel], masker.last_trackers[sel], ab, a.self_prefix_steps, g)
+                    roll = ddim_sample(ema, x0[sel], trackers[sel], ab, a.self_prefix_steps, g)
                 pf = prefix[sel].unsqueeze(-1)
                 obs = obs.clone()
                 obs[sel] = pf * roll + (1 - pf) * obs[sel]
