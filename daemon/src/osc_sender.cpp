@@ -109,6 +109,16 @@ bool OscSender::send(const void* data, std::size_t size, std::string& out_error)
   return false;
 }
 
+bool OscSender::send_bundle(const std::vector<std::uint8_t>& bytes, std::string& out_error) {
+  if (bytes.empty()) {
+    out_error = "liblo could not serialise the bundle";
+    return false;
+  }
+  if (!send(bytes.data(), bytes.size(), out_error)) return false;
+  bundles_sent_.fetch_add(1, std::memory_order_relaxed);
+  return true;
+}
+
 void OscSender::close() {
   if (fd_ >= 0) ::close(fd_);
   fd_ = -1;

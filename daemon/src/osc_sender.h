@@ -13,6 +13,7 @@
 
 #include <lo/lo_lowlevel.h>
 
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <deque>
@@ -40,6 +41,10 @@ class OscSender {
   [[nodiscard]] std::string open(const std::string& host, const std::string& port, const std::string& what);
   // Sends one datagram without blocking. False with `out_error` set when it was not sent.
   [[nodiscard]] bool send(const void* data, std::size_t size, std::string& out_error);
+  // Sends one serialised bundle (empty: liblo could not serialise it) and counts it when sent.
+  [[nodiscard]] bool send_bundle(const std::vector<std::uint8_t>& bytes, std::string& out_error);
+  // Bundles sent by send_bundle(); any thread may read it.
+  [[nodiscard]] std::uint64_t bundles_sent() const { return bundles_sent_.load(std::memory_order_relaxed); }
   void close();
   // The resolved address, "127.0.0.1:9000" or "[::1]:9000" (empty before open()).
   [[nodiscard]] const std::string& address() const { return address_; }
@@ -49,6 +54,7 @@ class OscSender {
   int fd_ = -1;
   std::string address_;
   bool loopback_ = false;
+  std::atomic<std::uint64_t> bundles_sent_{0};
 };
 
 class OscBundle {

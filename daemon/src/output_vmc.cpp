@@ -9,7 +9,6 @@
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
-#include <atomic>
 #include <memory>
 #include <mutex>
 
@@ -48,18 +47,11 @@ class VmcOutput final : public Output {
     if (first_t_ns_ == INT64_MIN) first_t_ns_ = frame.t_ns;
     retarget_to_unity(rig_, g, pose_);
     const auto time_s = static_cast<float>(static_cast<double>(frame.t_ns - first_t_ns_) * 1e-9);
-    const std::vector<std::uint8_t>& bytes = encoder_.encode(pose_, time_s);
-    if (bytes.empty()) {
-      out_error = "liblo could not serialise the bundle";
-      return false;
-    }
-    if (!sender_.send(bytes.data(), bytes.size(), out_error)) return false;
-    bundles_sent_.fetch_add(1, std::memory_order_relaxed);
-    return true;
+    return sender_.send_bundle(encoder_.encode(pose_, time_s), out_error);
   }
 
   nlohmann::json status() const override {
-    nlohmann::json j{{"bundles_sent", bundles_sent_.load(std::memory_order_relaxed)}};
+    nlohmann::json j{{"bundles_sent", sender_.bundles_sent()}};
     std::lock_guard lock(mutex_);
     if (!rig_error_.empty()) j["error"] = rig_error_;
     return j;
@@ -76,7 +68,6 @@ class VmcOutput final : public Output {
   int joint_count_ = 0;
   UnityPose pose_;
   std::int64_t first_t_ns_ = INT64_MIN;
-  std::atomic<std::uint64_t> bundles_sent_{0};
   mutable std::mutex mutex_;
   std::string rig_error_;
 };

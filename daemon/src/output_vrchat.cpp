@@ -8,7 +8,6 @@
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
-#include <atomic>
 #include <cmath>
 #include <memory>
 #include <mutex>
@@ -130,18 +129,11 @@ class VrchatOutput final : public Output {
       message += 2;
     }
     if (head.valid) write(bundle, message, vrchat::tracker_from_bodyd(head.position_m, head.rotation));
-    const std::vector<std::uint8_t>& bytes = bundle.serialise();
-    if (bytes.empty()) {
-      out_error = "liblo could not serialise the bundle";
-      return false;
-    }
-    if (!sender_.send(bytes.data(), bytes.size(), out_error)) return false;
-    bundles_sent_.fetch_add(1, std::memory_order_relaxed);
-    return true;
+    return sender_.send_bundle(bundle.serialise(), out_error);
   }
 
   nlohmann::json status() const override {
-    return {{"slots", vrchat::slot_names(slots_)}, {"bundles_sent", bundles_sent_.load(std::memory_order_relaxed)}};
+    return {{"slots", vrchat::slot_names(slots_)}, {"bundles_sent", sender_.bundles_sent()}};
   }
 
   void close() override { sender_.close(); }
@@ -160,7 +152,6 @@ class VrchatOutput final : public Output {
   OscBundle with_head_, without_head_;
   std::vector<int> joints_;  // per configured slot, in slot order
   std::string missing_;      // joints the skeleton lacks ("" when all are there)
-  std::atomic<std::uint64_t> bundles_sent_{0};
 };
 
 }  // namespace
