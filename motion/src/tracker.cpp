@@ -27,3 +27,15 @@ std::string_view role_joint_name(Role role) {
 }
 
 }  // namespace bodyd
+
+namespace bodyd {
+
+std::string_view pose_frame_name(PoseFrame frame) { return frame == PoseFrame::Device ? "device" : "joint"; }
+
+std::optional<PoseFrame> pose_frame_from_name(std::string_view name) {
+  if (name == "joint") return PoseFrame::Joint;
+  if (name == "device" || name == "xr") return PoseFrame::Device;
+  return std::nullopt;
+}
+
+}  // namespace bodyd
