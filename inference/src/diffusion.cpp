@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 
 namespace bodyd {
@@ -101,13 +102,30 @@ void DiffusionReconstructor::reset() {
 }
 
 void DiffusionReconstructor::set_user_height(double height_m) {
+  // Each role's newest sample, back in the user's units: kept across the reset below, so a
+  // tracker that was reporting still counts as tracked in the next pose (issue 20 item 9: the
+  // pose after the auto calibration said neither hand was tracking, because the hands' samples
+  // had been dropped and their next ones had not arrived yet).
+  std::array<std::optional<TrackerSample>, kRoleCount> newest{};
+  for (Role role : kRoles)
+    if (const TrackerSample* s = history_.newest(role)) {
+      newest[static_cast<size_t>(role)] = *s;
+      newest[static_cast<size_t>(role)]->position_m /= scale_;
+    }
   scale_ = height_m > 0 ? model_height_m_ / height_m : 1.0;
   for (size_t j = 0; j < user_skeleton_.offsets.size(); ++j) {
     user_skeleton_.offsets[j] = skeleton_.offsets[j] / scale_;
     if (skeleton_.end_sites[j]) user_skeleton_.end_sites[j] = *skeleton_.end_sites[j] / scale_;
   }
-  // Samples already stored are in the old scale: start over (calibration happens while standing).
+  // The window's samples and emitted frames are in the old scale: start over (calibration
+  // happens while standing), from the newest sample of each role in the new scale.
   reset();
+  for (const std::optional<TrackerSample>& s : newest)
+    if (s) {
+      TrackerSample scaled = *s;
+      scaled.position_m *= scale_;
+      (void)history_.push(filter_.filter(scaled));
+    }
 }
 
 bool DiffusionReconstructor::emitted_at(std::int64_t t_ns, GlobalPose& out, std::array<bool, 2>& contact) const {

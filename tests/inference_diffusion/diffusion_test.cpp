@@ -132,6 +132,52 @@ TEST(Diffusion, NoPoseBeforeTheFirstHeadSampleAndTimesMustIncrease) {
   EXPECT_TRUE(r.reconstruct(2000, pose));
 }
 
+// Issue 20 item 9: a calibration (the daemon's auto calibration, bodyd-ctl calibrate) changes the
+// skeleton between two samples. The first pose after it must still say the hands are tracked
+// when their trackers were reporting just before (the head's sample came first, the hands'
+// next ones had not arrived), and lost when they were lost.
+TEST(Diffusion, TrackingFlagsSurviveACalibration) {
+  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
+  auto samples = trackers(clip, 90.0);
+  for (const bool right_hand_lost : {false, true}) {
+    SCOPED_TRACE(right_hand_lost ? "right hand lost" : "both hands tracked");
+    DiffusionReconstructor r(tiny_model());
+    // Every sample up to 1 s, then the head's next one only.
+    std::int64_t last_t = 0;
+    size_t next = 0;
+    for (; next < samples.size() && samples[next].t_ns <= 1'000'000'000; ++next) {
+      TrackerSample s = samples[next];
+      if (right_hand_lost && s.role == Role::RightHand && s.t_ns > 500'000'000) s.valid = false;
+      r.push(s);
+      last_t = s.t_ns;
+    }
+    BodyPose before;
+    ASSERT_TRUE(r.reconstruct(last_t, before));
+    EXPECT_TRUE(before.tracker_valid[1]);
+    EXPECT_EQ(before.tracker_valid[2], !right_hand_lost);
+    r.set_user_height(r.model_height() * 1.1);
+    while (next < samples.size() && samples[next].role != Role::Head) ++next;
+    ASSERT_LT(next, samples.size());
+    const std::int64_t t = samples[next].t_ns;
+    ASSERT_GT(t, last_t);
+    r.push(samples[next]);
+    BodyPose after;
+    ASSERT_TRUE(r.reconstruct(t, after));
+    EXPECT_TRUE(after.tracker_valid[0]);
+    EXPECT_TRUE(after.tracker_valid[1]) << "the left hand was tracked " << (t - last_t) / 1000 << " us earlier";
+    EXPECT_EQ(after.tracker_valid[2], !right_hand_lost);
+    // The kept samples are in the new scale: the hand is where the tracker was (user units).
+    const TrackerSample* left = nullptr;
+    for (size_t i = next; i-- > 0;)
+      if (samples[i].role == Role::LeftHand) {
+        left = &samples[i];
+        break;
+      }
+    ASSERT_NE(left, nullptr);
+    EXPECT_LT((after.global.positions[static_cast<size_t>(features::kHandL)] - left->position_m).norm(), 0.05);
+  }
+}
+
 TEST(Diffusion, RejectsAModelOnAnotherSkeleton) {
   auto model = std::make_shared<inference::Model>(*tiny_model());
   model->skeleton.names[5] = "Kopf";
