@@ -322,7 +322,10 @@ struct Daemon::Impl final : ControlTarget {
       return;
     }
 
-    const OutputFrame frame{seq, s.t_ns, in.arrival_ns, body, recon->skeleton(), pose_msg, pose_bytes, head_as_received};
+    const OutputFrame frame{seq,        s.t_ns,           in.arrival_ns,     body,
+                            recon->skeleton(), pose_msg,  pose_bytes,        head_as_received,
+                            recentred ? recentre_rotation : Quat::Identity(),
+                            recentred ? recentre_translation_m : Vec3::Zero()};
     std::string error;
     for (std::size_t i = 0; i < outputs.size(); ++i) {
       OutputSlot& slot = *outputs[i];

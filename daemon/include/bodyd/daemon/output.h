@@ -54,6 +54,12 @@ struct OutputFrame {
   // The head sample that triggered this pose, as its source delivered it: BEFORE the device
   // offset (the headset's own pose, e.g. for VRChat's alignment). May be invalid.
   const TrackerSample& head_as_received;
+  // The re-centring ("reset", docs/control.md) that `body` is in: body = T_recentre * (the
+  // space the sources' samples came in), T_recentre(p) = recentre_rotation * p +
+  // recentre_translation_m. Identity until a reset. Outputs that feed the samples' own runtime
+  // back (steamvr, monado) undo it, so their trackers stay where the headset is.
+  Quat recentre_rotation = Quat::Identity();
+  Vec3 recentre_translation_m = Vec3::Zero();
 };
 
 // A parsed output spec: SCHEME:TARGET?KEY=VALUE&... (docs/outputs.md).

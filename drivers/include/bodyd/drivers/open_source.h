@@ -8,6 +8,8 @@
 //   vrchat:[HOST:]PORT   VRChat's head and wrist poses over OSC, with OSCQuery (network_source.h)
 //   vmc:[HOST:]PORT      VMC protocol HMD/controller/tracker poses (network_source.h)
 //   udp:[HOST:]PORT      one tracker-log line per datagram (network_source.h)
+//   steamvr[:SOCKET]     SlimeVR's OpenVR driver: headset and controllers (slimevr_bridge.h)
+//   monado[:DIR]         Monado's SolarXR feeder on DIR/SlimeVRInput (slimevr_bridge.h)
 //
 // A spec without a known "kind:" prefix is an error (so "C:\x" or a typo is never guessed).
 #pragma once
@@ -23,7 +25,7 @@
 
 namespace bodyd::drivers {
 
-enum class SourceKind { Replay, Sim, Hid, Usb, Vrchat, Vmc, Udp };
+enum class SourceKind { Replay, Sim, Hid, Usb, Vrchat, Vmc, Udp, Steamvr, Monado };
 
 struct SourceSpec {
   SourceKind kind = SourceKind::Replay;

@@ -1,0 +1,604 @@
+// The SlimeVR bridge server, its registry and the steamvr:/monado: sources (slimevr_bridge.h).
+#include "bodyd/drivers/slimevr_bridge.h"
+
+#include "bodyd/motion/limits.h"
+
+#include <spdlog/spdlog.h>
+
+#include <fcntl.h>
+#include <poll.h>
+#include <sys/eventfd.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <thread>
+
+namespace bodyd::drivers::slimevr {
+
+namespace {
+
+std::string env(const char* name) {
+  const char* v = std::getenv(name);
+  return v ? std::string(v) : std::string();
+}
+
+// A directory a socket may live in: a directory (not a symlink), owned by this user, with no
+// access for others. Empty, or why not.
+std::string check_private_dir(const std::filesystem::path& dir) {
+  struct stat st {};
+  if (::lstat(dir.c_str(), &st) != 0) return dir.string() + ": " + std::strerror(errno);
+  const char* why = nullptr;
+  if (S_ISLNK(st.st_mode)) why = "is a symbolic link";
+  else if (!S_ISDIR(st.st_mode)) why = "is not a directory";
+  else if (st.st_uid != ::geteuid()) why = "is owned by another user";
+  else if ((st.st_mode & 077) != 0) why = "is open to other users";
+  if (why == nullptr) return {};
+  char mode[8];
+  std::snprintf(mode, sizeof(mode), "%04o", static_cast<unsigned>(st.st_mode & 07777));
+  return dir.string() + " " + why + " (mode " + mode +
+         "): bodyd puts the bridge socket only in a private directory (mode 0700, owned by you); fix it "
+         "(chmod 700 " + dir.string() + ") or name another socket path";
+}
+
+// Makes `dir` (0700 for what it creates) and checks that it is private.
+std::string prepare_dir(const std::filesystem::path& dir) {
+  struct stat st {};
+  if (::lstat(dir.c_str(), &st) != 0 && errno == ENOENT) {
+    std::error_code ec;
+    if (dir.has_parent_path()) std::filesystem::create_directories(dir.parent_path(), ec);
+    if (ec) return "cannot create directory " + dir.parent_path().string() + ": " + ec.message();
+    if (::mkdir(dir.c_str(), 0700) != 0 && errno != EEXIST)
+      return "cannot create directory " + dir.string() + ": " + std::strerror(errno);
+  }
+  return check_private_dir(dir);
+}
+
+std::int64_t now_ns() { return monotonic_ns(); }
+
+// Which of bodyd's roles a SlimeVR role feeds (the headset and the two controllers).
+std::optional<Role> bodyd_role(std::int32_t r) {
+  if (r == role::kHmd) return Role::Head;
+  if (r == role::kLeftController) return Role::LeftHand;
+  if (r == role::kRightController) return Role::RightHand;
+  return std::nullopt;
+}
+
+// Logs the 1st, 2nd, 4th, 8th... occurrence of each reason.
+bool log_now(std::uint64_t count) { return count != 0 && (count & (count - 1)) == 0; }
+
+}  // namespace
+
+std::string default_socket_dir(std::string& error) {
+  if (std::string d = env("XDG_RUNTIME_DIR"); !d.empty()) return d;
+  if (std::string d = env("XDG_DATA_HOME"); !d.empty()) return d + "/dev.slimevr.SlimeVR";
+  if (std::string h = env("HOME"); !h.empty()) return h + "/.local/share/dev.slimevr.SlimeVR";
+  error = "neither XDG_RUNTIME_DIR, XDG_DATA_HOME nor HOME is set: name the socket path in the spec";
+  return {};
+}
+
+std::string socket_path(std::string_view argument, std::string_view name, std::string& error) {
+  std::string path(argument);
+  if (path.empty()) {
+    const std::string dir = default_socket_dir(error);
+    if (dir.empty()) return {};
+    path = dir + "/" + std::string(name);
+  } else if (path.rfind("~/", 0) == 0) {
+    const std::string home = env("HOME");
+    if (home.empty()) {
+      error = "\"" + path + "\": HOME is not set";
+      return {};
+    }
+    path = home + path.substr(1);
+  }
+  if (path.size() >= sizeof(sockaddr_un::sun_path)) {
+    error = "socket path " + path + " is too long for a Unix socket (at most " +
+            std::to_string(sizeof(sockaddr_un::sun_path) - 1) + " bytes)";
+    return {};
+  }
+  return path;
+}
+
+// ---- the server ---------------------------------------------------------------------------------
+
+struct BridgeServer::Impl {
+  struct Device {           // a tracker a client announced
+    std::string serial;
+    std::int32_t role = 0;
+    std::optional<Role> bodyd;
+  };
+  struct Connection {
+    int fd = -1;
+    std::vector<std::uint8_t> in, out;
+    std::map<std::int32_t, Device> devices;  // by tracker_id
+    std::int64_t window_start_ns = 0;
+    std::uint32_t window_frames = 0;
+    bool drop = false;
+  };
+
+  std::string path;
+  mutable std::mutex mutex;  // everything below
+  int users = 0;
+  int listen_fd = -1;
+  int wake_fd = -1;
+  std::atomic<bool> stop_flag{false};
+  std::thread thread;
+  std::vector<std::unique_ptr<Connection>> connections;
+  SampleSink* sink = nullptr;
+  std::uint16_t source_index = 0;
+  std::vector<AnnouncedTracker> trackers;
+  Encoder encoder;
+  BridgeStats stats;
+
+  void reject(const std::string& reason, const std::string& detail) {
+    ++stats.rejected;
+    const std::uint64_t n = ++stats.rejected_by_reason[reason];
+    stats.last_error = reason + ": " + detail;
+    if (log_now(n))
+      spdlog::warn("bridge {}: {} ({}; {} so far, logged at the 1st, 2nd, 4th, 8th...)", path, detail, reason, n);
+  }
+
+  void announce(Connection& c) {
+    encoder.version(c.out, kProtocolVersion);
+    for (const AnnouncedTracker& t : trackers) {
+      encoder.tracker_added(c.out, t.id, t.serial, t.name, t.role, "bodyd");
+      encoder.tracker_status(c.out, t.id, status::kOk);
+    }
+  }
+
+  // Writes what the socket takes now; drops a connection that kept too much.
+  void flush(Connection& c) {
+    while (!c.out.empty() && !c.drop) {
+      const ssize_t n = ::send(c.fd, c.out.data(), c.out.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
+      if (n > 0) {
+        c.out.erase(c.out.begin(), c.out.begin() + n);
+        continue;
+      }
+      if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) break;
+      if (n < 0 && errno == EINTR) continue;
+      c.drop = true;  // EPIPE, ECONNRESET: gone; the thread closes it
+      ++stats.disconnects;
+      return;
+    }
+    if (c.out.size() > kMaxPendingOutBytes) {
+      reject("slow_reader", "a client read nothing of " + std::to_string(c.out.size()) +
+                                " bytes waiting: the connection is dropped");
+      ++stats.dropped;
+      c.drop = true;
+    }
+  }
+
+  void push_invalid(const Connection& c) {
+    if (sink == nullptr) return;
+    for (const auto& [id, d] : c.devices) {
+      if (!d.bodyd) continue;
+      SourceSample s;
+      s.sample.t_ns = now_ns();
+      s.sample.role = *d.bodyd;
+      s.sample.valid = false;
+      s.sample.frame = PoseFrame::Device;
+      s.arrival_ns = s.sample.t_ns;
+      s.source_index = source_index;
+      sink->push(s);
+    }
+  }
+
+  void handle(Connection& c, const Message& m, std::int64_t arrival_ns) {
+    switch (m.kind) {
+      case Message::Kind::TrackerAdded: {
+        if (m.role < 0 || m.role > role::kMax) {
+          reject("unknown_role", "TrackerAdded " + std::to_string(m.tracker_id) + " \"" + m.serial + "\" has role " +
+                                     std::to_string(m.role) + " (SlimeVR's roles are 0-21)");
+          return;
+        }
+        Device& d = c.devices[m.tracker_id];
+        d.serial = m.serial;
+        d.role = m.role;
+        d.bodyd = bodyd_role(m.role);
+        stats.roles_in[m.serial.empty() ? std::to_string(m.tracker_id) : m.serial] = m.role;
+        if (!d.bodyd) ++stats.ignored;
+        spdlog::info("bridge {}: device {} \"{}\" ({}), role {}{}", path, m.tracker_id, m.serial, m.name, m.role,
+                     d.bodyd ? std::string(" -> ") + std::string(role_name(*d.bodyd)) : std::string(" (not used)"));
+        return;
+      }
+      case Message::Kind::Position: {
+        const auto it = c.devices.find(m.tracker_id);
+        if (it == c.devices.end()) {
+          reject("unknown_tracker", "Position for tracker " + std::to_string(m.tracker_id) + ", which no TrackerAdded announced");
+          return;
+        }
+        if (!it->second.bodyd || sink == nullptr) {
+          ++stats.ignored;
+          return;
+        }
+        if (!m.has_position) {
+          ++stats.ignored;  // rotation only (IMU): the reconstruction needs positions
+          return;
+        }
+        const Vec3 p(m.x, m.y, m.z);
+        const Quat q(m.qw, m.qx, m.qy, m.qz);
+        const double norm = std::sqrt(q.coeffs().squaredNorm());
+        if (!limits::position_plausible(p.x()) || !limits::position_plausible(p.y()) ||
+            !limits::position_plausible(p.z()) || !std::isfinite(norm) ||
+            std::fabs(norm - 1.0) > limits::kQuatNormTolerance) {
+          reject("bad_pose", "Position of tracker " + std::to_string(m.tracker_id) + " is not a pose (position (" +
+                                 std::to_string(m.x) + ", " + std::to_string(m.y) + ", " + std::to_string(m.z) +
+                                 ") m, quaternion norm " + std::to_string(norm) + ")");
+          return;
+        }
+        SourceSample s;
+        s.sample.t_ns = arrival_ns;
+        s.sample.role = *it->second.bodyd;
+        s.sample.valid = true;
+        s.sample.position_m = p;
+        s.sample.rotation = q.normalized();
+        s.sample.frame = PoseFrame::Device;
+        s.arrival_ns = arrival_ns;
+        s.source_index = source_index;
+        sink->push(s);
+        ++stats.samples;
+        return;
+      }
+      case Message::Kind::TrackerStatus: {
+        const auto it = c.devices.find(m.tracker_id);
+        if (it != c.devices.end() && it->second.bodyd && sink != nullptr && m.status == status::kDisconnected) {
+          SourceSample s;
+          s.sample.t_ns = arrival_ns;
+          s.sample.role = *it->second.bodyd;
+          s.sample.frame = PoseFrame::Device;
+          s.arrival_ns = arrival_ns;
+          s.source_index = source_index;
+          sink->push(s);
+        } else {
+          ++stats.ignored;
+        }
+        return;
+      }
+      case Message::Kind::Version:
+      case Message::Kind::UserAction:
+      case Message::Kind::Battery:
+      case Message::Kind::Empty: ++stats.ignored; return;
+    }
+  }
+
+  // Reads what is there and handles every whole frame; marks the connection for dropping on
+  // a broken stream, a flood or EOF.
+  void read(Connection& c) {
+    std::uint8_t buf[4096];
+    for (int reads = 0; reads < 16 && !c.drop; ++reads) {
+      const ssize_t n = ::recv(c.fd, buf, sizeof buf, MSG_DONTWAIT);
+      if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)) {
+        c.drop = true;
+        ++stats.disconnects;
+        return;
+      }
+      if (n < 0) return;
+      const std::int64_t arrival_ns = now_ns();
+      c.in.insert(c.in.end(), buf, buf + n);
+      std::size_t at = 0;
+      while (!c.drop) {
+        const FrameView f = next_frame(c.in.data() + at, c.in.size() - at);
+        if (f.result == FrameResult::NeedMore) break;
+        if (f.result == FrameResult::TooLong || f.result == FrameResult::TooShort) {
+          reject(f.result == FrameResult::TooLong ? "frame_too_long" : "frame_too_short",
+                 "a frame declares " + std::to_string(f.declared_bytes) + " bytes (the protocol allows 4 to " +
+                     std::to_string(kMaxFrameBytes) + "): the stream cannot be followed, the connection is dropped");
+          ++stats.dropped;
+          c.drop = true;
+          break;
+        }
+        at += f.frame_bytes;
+        ++stats.frames_in;
+        if (arrival_ns - c.window_start_ns >= 1'000'000'000) {
+          c.window_start_ns = arrival_ns;
+          c.window_frames = 0;
+        }
+        if (++c.window_frames > kMaxFramesPerSecond) {
+          reject("flood", "a client sent more than " + std::to_string(kMaxFramesPerSecond) +
+                              " frames in a second: the connection is dropped");
+          ++stats.dropped;
+          c.drop = true;
+          break;
+        }
+        Message m;
+        std::string error;
+        if (!decode_message(f.payload, f.payload_bytes, m, error)) {
+          reject("malformed", error);  // the framing held: skip this frame only
+          continue;
+        }
+        handle(c, m, arrival_ns);
+      }
+      c.in.erase(c.in.begin(), c.in.begin() + static_cast<std::ptrdiff_t>(std::min(at, c.in.size())));
+    }
+  }
+
+  void accept_all() {
+    for (;;) {
+      const int fd = ::accept4(listen_fd, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
+      if (fd < 0) return;
+      if (connections.size() >= kMaxConnections) {
+        ::close(fd);
+        ++stats.refused;
+        reject("too_many_clients", "more than " + std::to_string(kMaxConnections) + " clients at once: refused");
+        continue;
+      }
+      auto c = std::make_unique<Connection>();
+      c->fd = fd;
+      c->window_start_ns = now_ns();
+      ++stats.connections;
+      announce(*c);
+      flush(*c);
+      spdlog::info("bridge {}: a client connected ({} now)", path, connections.size() + 1);
+      connections.push_back(std::move(c));
+    }
+  }
+
+  void close_dropped() {
+    for (auto it = connections.begin(); it != connections.end();) {
+      if (!(*it)->drop) {
+        ++it;
+        continue;
+      }
+      push_invalid(**it);
+      ::close((*it)->fd);
+      it = connections.erase(it);
+      spdlog::info("bridge {}: a client left ({} now)", path, connections.size());
+    }
+  }
+
+  void run() {
+    std::vector<pollfd> fds;
+    while (!stop_flag.load()) {
+      fds.clear();
+      {
+        std::lock_guard lock(mutex);
+        fds.push_back({listen_fd, POLLIN, 0});
+        fds.push_back({wake_fd, POLLIN, 0});
+        for (const auto& c : connections)
+          fds.push_back({c->fd, static_cast<short>(POLLIN | (c->out.empty() ? 0 : POLLOUT)), 0});
+      }
+      if (::poll(fds.data(), fds.size(), 100) < 0 && errno != EINTR) break;
+      std::lock_guard lock(mutex);
+      if (fds[1].revents & POLLIN) {
+        std::uint64_t v;
+        (void)!::read(wake_fd, &v, sizeof v);
+      }
+      // Connections may have changed between the two locks (publish drops only by flag), so
+      // match by fd.
+      for (std::size_t i = 2; i < fds.size(); ++i) {
+        if (fds[i].revents == 0) continue;
+        for (auto& c : connections) {
+          if (c->fd != fds[i].fd || c->drop) continue;
+          if (fds[i].revents & (POLLIN | POLLHUP | POLLERR)) read(*c);
+          if (!c->drop && !c->out.empty()) flush(*c);
+        }
+      }
+      if (fds[0].revents & POLLIN) accept_all();
+      close_dropped();
+    }
+  }
+
+  void wake() const {
+    const std::uint64_t one = 1;
+    (void)!::write(wake_fd, &one, sizeof one);
+  }
+};
+
+BridgeServer::BridgeServer(std::string path) : path_(std::move(path)), impl_(std::make_unique<Impl>()) {
+  impl_->path = path_;
+  impl_->stats.path = path_;
+}
+
+BridgeServer::~BridgeServer() {
+  {
+    std::lock_guard lock(impl_->mutex);
+    impl_->users = std::min(impl_->users, 1);
+  }
+  stop();
+}
+
+std::string BridgeServer::start() {
+  std::lock_guard lock(impl_->mutex);
+  if (impl_->users++ > 0) return {};
+  const std::filesystem::path p(path_);
+  const auto fail = [&](std::string e) {
+    impl_->users = 0;
+    if (impl_->listen_fd >= 0) ::close(impl_->listen_fd), impl_->listen_fd = -1;
+    return "bridge socket " + path_ + ": " + e;
+  };
+  if (std::string e = prepare_dir(p.parent_path().empty() ? std::filesystem::path(".") : p.parent_path()); !e.empty())
+    return fail(e);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  if (path_.size() >= sizeof(addr.sun_path)) return fail("path too long for a Unix socket");
+  std::memcpy(addr.sun_path, path_.c_str(), path_.size() + 1);
+  struct stat st {};
+  if (::lstat(path_.c_str(), &st) == 0) {
+    if (!S_ISSOCK(st.st_mode)) return fail("exists and is not a socket; bodyd does not replace other files (remove it, or name another path)");
+    const int probe = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    const bool live = probe >= 0 && ::connect(probe, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0;
+    if (probe >= 0) ::close(probe);
+    if (live) return fail("in use: another program listens on it (a SlimeVR server, or another bodyd?); stop it, or name another path");
+    ::unlink(path_.c_str());  // stale, from a process that is gone
+  }
+  impl_->listen_fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+  if (impl_->listen_fd < 0) return fail(std::string("socket: ") + std::strerror(errno));
+  if (::bind(impl_->listen_fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0)
+    return fail(std::string("bind: ") + std::strerror(errno));
+  ::chmod(path_.c_str(), 0600);
+  if (::listen(impl_->listen_fd, 8) != 0) return fail(std::string("listen: ") + std::strerror(errno));
+  impl_->wake_fd = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+  if (impl_->wake_fd < 0) return fail(std::string("eventfd: ") + std::strerror(errno));
+  impl_->stop_flag.store(false);
+  impl_->stats.listening = true;
+  impl_->thread = std::thread([this] { impl_->run(); });
+  spdlog::info("bridge: listening on {} (SlimeVR driver protocol)", path_);
+  return {};
+}
+
+void BridgeServer::stop() {
+  {
+    std::lock_guard lock(impl_->mutex);
+    if (impl_->users == 0 || --impl_->users > 0) return;
+    impl_->stop_flag.store(true);
+  }
+  if (impl_->thread.joinable()) {
+    impl_->wake();
+    impl_->thread.join();
+  }
+  std::lock_guard lock(impl_->mutex);
+  for (auto& c : impl_->connections) {
+    impl_->push_invalid(*c);
+    ::close(c->fd);
+  }
+  impl_->connections.clear();
+  if (impl_->listen_fd >= 0) {
+    ::close(impl_->listen_fd);
+    impl_->listen_fd = -1;
+    ::unlink(path_.c_str());
+  }
+  if (impl_->wake_fd >= 0) ::close(impl_->wake_fd), impl_->wake_fd = -1;
+  impl_->stats.listening = false;
+}
+
+void BridgeServer::attach_sink(SampleSink* sink, std::uint16_t source_index) {
+  std::lock_guard lock(impl_->mutex);
+  impl_->sink = sink;
+  impl_->source_index = source_index;
+}
+
+void BridgeServer::set_trackers(std::vector<AnnouncedTracker> trackers) {
+  std::lock_guard lock(impl_->mutex);
+  impl_->trackers = std::move(trackers);
+  for (auto& c : impl_->connections) {
+    for (const AnnouncedTracker& t : impl_->trackers) {
+      impl_->encoder.tracker_added(c->out, t.id, t.serial, t.name, t.role, "bodyd");
+      impl_->encoder.tracker_status(c->out, t.id, status::kOk);
+    }
+    impl_->flush(*c);
+  }
+  if (impl_->wake_fd >= 0) impl_->wake();
+}
+
+bool BridgeServer::publish(const TrackerPoseOut* poses, std::size_t count, std::string& out_error) {
+  std::lock_guard lock(impl_->mutex);
+  ++impl_->stats.publishes;
+  bool dropped = false, any = false;
+  for (auto& c : impl_->connections) {
+    if (c->drop) continue;
+    any = true;
+    for (std::size_t i = 0; i < count; ++i) impl_->encoder.position(c->out, poses[i].id, poses[i].position_m, poses[i].rotation);
+    impl_->stats.frames_out += count;
+    impl_->flush(*c);
+    dropped |= c->drop;
+  }
+  if (dropped) impl_->wake();
+  if (!any) ++impl_->stats.publishes_without_client;
+  if (dropped) {
+    out_error = "a client that does not read was dropped";
+    return false;
+  }
+  return true;
+}
+
+BridgeStats BridgeServer::stats() const {
+  std::lock_guard lock(impl_->mutex);
+  BridgeStats s = impl_->stats;
+  s.clients = impl_->connections.size();
+  return s;
+}
+
+std::shared_ptr<BridgeServer> shared_bridge(const std::string& path) {
+  static std::mutex mutex;
+  static std::map<std::string, std::weak_ptr<BridgeServer>> servers;
+  std::lock_guard lock(mutex);
+  std::error_code ec;
+  const std::string key = std::filesystem::absolute(path, ec).lexically_normal().string();
+  if (auto s = servers[key].lock()) return s;
+  auto s = std::make_shared<BridgeServer>(path);
+  servers[key] = s;
+  return s;
+}
+
+// ---- the sources -------------------------------------------------------------------------------
+
+namespace {
+
+class BridgeSource final : public TrackerSource {
+ public:
+  BridgeSource(std::string name, std::shared_ptr<BridgeServer> server) : name_(std::move(name)), server_(std::move(server)) {}
+  ~BridgeSource() override { stop(); }
+
+  const std::string& name() const override { return name_; }
+
+  std::string start(SampleSink& sink, std::uint16_t source_index) override {
+    if (started_) return {};
+    server_->attach_sink(&sink, source_index);
+    if (std::string e = server_->start(); !e.empty()) {
+      server_->attach_sink(nullptr, 0);
+      return "--source " + name_ + ": " + e;
+    }
+    started_ = true;
+    return {};
+  }
+
+  void stop() override {
+    if (!started_) return;
+    server_->attach_sink(nullptr, 0);
+    server_->stop();
+    started_ = false;
+  }
+
+  SourceStatus status() const override {
+    const BridgeStats b = server_->stats();
+    SourceStatus s;
+    s.name = name_;
+    s.connected = b.clients > 0;
+    s.samples = b.samples;
+    s.rejected = b.rejected;
+    s.rejected_by_reason = b.rejected_by_reason;
+    s.last_error = b.last_error;
+    s.counters = {{"clients", b.clients},         {"connections", b.connections}, {"disconnects", b.disconnects},
+                  {"dropped", b.dropped},         {"frames_in", b.frames_in},     {"ignored", b.ignored},
+                  {"refused", b.refused}};
+    return s;
+  }
+
+ private:
+  std::string name_;
+  std::shared_ptr<BridgeServer> server_;
+  bool started_ = false;
+};
+
+}  // namespace
+
+std::unique_ptr<TrackerSource> open_steamvr_source(std::string_view spec, std::string_view argument, std::string& error) {
+  std::string e;
+  const std::string path = socket_path(argument, kDriverSocketName, e);
+  if (path.empty()) {
+    error = "--source " + std::string(spec) + ": " + e;
+    return nullptr;
+  }
+  return std::make_unique<BridgeSource>("steamvr:" + path, shared_bridge(path));
+}
+
+std::unique_ptr<TrackerSource> open_monado_source(std::string_view spec, std::string_view argument, std::string& error) {
+  std::string e;
+  std::string dir(argument);
+  if (dir.empty()) dir = default_socket_dir(e);
+  std::string path = dir.empty() ? std::string() : socket_path(dir + "/" + std::string(kMonadoInputSocketName), {}, e);
+  if (path.empty()) {
+    error = "--source " + std::string(spec) + ": " + e;
+    return nullptr;
+  }
+  return std::make_unique<BridgeSource>("monado:" + path, shared_bridge(path));
+}
+
+}  // namespace bodyd::drivers::slimevr

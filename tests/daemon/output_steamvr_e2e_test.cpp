@@ -1,0 +1,193 @@
+// bodyd as the tracking server of SlimeVR's OpenVR driver (issue 17), against a client written
+// only from the protocol's schema in another language: tests/drivers/slimevr/driver_client.py
+// (Debian's python3-protobuf, the test's own .proto compiled by protoc into the build directory)
+// plays a clip's headset and controllers at 90 Hz into bodyd --source steamvr: --output
+// steamvr: on one socket, and records what bodyd sends back. The announced trackers must be
+// the configured ones, once per connection, and every Position the same joint of the ZeroMQ
+// pose within 1 mm and 0.1 degree (the driver's space: no reset, so bodyd's own). Skips when
+// python3 or python3-protobuf is missing.
+#include "slimevr_helpers.h"
+
+#include <sys/stat.h>
+
+namespace bodyd {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace test::slimevr;
+
+const std::pair<int, const char*> kTrackers[] = {{1, "Hips"},       {2, "Foot_L"},     {3, "Foot_R"},
+                                                 {4, "Chest"},      {5, "LowerLeg_L"}, {6, "LowerLeg_R"},
+                                                 {7, "LowerArm_L"}, {8, "LowerArm_R"}};
+const char* const kSerials[] = {"bodyd-waist",     "bodyd-left_foot",  "bodyd-right_foot",  "bodyd-chest",
+                                "bodyd-left_knee", "bodyd-right_knee", "bodyd-left_elbow", "bodyd-right_elbow"};
+
+struct Received {
+  std::vector<std::vector<nlohmann::json>> announced;  // per connection: the TrackerAdded records
+  std::vector<std::vector<nlohmann::json>> groups;     // the Positions of one pose (8, in id order)
+};
+
+Received parse(const std::vector<nlohmann::json>& records) {
+  Received r;
+  for (const nlohmann::json& rec : records) {
+    const std::string kind = rec["kind"];
+    if (kind == "connected") r.announced.emplace_back();
+    else if (kind == "tracker_added" && !r.announced.empty()) r.announced.back().push_back(rec);
+    else if (kind == "position") {
+      if (r.groups.empty() || rec["id"].get<int>() == kTrackers[0].first) r.groups.emplace_back();
+      r.groups.back().push_back(rec);
+    }
+  }
+  return r;
+}
+
+std::pair<double, double> group_error(const std::vector<nlohmann::json>& g, const protocol::PoseMessage& pose,
+                                      const std::vector<std::size_t>& joints) {
+  double mm = 1e9, deg = 1e9;
+  if (g.size() != std::size(kTrackers)) return {mm, deg};
+  mm = deg = 0;
+  for (std::size_t k = 0; k < g.size(); ++k) {
+    const auto& j = pose.joints[joints[k]];
+    mm = std::max(mm, (vec3(g[k]["p"]) - vec3(j.position_m)).norm() * 1000.0);
+    deg = std::max(deg, angle_deg(quat_xyzw(g[k]["q"]), quat_xyzw(j.rotation_xyzw)));
+  }
+  return {mm, deg};
+}
+
+struct Loop {
+  test::TempDir dir;
+  std::string python;
+  fs::path socket;
+  std::unique_ptr<test::Child> daemon;
+  zmq::context_t ctx;
+  std::optional<zmq::socket_t> sub;
+  protocol::SkeletonMessage skeleton;
+  std::vector<protocol::PoseMessage> poses;
+
+  ::testing::AssertionResult start(const std::vector<std::string>& extra = {}) {
+    socket = dir.path / "run" / "SlimeVRDriver";  // bodyd makes the directory (0700)
+    std::vector<std::string> args{(test::bin_dir() / "bodyd").string(), "--method", "ik", "--source",
+                                  "steamvr:" + socket.string(), "--output",
+                                  "steamvr:" + socket.string() + "?trackers=waist,feet,chest,knees,elbows", "--pub",
+                                  "tcp://127.0.0.1:*", "--control", "none", "--endpoints-file",
+                                  (dir.path / "endpoints.json").string()};
+    args.insert(args.end(), extra.begin(), extra.end());
+    daemon = std::make_unique<test::Child>(args, dir.path / "bodyd.err");
+    const auto endpoints = test::wait_endpoints(dir.path / "endpoints.json", 20000);
+    if (!endpoints) return ::testing::AssertionFailure() << daemon->log();
+    sub.emplace(test::sub_socket(ctx, (*endpoints)["pub"].get<std::string>()));
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the subscription reaches the publisher
+    return ::testing::AssertionSuccess();
+  }
+
+  // Runs the client to its end, collecting the ZeroMQ poses meanwhile.
+  int run_client(const std::vector<std::string>& args, const fs::path& err) {
+    std::vector<std::string> full{python, client_script("driver_client.py").string(), pb_dir().string()};
+    full.insert(full.end(), args.begin(), args.end());
+    test::Child client(full, err);
+    auto quiet_since = std::chrono::steady_clock::now();
+    std::size_t last = 0;
+    collect(*sub, skeleton, poses, [&] {
+      if (poses.size() != last) last = poses.size(), quiet_since = std::chrono::steady_clock::now();
+      return client.wait(0).has_value() && std::chrono::steady_clock::now() - quiet_since > std::chrono::milliseconds(500);
+    });
+    const int rc = client.wait(0).value_or(-1);
+    if (rc != 0) ADD_FAILURE() << "client: " << client.log();
+    return rc;
+  }
+};
+
+// Pairs each group with the first pose at or after the previous group's that matches within
+// 1 mm (poses and groups come in the same order, one group per pose while a driver is connected).
+void compare(const Loop& loop, const Received& r, double& worst_mm, double& worst_deg, std::size_t& matched) {
+  std::vector<std::size_t> joints;
+  for (const auto& [id, joint] : kTrackers) joints.push_back(joint_index(loop.skeleton, joint));
+  std::size_t next = 0;
+  for (std::size_t i = 0; i < r.groups.size(); ++i) {
+    ASSERT_EQ(r.groups[i].size(), std::size(kTrackers)) << "group " << i;
+    for (std::size_t k = 0; k < r.groups[i].size(); ++k) {
+      ASSERT_EQ(r.groups[i][k]["id"].get<int>(), kTrackers[k].first);
+      ASSERT_TRUE(r.groups[i][k]["has_p"].get<bool>());
+    }
+    std::size_t p = next;
+    while (p < loop.poses.size() && group_error(r.groups[i], loop.poses[p], joints).first > 1.0) ++p;
+    ASSERT_LT(p, loop.poses.size()) << "group " << i << " matches no pose from " << next << " on";
+    const auto [mm, deg] = group_error(r.groups[i], loop.poses[p], joints);
+    worst_mm = std::max(worst_mm, mm);
+    worst_deg = std::max(worst_deg, deg);
+    ++matched;
+    next = p + 1;
+  }
+}
+
+void expect_announced(const std::vector<nlohmann::json>& added) {
+  ASSERT_EQ(added.size(), std::size(kTrackers));
+  for (std::size_t k = 0; k < added.size(); ++k) {
+    EXPECT_EQ(added[k]["id"].get<int>(), kTrackers[k].first);
+    EXPECT_EQ(added[k]["role"].get<int>(), kTrackers[k].first);  // SlimeVR's role numbers
+    EXPECT_EQ(added[k]["serial"].get<std::string>(), kSerials[k]);
+    EXPECT_FALSE(added[k]["name"].get<std::string>().empty());
+  }
+}
+
+TEST(SteamvrBridge, DriverLoopTrackersAreTheZmqPoseJoints) {
+  Loop loop;
+  if (std::string why = python_skip_reason(loop.python); !why.empty()) GTEST_SKIP() << why;
+  ASSERT_TRUE(loop.start());
+  // Only the user may connect: the socket 0600 in a 0700 directory.
+  struct stat st {};
+  ASSERT_EQ(::stat(loop.socket.parent_path().c_str(), &st), 0);
+  EXPECT_EQ(st.st_mode & 0777, 0700u);
+  ASSERT_EQ(::stat(loop.socket.c_str(), &st), 0);
+  EXPECT_TRUE(S_ISSOCK(st.st_mode));
+  EXPECT_EQ(st.st_mode & 0077, 0u);
+
+  write_poses(loop.dir.path / "poses.txt");
+  ASSERT_EQ(loop.run_client({"play", loop.socket.string(), (loop.dir.path / "poses.txt").string(),
+                             (loop.dir.path / "received.jsonl").string()},
+                            loop.dir.path / "client.err"),
+            0);
+  loop.daemon->signal(SIGINT);
+  ASSERT_EQ(loop.daemon->wait(10000), 0) << loop.daemon->log();
+  ASSERT_FALSE(loop.skeleton.names.empty());
+  ASSERT_GT(loop.poses.size(), 100u) << loop.daemon->log();
+
+  const Received r = parse(read_jsonl(loop.dir.path / "received.jsonl"));
+  ASSERT_EQ(r.announced.size(), 1u);
+  expect_announced(r.announced[0]);
+  // One group per pose (the driver was connected for all of them).
+  EXPECT_GE(r.groups.size() * 100, loop.poses.size() * 95) << r.groups.size() << " groups for " << loop.poses.size() << " poses";
+  double mm = 0, deg = 0;
+  std::size_t matched = 0;
+  compare(loop, r, mm, deg, matched);
+  EXPECT_EQ(matched, r.groups.size());
+  EXPECT_LE(mm, 1.0);
+  EXPECT_LE(deg, 0.1);
+  std::cout << r.groups.size() << " position groups for " << loop.poses.size() << " poses; worst " << mm << " mm, " << deg << " deg\n";
+}
+
+TEST(SteamvrBridge, ADriverThatReconnectsGetsItsTrackersAgain) {
+  Loop loop;
+  if (std::string why = python_skip_reason(loop.python); !why.empty()) GTEST_SKIP() << why;
+  ASSERT_TRUE(loop.start());
+  write_poses(loop.dir.path / "poses.txt");
+  ASSERT_EQ(loop.run_client({"play", loop.socket.string(), (loop.dir.path / "poses.txt").string(),
+                             (loop.dir.path / "received.jsonl").string(), "--reconnect-after", "90"},
+                            loop.dir.path / "client.err"),
+            0);
+  loop.daemon->signal(SIGINT);
+  ASSERT_EQ(loop.daemon->wait(10000), 0) << loop.daemon->log();
+  const Received r = parse(read_jsonl(loop.dir.path / "received.jsonl"));
+  ASSERT_EQ(r.announced.size(), 2u);
+  expect_announced(r.announced[0]);
+  expect_announced(r.announced[1]);
+  double mm = 0, deg = 0;
+  std::size_t matched = 0;
+  compare(loop, r, mm, deg, matched);
+  EXPECT_GT(matched, 150u);  // both connections were served (178 poses in all)
+  EXPECT_LE(mm, 1.0);
+  EXPECT_LE(deg, 0.1);
+}
+
+}  // namespace
+}  // namespace bodyd
