@@ -53,6 +53,7 @@ extern "C" {
 #define BODYD_ERROR_MALFORMED (-2) /* a message could not be decoded and was skipped; keep receiving */
 #define BODYD_ERROR_ARGUMENT (-3)  /* a NULL handle or pointer, an index out of range, a buffer too small */
 #define BODYD_ERROR_NO_SKELETON (-4) /* no skeleton known yet */
+#define BODYD_ERROR_NO_REST_POSE (-5) /* the skeleton carries no rest rotations (a version-1 skeleton) */
 
 /* One joint's global pose: metres, unit quaternion (x, y, z, w), +Y up. 28 bytes. */
 typedef struct bodyd_joint {
@@ -129,6 +130,14 @@ BODYD_API const char* bodyd_client_skeleton_joint_name(const bodyd_client* clien
 /* Joint `index`'s parent index (-1 for the root) and rest offset (metres, parent frame). */
 BODYD_API int bodyd_client_skeleton_joint(const bodyd_client* client, uint32_t index, int32_t* parent,
                                           float offset_m[3]);
+
+/* Joint `index`'s rest rotation relative to its parent, quaternion (x, y, z, w), unit length
+ * (docs/protocol.md, "Rest pose"): forward kinematics of the rest offsets and rest rotations
+ * gives the skeleton's reference T-pose, which retargeting to an avatar needs. BODYD_OK;
+ * BODYD_ERROR_NO_SKELETON while no skeleton is known; BODYD_ERROR_NO_REST_POSE when the
+ * skeleton has none (version 1; rotation_xyzw is left unchanged); BODYD_ERROR_ARGUMENT for a
+ * NULL pointer or an index out of range. */
+BODYD_API int bodyd_client_skeleton_rest_rotation(const bodyd_client* client, uint32_t index, float rotation_xyzw[4]);
 
 BODYD_API int bodyd_client_stats(const bodyd_client* client, bodyd_stats* out);
 

@@ -172,6 +172,16 @@ int bodyd_client_skeleton_joint(const bodyd_client* c, uint32_t index, int32_t* 
   return BODYD_OK;
 }
 
+int bodyd_client_skeleton_rest_rotation(const bodyd_client* c, uint32_t index, float rotation_xyzw[4]) {
+  if (c == nullptr || rotation_xyzw == nullptr) return BODYD_ERROR_ARGUMENT;
+  const auto* s = skeleton_of(c);
+  if (s == nullptr) return BODYD_ERROR_NO_SKELETON;
+  if (index >= s->names.size()) return BODYD_ERROR_ARGUMENT;
+  if (s->rest_rotations_xyzw.size() != s->names.size()) return BODYD_ERROR_NO_REST_POSE;
+  std::memcpy(rotation_xyzw, s->rest_rotations_xyzw[index].data(), sizeof(float) * 4);
+  return BODYD_OK;
+}
+
 int bodyd_client_stats(const bodyd_client* c, bodyd_stats* out) {
   if (c == nullptr || out == nullptr) return BODYD_ERROR_ARGUMENT;
   const auto& s = c->client->stats();

@@ -60,6 +60,11 @@ int main(int argc, char** argv) {
   CHECK(parent == 4);
   CHECK(offset[1] == 5.0f / 64.0f);
   CHECK(bodyd_client_skeleton_joint(c, 22, &parent, offset) == BODYD_ERROR_ARGUMENT);
+  /* The synthetic skeleton is a version-1 one: no rest rotations (issue 20 item 9). */
+  float rest[4] = {9, 9, 9, 9};
+  CHECK(bodyd_client_skeleton_rest_rotation(c, 5, rest) == BODYD_ERROR_NO_REST_POSE);
+  CHECK(rest[0] == 9 && rest[3] == 9);
+  CHECK(bodyd_client_skeleton_rest_rotation(c, 5, NULL) == BODYD_ERROR_ARGUMENT);
 
   /* A request the server refuses: BODYD_ERROR, reply copied, error set. */
   char reply[512];

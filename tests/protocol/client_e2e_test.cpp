@@ -1,6 +1,7 @@
 // End to end over real sockets: the C++ client, the C ABI from C, the Python example, bodyd-sub
 // and bodyd-record against an in-process publisher on tcp://127.0.0.1:* and ipc://.
 #include "bodyd/client/client.h"
+#include "bodyd_client.h"
 #include "bodyd/protocol/recording.h"
 #include "bodyd/protocol/synthetic.h"
 #include "../test_paths.h"
@@ -11,6 +12,7 @@
 
 #include <fmt/format.h>
 
+#include <cmath>
 #include <sstream>
 
 namespace bodyd::test {
@@ -240,6 +242,39 @@ TEST(ClientCpp, InvalidEndpointIsAnError) {
 }
 
 // ---- C ABI from C ------------------------------------------------------------------------
+
+// Issue 20 item 9: the C ABI gives the skeleton's rest rotations (a P/Invoke client with no
+// JSON parser needs them to retarget), and says when a skeleton has none.
+TEST(ClientCApi, RestRotationsOfTheSkeleton) {
+  protocol::SkeletonMessage v2 = synthetic_skeleton();
+  for (std::size_t i = 0; i < v2.names.size(); ++i) {
+    const float a = 0.05f * static_cast<float>(i);
+    v2.rest_rotations_xyzw.push_back({std::sin(a), 0.0f, 0.0f, std::cos(a)});
+  }
+  v2.skeleton_id = protocol::skeleton_id_of(v2);
+  TestControlServer with_rest("tcp://127.0.0.1:*", v2);
+  bodyd_client* c = bodyd_client_create("tcp://127.0.0.1:9", with_rest.endpoint().c_str());
+  ASSERT_NE(c, nullptr) << bodyd_client_error(nullptr);
+  float q[4] = {0, 0, 0, 0};
+  EXPECT_EQ(bodyd_client_skeleton_rest_rotation(c, 0, q), BODYD_ERROR_NO_SKELETON);
+  ASSERT_EQ(bodyd_client_fetch_skeleton(c, 5000), BODYD_OK) << bodyd_client_error(c);
+  ASSERT_EQ(bodyd_client_skeleton_id(c), v2.skeleton_id);
+  for (std::uint32_t i = 0; i < v2.names.size(); ++i) {
+    ASSERT_EQ(bodyd_client_skeleton_rest_rotation(c, i, q), BODYD_OK) << i;
+    EXPECT_EQ((F4{q[0], q[1], q[2], q[3]}), v2.rest_rotations_xyzw[i]) << i;
+  }
+  EXPECT_EQ(bodyd_client_skeleton_rest_rotation(c, 22, q), BODYD_ERROR_ARGUMENT);
+  EXPECT_EQ(bodyd_client_skeleton_rest_rotation(c, 1, nullptr), BODYD_ERROR_ARGUMENT);
+  EXPECT_EQ(bodyd_client_skeleton_rest_rotation(nullptr, 1, q), BODYD_ERROR_ARGUMENT);
+  bodyd_client_destroy(c);
+
+  TestControlServer without_rest;  // the synthetic skeleton is a version-1 one
+  c = bodyd_client_create("tcp://127.0.0.1:9", without_rest.endpoint().c_str());
+  ASSERT_NE(c, nullptr);
+  ASSERT_EQ(bodyd_client_fetch_skeleton(c, 5000), BODYD_OK) << bodyd_client_error(c);
+  EXPECT_EQ(bodyd_client_skeleton_rest_rotation(c, 1, q), BODYD_ERROR_NO_REST_POSE);
+  bodyd_client_destroy(c);
+}
 
 TEST(ClientCApi, UsedFromC) {
   TestControlServer control;

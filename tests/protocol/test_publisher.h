@@ -111,8 +111,9 @@ class TestPublisher {
 // {"ok":false,"error":...}, as docs/control.md describes the daemon's replies.
 class TestControlServer {
  public:
-  explicit TestControlServer(const std::string& endpoint = "tcp://127.0.0.1:*")
-      : socket_(context_, zmq::socket_type::rep) {
+  explicit TestControlServer(const std::string& endpoint = "tcp://127.0.0.1:*",
+                             protocol::SkeletonMessage skeleton = protocol::synthetic_skeleton())
+      : skeleton_(std::move(skeleton)), socket_(context_, zmq::socket_type::rep) {
     socket_.set(zmq::sockopt::linger, 0);
     socket_.bind(endpoint);
     endpoint_ = socket_.get(zmq::sockopt::last_endpoint);
@@ -135,7 +136,7 @@ class TestControlServer {
       const auto request = nlohmann::json::parse(msg.to_string_view(), nullptr, false);
       nlohmann::json reply;
       if (request.is_object() && request.value("cmd", "") == "skeleton") {
-        reply = client::skeleton_to_json(protocol::synthetic_skeleton());
+        reply = client::skeleton_to_json(skeleton_);
         reply["ok"] = true;
       } else {
         reply = {{"ok", false}, {"error", "unknown command"}};
@@ -145,6 +146,7 @@ class TestControlServer {
     }
   }
 
+  protocol::SkeletonMessage skeleton_;
   zmq::context_t context_{1};
   zmq::socket_t socket_;
   std::string endpoint_;
