@@ -19,10 +19,16 @@ test: build
 demo: build
 	@scripts/demo $(BUILD)
 
-# The Debian package $(BUILD)/bodyd_<version>_<arch>.deb (CPack; docs/install.md):
-# sudo apt install ./$(BUILD)/bodyd_*.deb
-package: build
-	@cd $(BUILD) && cpack -G DEB
+# The Debian package $(PACKAGE_BUILD)/bodyd_<version>_<arch>.deb (CPack; docs/install.md):
+# sudo apt install ./$(PACKAGE_BUILD)/bodyd_*.deb. Its own build tree builds only what ships
+# (BODYD_BUILD_TESTS=OFF: no tests, no test tools), and setup installs only the build
+# dependencies (BODYD_SETUP_PACKAGE=1: no browser, no npm).
+PACKAGE_BUILD ?= build-package
+package:
+	@BODYD_SETUP_PACKAGE=1 scripts/setup
+	@cmake -S . -B $(PACKAGE_BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DBODYD_BUILD_TESTS=OFF >/dev/null
+	@cmake --build $(PACKAGE_BUILD) -j $(JOBS)
+	@cd $(PACKAGE_BUILD) && cpack -G DEB
 
 # ASan/UBSan build and test run (slower; in build-asan/).
 sanitize: setup
@@ -40,4 +46,4 @@ fuzz:
 	@scripts/fuzz --build $(FUZZ_BUILD) --seconds $(FUZZ_SECONDS) --jobs $(JOBS) $(FUZZ_TARGETS)
 
 clean:
-	rm -rf $(BUILD) build-asan $(FUZZ_BUILD)
+	rm -rf $(BUILD) build-asan $(FUZZ_BUILD) $(PACKAGE_BUILD)

@@ -97,3 +97,58 @@ TEST(Docs, ConventionsAreCitedFromTheRepository) {
     }
   }
 }
+
+// Issue 20 item 8: the quick start installs the file `make package` writes. Every
+// `apt install ./DIR/bodyd_...deb` in README.md and docs/install.md names the Makefile's
+// PACKAGE_BUILD directory.
+TEST(Docs, AptInstallNamesTheFileMakePackageWrites) {
+  const fs::path root = bodyd::test::source_dir();
+  std::smatch m;
+  const std::string makefile = slurp(root / "Makefile");
+  ASSERT_TRUE(std::regex_search(makefile, m, std::regex(R"(\nPACKAGE_BUILD \?= (\S+))")))
+      << "the Makefile does not say where make package builds (PACKAGE_BUILD ?= DIR)";
+  const std::string dir = m[1].str();
+  const std::regex install(R"(apt install (\S*bodyd_\S*\.deb))");
+  int found = 0;
+  for (const char* page : {"README.md", "docs/install.md"}) {
+    const std::string text = slurp(root / page);
+    for (std::sregex_iterator it(text.begin(), text.end(), install), end; it != end; ++it) {
+      ++found;
+      EXPECT_TRUE((*it)[1].str().starts_with("./" + dir + "/bodyd_"))
+          << page << ": `" << it->str() << "` is not the file make package writes (" << dir << "/bodyd_*.deb)";
+    }
+  }
+  EXPECT_GE(found, 2);
+}
+
+// Issue 20 item 8: what a missing user session bus means for `systemctl --user`, and what to do.
+TEST(Docs, InstallExplainsAMissingUserBus) {
+  const std::string text = slurp(bodyd::test::source_dir() / "docs/install.md");
+  for (const char* part : {"Failed to connect to bus: No medium found", "desktop session", "loginctl enable-linger"})
+    EXPECT_NE(text.find(part), std::string::npos) << "docs/install.md does not mention \"" << part << "\"";
+}
+
+// Issue 20 item 9: docs/protocol.md's C# section declares every function of the C ABI header
+// (a P/Invoke client is written from it), says how many there are, and points to no table that
+// is not there.
+TEST(Docs, CSharpSectionDeclaresEveryCAbiFunction) {
+  const fs::path root = bodyd::test::source_dir();
+  const std::string header = slurp(root / "client/include/bodyd_client.h");
+  const std::string doc = slurp(root / "docs/protocol.md");
+  const std::regex declared(R"(BODYD_API[^;(]*\b(bodyd_client_\w+)\s*\()");
+  int functions = 0;
+  for (std::sregex_iterator it(header.begin(), header.end(), declared), end; it != end; ++it) {
+    ++functions;
+    const std::string name = (*it)[1].str();
+    EXPECT_TRUE(std::regex_search(doc, std::regex("\\[DllImport\\(Lib\\)\\][^\\n]*\\b" + name + "\\(")))
+        << "docs/protocol.md's C# section has no DllImport for " << name;
+  }
+  EXPECT_GE(functions, 14);
+  EXPECT_NE(doc.find("These are all " + std::to_string(functions) + " functions of the header"), std::string::npos)
+      << "docs/protocol.md does not say the header has " << functions << " functions";
+  EXPECT_EQ(doc.find("the table below"), std::string::npos) << "docs/protocol.md refers to a table below";
+  // The retargeting recipe covers what an integrator needs beyond the special case.
+  for (const char* part : {"bodyd_client_skeleton_rest_rotation", "A[b]", "hAvatar", "fUser", "UpperChest",
+                           "HumanPoseHandler", "facing bodyd −Z"})
+    EXPECT_NE(doc.find(part), std::string::npos) << "docs/protocol.md lacks \"" << part << "\"";
+}

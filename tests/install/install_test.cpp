@@ -7,6 +7,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <fstream>
+#include <sstream>
 #include <regex>
 #include <set>
 
@@ -51,6 +53,8 @@ TEST_F(InstallTree, HasTheUsualLayout) {
                            "lib/systemd/user/bodyd.service", "lib/udev/rules.d/70-bodyd.rules"}) {
     EXPECT_TRUE(fs::is_regular_file(prefix_ / file)) << file;
   }
+  // A test tool is not installed (issue 20 item 8: the package shipped bodyd-testpub).
+  EXPECT_FALSE(fs::exists(prefix_ / "bin/bodyd-testpub"));
   // The client library and its pkg-config file, in whatever libdir GNUInstallDirs chose.
   bool lib = false, pc = false;
   for (const auto& e : fs::recursive_directory_iterator(prefix_ / "lib")) {
@@ -187,6 +191,74 @@ TEST_F(InstallTree, InstalledBodydTouchesNothingInTheSourceOrBuildTree) {
   std::string list;
   for (const auto& p : offending) list += "  " + p + "\n";
   EXPECT_TRUE(offending.empty()) << "the installed bodyd looked at the source or build tree:\n" << list;
+}
+
+// make package (issue 20 item 8) builds only what ships, in its own tree: configured with
+// BODYD_BUILD_TESTS=OFF the build has the programs but no test, fuzz target or test tool
+// (configure only: no compiler runs).
+TEST(PackageBuild, WithoutTestsConfiguresOnlyWhatShips) {
+  ScratchDir dir("bodyd-package-build");
+  const fs::path tree = dir.path / "build-package";
+  const RunResult configure = run({kCmake.string(), "-S", source_dir().string(), "-B", tree.string(),
+                                   "-DBODYD_BUILD_TESTS=OFF", "-DCMAKE_BUILD_TYPE=RelWithDebInfo"},
+                                  {.output_dir = dir.path, .name = "configure"}, 240000);
+  ASSERT_EQ(configure.exit_code, 0) << configure.out << configure.err;
+  const RunResult help = run({kCmake.string(), "--build", tree.string(), "--target", "help"},
+                             {.output_dir = dir.path, .name = "help"}, 60000);
+  ASSERT_EQ(help.exit_code, 0) << help.err;
+  std::set<std::string> targets;
+  std::istringstream lines(help.out);
+  for (std::string line; std::getline(lines, line);)
+    if (line.rfind("... ", 0) == 0) targets.insert(line.substr(4, line.find(' ', 4) - 4));
+  for (const char* program : {"bodyd", "bodyd-ctl", "bodyd-sub", "bodyd-viewer-bridge", "bodyd_client"})
+    EXPECT_TRUE(targets.count(program)) << program << " is not built for the package";
+  for (const std::string& t : targets) {
+    EXPECT_EQ(t.find("_test"), std::string::npos) << "a test in the package build: " << t;
+    EXPECT_NE(t.rfind("fuzz_", 0), 0u) << "a fuzz target in the package build: " << t;
+    EXPECT_NE(t, "bodyd-testpub");
+  }
+  EXPECT_FALSE(fs::exists(tree / "CTestTestfile.cmake")) << "ctest is configured in the package build";
+}
+
+// The Makefile's package recipe (make -n prints it without running it): its own build tree,
+// tests off, setup told it is a package build.
+TEST(PackageBuild, MakePackageUsesItsOwnTreeWithoutTests) {
+  if (!fs::exists("/usr/bin/make")) GTEST_SKIP() << "make is not installed";
+  ScratchDir dir("bodyd-make-n");
+  const RunResult r = run({"/usr/bin/make", "-n", "-C", source_dir().string(), "package"},
+                          {.output_dir = dir.path, .name = "make"}, 30000);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* part : {"BODYD_SETUP_PACKAGE=1 scripts/setup", "-B build-package", "-DBODYD_BUILD_TESTS=OFF",
+                           "cd build-package && cpack -G DEB"})
+    EXPECT_NE(r.out.find(part), std::string::npos) << "missing \"" << part << "\" in:\n" << r.out;
+}
+
+// scripts/setup for a package build asks only for build dependencies and never runs npm:
+// dpkg-query and npm are replaced by fakes on PATH that log their arguments (the fake
+// dpkg-query says every package is installed, so nothing is installed).
+TEST(PackageBuild, SetupForAPackageSkipsTestPackagesAndNpm) {
+  ScratchDir dir("bodyd-setup");
+  const fs::path bin = dir.path / "bin", log = dir.path / "calls.log";
+  fs::create_directories(bin);
+  for (const char* name : {"dpkg-query", "npm", "chromium"}) {
+    std::ofstream script(bin / name);
+    script << "#!/bin/sh\necho \"" << name << " $*\" >> '" << log.string() << "'\n"
+           << (std::string(name) == "dpkg-query" ? "printf 'install ok installed'\n" : "") << "exit 0\n";
+    script.close();
+    fs::permissions(bin / name, fs::perms::owner_all);
+  }
+  const RunResult r = run({"/bin/bash", (source_dir() / "scripts/setup").string()},
+                          {.env = {{"PATH", bin.string() + ":/usr/bin:/bin"}, {"BODYD_SETUP_PACKAGE", "1"}},
+                           .output_dir = dir.path, .name = "setup"},
+                          30000);
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  const std::string calls = read_file(log);
+  EXPECT_NE(calls.find("dpkg-query -W -f=${Status} libzmq3-dev"), std::string::npos) << calls;
+  EXPECT_NE(calls.find("dpkg-query -W -f=${Status} dpkg-dev"), std::string::npos) << calls;
+  for (const char* test_only : {" libgtest-dev", " strace", " python3-numpy", " libczmq-dev"})
+    EXPECT_EQ(calls.find(test_only), std::string::npos) << test_only << " asked for a package build:\n" << calls;
+  EXPECT_EQ(calls.find("npm"), std::string::npos) << calls;
+  EXPECT_EQ(r.out.find("npm ci"), std::string::npos) << r.out;
 }
 
 }  // namespace

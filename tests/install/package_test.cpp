@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include <fstream>
+
 namespace bodyd::test {
 namespace {
 
@@ -84,6 +86,8 @@ TEST_F(DebianPackage, HoldsProgramsDataUnitUdevRuleAndClientLibrary) {
                         list.find(std::string(path) + " -> ") != std::string::npos;
     EXPECT_TRUE(listed) << path << " not in the package:\n" << list.substr(0, 4000);
   }
+  // A test tool is not shipped (issue 20 item 8).
+  EXPECT_EQ(list.find("bodyd-testpub"), std::string::npos) << "the package ships the test tool bodyd-testpub";
   // Nothing of the build machine: no source or build paths, nothing outside /usr.
   EXPECT_EQ(list.find(source_dir().string()), std::string::npos);
   std::istringstream lines(list);
@@ -118,6 +122,52 @@ TEST_F(DebianPackage, UnpackedBodydRunsOnItsOwnFiles) {
   const RunResult ctl = run({(root / "usr/bin/bodyd-ctl").string(), "--help"}, {.output_dir = dir.path, .name = "ctl"});
   EXPECT_EQ(ctl.exit_code, 0) << ctl.err;
   EXPECT_NE(ctl.out.find("calibrate"), std::string::npos);
+}
+
+// apt remove leaves no dangling per-user enable link (issue 20 item 8): the package's postrm,
+// run as dpkg runs it after removing the files ("remove"), deletes a user's
+// default.target.wants/bodyd.service link to the removed unit and nothing else. The passwd
+// database is a fake getent on PATH naming two scratch homes.
+TEST_F(DebianPackage, PostrmRemovesDanglingUserEnableLinksOnly) {
+  if (fs::exists("/usr/lib/systemd/user/bodyd.service"))
+    GTEST_SKIP() << "bodyd is installed on this machine, so its unit's links do not dangle here";
+  const fs::path control = scratch_->path / "control";
+  const RunResult e = run({"/usr/bin/dpkg-deb", "-e", deb_.string(), control.string()},
+                          {.output_dir = scratch_->path, .name = "e"});
+  ASSERT_EQ(e.exit_code, 0) << e.err;
+  const fs::path postrm = control / "postrm";
+  ASSERT_TRUE(fs::is_regular_file(postrm)) << "the package has no postrm";
+  EXPECT_NE(fs::status(postrm).permissions() & fs::perms::owner_exec, fs::perms::none);
+
+  ScratchDir dir("bodyd-postrm");
+  const fs::path alice = dir.path / "alice", bob = dir.path / "bob", bin = dir.path / "bin";
+  const fs::path wants = alice / ".config/systemd/user/default.target.wants";
+  const fs::path bob_wants = bob / ".config/systemd/user/default.target.wants";
+  fs::create_directories(wants);
+  fs::create_directories(bob_wants);
+  fs::create_directories(bin);
+  fs::create_symlink("/usr/lib/systemd/user/bodyd.service", wants / "bodyd.service");  // dangles here
+  fs::create_symlink("/usr/lib/systemd/user/other.service", wants / "other.service");  // not ours
+  fs::create_symlink(alice / "own-bodyd.service", bob_wants / "bodyd.service");          // the user's own unit
+  {
+    std::ofstream getent(bin / "getent");
+    getent << "#!/bin/sh\nprintf 'alice:x:1000:1000::" << alice.string() << ":/bin/sh\\nbob:x:1001:1001::"
+           << bob.string() << ":/bin/sh\\nnobody:x:65534:65534::/nonexistent:/bin/false\\n'\n";
+  }
+  fs::permissions(bin / "getent", fs::perms::owner_all);
+  const RunResult r = run({"/bin/sh", postrm.string(), "remove"},
+                          {.env = {{"PATH", bin.string() + ":/usr/bin:/bin"}}, .output_dir = dir.path, .name = "postrm"});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_FALSE(fs::is_symlink(wants / "bodyd.service")) << "the dangling enable link is still there";
+  EXPECT_TRUE(fs::is_symlink(wants / "other.service"));
+  EXPECT_TRUE(fs::is_symlink(bob_wants / "bodyd.service"));
+  EXPECT_NE(r.out.find("removed " + (wants / "bodyd.service").string()), std::string::npos) << r.out;
+  // An upgrade keeps every link.
+  fs::create_symlink("/usr/lib/systemd/user/bodyd.service", wants / "bodyd.service");
+  const RunResult up = run({"/bin/sh", postrm.string(), "upgrade", "0.1.0"},
+                           {.env = {{"PATH", bin.string() + ":/usr/bin:/bin"}}, .output_dir = dir.path, .name = "upgrade"});
+  EXPECT_EQ(up.exit_code, 0);
+  EXPECT_TRUE(fs::is_symlink(wants / "bodyd.service"));
 }
 
 }  // namespace
