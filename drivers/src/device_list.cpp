@@ -42,7 +42,25 @@ std::vector<ListedDevice> list_devices(HidTransport* hid, UsbTransport* usb) {
   return out;
 }
 
-std::string list_devices_text() {
+std::string no_tracker_device_text(std::string_view demo_recording) {
+  std::string text =
+      "no tracker device found (searched HID devices with the bodyd report usage 0xFF00:0x01 or IDs "
+      "1209:B0D1, 1209:B0D2, 1532:0300, and USB devices 1209:B0D1, 1209:B0D2).\n"
+      "Check that the device is plugged in (lsusb lists it); if it is, the udev rule may be missing: "
+      "see docs/drivers.md.\n"
+      "A VR headset's trackers come over the network instead (docs/vr-apps.md):\n"
+      "  bodyd --source vrchat:   VRChat's OSC trackers (listens on 127.0.0.1:9001)\n"
+      "  bodyd --source vmc:      a VMC sender, e.g. Virtual Motion Capture (127.0.0.1:39539)\n";
+  if (!demo_recording.empty())
+    text += "Without trackers: bodyd --source replay:" + std::string(demo_recording) +
+            " (the bundled recording, which bodyd also plays when given no --source), or "
+            "bodyd --source sim:FILE.bvh.\n";
+  else
+    text += "Without trackers: bodyd with no --source plays the bundled recording; or bodyd --source sim:FILE.bvh.\n";
+  return text;
+}
+
+std::string list_devices_text(std::string_view demo_recording) {
   std::string error;
   std::shared_ptr<SimulatedDeviceSet> fake = simulated_device_set_from_env(error);
   if (!error.empty()) return "error: " + error + "\n";
@@ -61,11 +79,7 @@ std::string list_devices_text() {
   }
   const std::vector<ListedDevice> devices = list_devices(hid.get(), usb.get());
   if (devices.empty()) {
-    text +=
-        "no tracker device found (searched HID devices with the bodyd report usage 0xFF00:0x01 or IDs "
-        "1209:B0D1, 1209:B0D2, 1532:0300, and USB devices 1209:B0D1, 1209:B0D2).\n"
-        "Check that the device is plugged in (lsusb lists it); if it is, the udev rule may be missing: "
-        "see docs/drivers.md. Without hardware: bodyd --source sim:FILE.bvh.\n";
+    text += no_tracker_device_text(demo_recording);
     return text;
   }
   for (const ListedDevice& d : devices) text += d.spec + "  " + d.path + "  " + d.description + "\n";

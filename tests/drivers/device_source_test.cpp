@@ -397,5 +397,21 @@ TEST(DeviceList, NothingFoundIsAnEmptyList) {
   EXPECT_TRUE(list_devices(&hid, &usb).empty());
 }
 
+// Issue 20 item 8: with nothing found, the text names the network inputs a headset user needs
+// and the bundled recording to try, by the path given, and advertises no input that does not exist.
+TEST(DeviceList, NothingFoundNamesTheNetworkInputsAndTheBundledRecording) {
+  const std::string text = no_tracker_device_text("/usr/share/bodyd/data/demo/walk.csv");
+  for (const char* part : {"no tracker device found", "docs/drivers.md", "bodyd --source vrchat:", "bodyd --source vmc:",
+                           "docs/vr-apps.md", "bodyd --source replay:/usr/share/bodyd/data/demo/walk.csv"})
+    EXPECT_NE(text.find(part), std::string::npos) << "missing \"" << part << "\" in:\n" << text;
+  for (const char* absent : {"steamvr", "monado"}) EXPECT_EQ(text.find(absent), std::string::npos) << text;
+  // Every input it names is one open_source knows (a port of 0 so nothing stays bound).
+  std::string error;
+  for (const char* spec : {"vrchat:127.0.0.1:0?oscquery=off", "vmc:127.0.0.1:0"})
+    EXPECT_NE(open_source(spec, SourceOptions{}, error), nullptr) << spec << ": " << error;
+  const std::string unknown = no_tracker_device_text("");
+  EXPECT_NE(unknown.find("no --source plays the bundled recording"), std::string::npos) << unknown;
+}
+
 }  // namespace
 }  // namespace bodyd::drivers

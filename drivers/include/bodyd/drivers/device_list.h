@@ -28,9 +28,14 @@ struct ListedDevice {
 // devices with a known ID. Either transport may be null (not searched).
 [[nodiscard]] std::vector<ListedDevice> list_devices(HidTransport* hid, UsbTransport* usb);
 
-// The text bodyd --list-devices prints: one line per device, or a plain "no tracker device
-// found" with what to check. Uses the simulated devices when BODYD_FAKE_DEVICES is set.
-[[nodiscard]] std::string list_devices_text();
+// The text bodyd --list-devices prints: one line per device, or no_tracker_device_text().
+// Uses the simulated devices when BODYD_FAKE_DEVICES is set. `demo_recording`: the path of the
+// bundled recording (data/demo/walk.csv as found; "" if unknown), named as the thing to try.
+[[nodiscard]] std::string list_devices_text(std::string_view demo_recording = {});
+
+// "no tracker device found", what was searched and what to check, then the inputs a headset
+// user needs instead (vrchat:, vmc:) and the bundled recording to try without trackers.
+[[nodiscard]] std::string no_tracker_device_text(std::string_view demo_recording);
 
 // "1209:B0D1" or "1209:B0D1,1532:0300" (hex, 1-4 digits each). nullopt and `error` when malformed.
 [[nodiscard]] std::optional<std::vector<DeviceId>> parse_device_ids(std::string_view text, std::string& error);
