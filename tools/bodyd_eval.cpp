@@ -83,6 +83,22 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--filter-beta", method_options.filter.beta_per_m_s, "diffusion: the tracker filter's beta_per_m_s")
       ->capture_default_str();
+  std::string device_frames = "joint", calibration_pose = "first-still", reference_path;
+  double tracker_rate_hz = 0.0, jitter_ms = 0.0;
+  app.add_option("--device-frames", device_frames,
+                 "joint: the trackers are the skeleton's joints (default); xr: what a headset and controllers send "
+                 "(the headset at the eyes in the XR axes, the controllers' grip poses, a random mounting per clip), "
+                 "mapped through the default mounting and the calibration pose (docs/evaluation.md)")
+      ->check(CLI::IsMember({"joint", "xr"}))
+      ->capture_default_str();
+  app.add_option("--calibration-pose", calibration_pose,
+                 "with --device-frames xr: first-still (the clip's first still second, default), none (the default "
+                 "mounting only), or a frame number N (that frame's pose held for 1.2 s before the clip starts)")
+      ->capture_default_str();
+  app.add_option("--reference", reference_path, "body reference of the default mounting (default: data/body-reference.json)");
+  app.add_option("--tracker-rate-hz", tracker_rate_hz, "tracker sample rate (default: the clip's frame rate)")
+      ->check(CLI::Range(1.0, 2000.0));
+  app.add_option("--jitter-ms", jitter_ms, "tracker timestamp jitter, standard deviation (ms)")->check(CLI::Range(0.0, 50.0));
   app.add_option("--split", split, "split file: BVH paths relative to its folder's parent (e.g. splits/val.txt)");
   app.add_option("files", files, "BVH files (besides or instead of --split)");
   CLI11_PARSE(app, argc, argv);
@@ -115,11 +131,60 @@ int main(int argc, char** argv) {
     sim.rotation_noise_deg = noise_deg;
     sim.dropout_rate_hz = dropout_rate_hz;
     sim.dropout_mean_ms = dropout_mean_ms;
+    sim.jitter_ms = jitter_ms;
+    std::optional<int> hold_frame;
+    if (device_frames == "xr") {
+      options.device_frames = true;
+      options.body_reference = bodyd::read_body_reference(bodyd::find_body_reference(reference_path));
+      if (calibration_pose != "none") options.calibrate_pose = true;
+      if (calibration_pose != "none" && calibration_pose != "first-still") {
+        try {
+          std::size_t used = 0;
+          hold_frame = std::stoi(calibration_pose, &used);
+          if (used != calibration_pose.size() || *hold_frame < 0) throw std::invalid_argument("");
+        } catch (const std::exception&) {
+          throw std::runtime_error("--calibration-pose " + calibration_pose +
+                                   ": expected first-still, none or a frame number (0, 1, ...)");
+        }
+      }
+    } else if (calibration_pose != "first-still") {
+      throw std::runtime_error("--calibration-pose goes with --device-frames xr");
+    }
+    const bodyd::Mounting defaults = bodyd::default_mounting(options.body_reference);
+    const auto session_mounting = [&](int index) {
+      return bodyd::draw_session_mounting(defaults, bodyd::MountingSpread{}, mix_seed(seed, static_cast<std::uint64_t>(index)));
+    };
+    if (options.device_frames) options.true_mounting = session_mounting;
     const bodyd::TrackerSource source = [&](const bodyd::Motion& clip, int index) {
       bodyd::SimOptions o = sim;
-      o.rate_hz = clip.fps();  // samples at the frame times (docs/evaluation.md)
+      o.rate_hz = tracker_rate_hz > 0.0 ? tracker_rate_hz : clip.fps();  // default: at the frame times (docs/evaluation.md)
       o.seed = mix_seed(seed, static_cast<std::uint64_t>(index));
-      return bodyd::simulate_trackers(clip, o);
+      if (options.device_frames) o.device_mounting = session_mounting(index);
+      std::vector<bodyd::TrackerSample> samples = bodyd::simulate_trackers(clip, o);
+      if (hold_frame) {
+        // The calibration pose: frame N's device poses held still for 1.2 s before the clip.
+        if (*hold_frame >= clip.frame_count())
+          throw std::runtime_error(fmt::format("--calibration-pose {}: the clip has {} frames", *hold_frame, clip.frame_count()));
+        bodyd::SimOptions still = o;
+        still.position_noise_mm = still.rotation_noise_deg = still.jitter_ms = still.dropout_rate_hz = 0.0;
+        bodyd::Motion frame = clip;
+        frame.frames.assign(2, clip.frames[static_cast<std::size_t>(*hold_frame)]);
+        const std::vector<bodyd::TrackerSample> pose = bodyd::simulate_trackers(frame, still);
+        const double period_ns = 1e9 / o.rate_hz;
+        const auto n = static_cast<std::int64_t>(1.2e9 / period_ns);
+        std::vector<bodyd::TrackerSample> held;
+        for (std::int64_t k = n; k >= 1; --k)
+          for (bodyd::Role r : bodyd::kRoles)
+            for (const bodyd::TrackerSample& p : pose)
+              if (p.role == r) {
+                bodyd::TrackerSample h = p;
+                h.t_ns = samples.front().t_ns - std::llround(static_cast<double>(k) * period_ns);
+                held.push_back(h);
+                break;
+              }
+        samples.insert(samples.begin(), held.begin(), held.end());
+      }
+      return samples;
     };
 
     const bodyd::EvalReport report = bodyd::evaluate(clips, options, source);

@@ -197,6 +197,82 @@ class Calibrating final : public Reconstructor {
   std::optional<StandingHeight> found_;
 };
 
+// Device poses mapped to joints, as the daemon does (daemon.cpp handle_sample): through the default
+// mounting until a calibration pose has been measured (the clip's first still second), then
+// through the measured one; with `calibrate_height` its height is applied too.
+class Mounted final : public Reconstructor {
+ public:
+  Mounted(std::unique_ptr<Reconstructor> inner, const Mounting& defaults, std::optional<PoseCalibrator> calibrator,
+          bool calibrate_height)
+      : inner_(std::move(inner)), mounting_(defaults), calibrator_(std::move(calibrator)), calibrate_height_(calibrate_height) {}
+  std::string_view name() const override { return inner_->name(); }
+  const Skeleton& skeleton() const override { return inner_->skeleton(); }
+  void push(const TrackerSample& s) override {
+    if (calibrator_) {
+      if (std::optional<PoseCalibration> c = calibrator_->push(s)) {
+        for (Role r : kRoles)
+          if (c->measured[static_cast<size_t>(r)])
+            mounting_.T_device_joint[static_cast<size_t>(r)] = c->mounting.T_device_joint[static_cast<size_t>(r)];
+        inner_->reset();  // the inputs jumped, as in the daemon
+        if (calibrate_height_) (void)calibrate_from_head_height(*inner_, c->head_height_m);
+        found_ = std::move(c);
+      }
+    }
+    inner_->push(device_to_joint(s, mounting_.T_device_joint[static_cast<size_t>(s.role)]));
+  }
+  bool reconstruct(std::int64_t t_ns, BodyPose& out) override { return inner_->reconstruct(t_ns, out); }
+  void reset() override {
+    inner_->reset();
+    if (calibrator_) calibrator_->reset();
+  }
+  void set_user_height(double h) override { inner_->set_user_height(h); }
+  double user_height() const override { return inner_->user_height(); }
+  std::int64_t refused_samples() const override { return inner_->refused_samples(); }
+  const std::optional<PoseCalibration>& found() const { return found_; }
+
+ private:
+  std::unique_ptr<Reconstructor> inner_;
+  Mounting mounting_;
+  std::optional<PoseCalibrator> calibrator_;
+  bool calibrate_height_;
+  std::optional<PoseCalibration> found_;
+};
+
+EvalReport::MountingError mounting_error(const Mounting& est, const Mounting& truth) {
+  EvalReport::MountingError e;
+  const RigidTransform& h = est.T_device_joint[0];
+  const RigidTransform& ht = truth.T_device_joint[0];
+  e.head_deg = geodesic_angle(h.rotation, ht.rotation) * 180.0 / M_PI;
+  // Pitch: the part of the difference (in the device's axes) about the device's +X.
+  const Vec3 d = axis_angle_from_quat((h.rotation * ht.rotation.conjugate()).normalized());
+  e.head_pitch_deg = std::abs(d.x()) * 180.0 / M_PI;
+  e.eye_offset_cm = 100.0 * (h.position_m - ht.position_m).norm();
+  for (int r = 1; r <= 2; ++r) {
+    e.grip_deg += 0.5 * geodesic_angle(est.T_device_joint[static_cast<size_t>(r)].rotation,
+                                       truth.T_device_joint[static_cast<size_t>(r)].rotation) * 180.0 / M_PI;
+    e.grip_offset_cm += 0.5 * 100.0 * (est.T_device_joint[static_cast<size_t>(r)].position_m -
+                                       truth.T_device_joint[static_cast<size_t>(r)].position_m).norm();
+  }
+  return e;
+}
+
+void add_error(EvalReport::MountingError& sum, const EvalReport::MountingError& e) {
+  sum.head_deg += e.head_deg;
+  sum.head_pitch_deg += e.head_pitch_deg;
+  sum.grip_deg += e.grip_deg;
+  sum.eye_offset_cm += e.eye_offset_cm;
+  sum.grip_offset_cm += e.grip_offset_cm;
+}
+
+void divide_error(EvalReport::MountingError& e, double n) {
+  const double k = n > 0 ? 1.0 / n : std::numeric_limits<double>::quiet_NaN();
+  e.head_deg *= k;
+  e.head_pitch_deg *= k;
+  e.grip_deg *= k;
+  e.eye_offset_cm *= k;
+  e.grip_offset_cm *= k;
+}
+
 // Whether each hand's tracker is valid at each frame time (the newest sample at or before it).
 std::vector<std::array<bool, 2>> hand_validity(std::span<const TrackerSample> samples,
                                                std::span<const std::int64_t> frame_times_ns) {
@@ -276,6 +352,10 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
   static constexpr std::array<const char*, 3> kCategories{"dataset", "content", "style"};
   std::array<std::map<std::string, GroupAcc>, 3> groups;
   double calibration_error_sum_cm = 0.0, scale_error_sum = 0.0, calibration_time_sum_s = 0.0;
+  report.device_frames = options.device_frames;
+  report.calibrate_pose = options.device_frames && options.calibrate_pose;
+  const Mounting defaults = default_mounting(options.body_reference);
+  double pose_time_sum_s = 0.0;
 
   int index = 0;
   for (const std::filesystem::path& path : clips) {
@@ -312,12 +392,39 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
         std::unique_ptr<Reconstructor> reconstructor =
             make_reconstructor(method, options.model_path, &clip.skeleton, options.reconstructor);
         Calibrating* calibrating = nullptr;
-        if (options.calibrate && method != "ik") {
+        Mounted* mounted = nullptr;
+        if (options.device_frames) {
+          std::optional<PoseCalibrator> calibrator;
+          if (options.calibrate_pose) calibrator.emplace(options.body_reference, defaults, options.pose_calibration);
+          auto wrapped = std::make_unique<Mounted>(std::move(reconstructor), defaults, std::move(calibrator),
+                                                   options.calibrate && method != "ik");
+          mounted = wrapped.get();
+          reconstructor = std::move(wrapped);
+        } else if (options.calibrate && method != "ik") {
           auto wrapped = std::make_unique<Calibrating>(std::move(reconstructor), options.calibration);
           calibrating = wrapped.get();
           reconstructor = std::move(wrapped);
         }
         const OnlineRun run = run_online(*reconstructor, samples, frame_times);
+        if (mounted != nullptr && m == 0) {
+          const Mounting truth = options.true_mounting ? options.true_mounting(index) : defaults;
+          add_error(report.default_mounting_error, mounting_error(defaults, truth));
+          if (mounted->found()) {
+            ++report.pose_calibrated_clips;
+            add_error(report.calibrated_mounting_error, mounting_error(mounted->found()->mounting, truth));
+            pose_time_sum_s += static_cast<double>(mounted->found()->t_ns - samples.front().t_ns) * 1e-9;
+            if (options.calibrate) {
+              const PoseCalibration& c = *mounted->found();
+              const double truth_m = standing_head_height_m(clip.skeleton);
+              ++report.calibrated_clips;
+              calibration_error_sum_cm += 100.0 * std::abs(c.head_height_m - truth_m);
+              scale_error_sum += std::abs(c.head_height_m / truth_m - 1.0);
+              report.calibration_scale_error_max =
+                  std::max(report.calibration_scale_error_max, std::abs(c.head_height_m / truth_m - 1.0));
+              calibration_time_sum_s += static_cast<double>(c.t_ns - frame_times.front()) * 1e-9;
+            }
+          }
+        }
         if (calibrating != nullptr && calibrating->found() && !clip_calibrated) {
           clip_calibrated = true;
           const StandingHeight& h = *calibrating->found();
@@ -401,6 +508,11 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
   report.calibration_scale_error = report.calibrated_clips > 0 ? scale_error_sum / report.calibrated_clips : nan;
   report.calibration_time_s = report.calibrated_clips > 0 ? calibration_time_sum_s / report.calibrated_clips : nan;
   if (report.calibrated_clips == 0) report.calibration_scale_error_max = nan;
+  if (report.device_frames) {
+    divide_error(report.default_mounting_error, report.clips);
+    divide_error(report.calibrated_mounting_error, report.pose_calibrated_clips);
+    report.pose_calibration_time_s = report.pose_calibrated_clips > 0 ? pose_time_sum_s / report.pose_calibrated_clips : nan;
+  }
   report.timing_method = report.methods[timed].name;
   report.ms_per_frame_p50 = report.methods[timed].ms_per_frame_p50;
   report.ms_per_frame_p99 = report.methods[timed].ms_per_frame_p99;
@@ -463,6 +575,22 @@ std::string report_json(const EvalReport& report) {
                         {"scale_error", report.calibrate ? number(report.calibration_scale_error) : nullptr},
                         {"scale_error_max", report.calibrate ? number(report.calibration_scale_error_max) : nullptr},
                         {"time_s", report.calibrate ? number(report.calibration_time_s) : nullptr}};
+  if (report.device_frames) {
+    const auto err = [](const EvalReport::MountingError& e) {
+      return nlohmann::ordered_json{{"head_deg", number(e.head_deg)},
+                                    {"head_pitch_deg", number(e.head_pitch_deg)},
+                                    {"grip_deg", number(e.grip_deg)},
+                                    {"eye_offset_cm", number(e.eye_offset_cm)},
+                                    {"grip_offset_cm", number(e.grip_offset_cm)}};
+    };
+    nlohmann::ordered_json d;
+    d["pose_calibration"] = report.calibrate_pose;
+    d["clips_pose_calibrated"] = report.pose_calibrated_clips;
+    d["pose_calibration_time_s"] = report.calibrate_pose ? number(report.pose_calibration_time_s) : nullptr;
+    d["default_mounting_error"] = err(report.default_mounting_error);
+    d["calibrated_mounting_error"] = report.calibrate_pose ? err(report.calibrated_mounting_error) : nullptr;
+    doc["device_frames"] = d;
+  }
   return doc.dump(2) + "\n";
 }
 
@@ -499,6 +627,18 @@ std::string report_table(const EvalReport& report) {
         "scale error {:.2f}% (mean; max {:.2f}%), {:.2f} s after the clip's start (mean)\n",
         report.body_scale, report.calibrated_clips, report.clips, report.fallback_clips, report.calibration_error_cm,
         100.0 * report.calibration_scale_error, 100.0 * report.calibration_scale_error_max, report.calibration_time_s);
+  if (report.device_frames) {
+    const auto line = [](const char* what, const EvalReport::MountingError& e) {
+      return fmt::format("{} mounting error: head {:.2f} deg (pitch {:.2f}), grips {:.2f} deg, eye offset {:.2f} cm, "
+                         "grip offset {:.2f} cm\n",
+                         what, e.head_deg, e.head_pitch_deg, e.grip_deg, e.eye_offset_cm, e.grip_offset_cm);
+    };
+    out += "device frames: " + line("default", report.default_mounting_error);
+    if (report.calibrate_pose)
+      out += fmt::format("device frames: calibration pose on {} of {} clips ({:.2f} s after the first sample); ",
+                         report.pose_calibrated_clips, report.clips, report.pose_calibration_time_s) +
+             line("calibrated", report.calibrated_mounting_error);
+  }
   // Groups, compact: mpjpe, lower and head error per method, then the jitter ratio to the truth.
   if (!report.groups.empty()) {
     out += fmt::format("\n{:<28}{:>6}", "group", "clips");

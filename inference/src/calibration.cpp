@@ -135,3 +135,151 @@ std::optional<StandingHeight> StandingHeightDetector::push(const TrackerSample& 
 }
 
 }  // namespace bodyd
+
+namespace bodyd {
+
+std::string validate(const PoseCalibrationOptions& o) {
+  if (!(std::isfinite(o.still_s) && o.still_s >= 0.2 && o.still_s <= 10.0))
+    return fmt::format("still_s must be in [0.2, 10] s, not {}", o.still_s);
+  if (!(std::isfinite(o.max_position_range_m) && o.max_position_range_m > 0.0 && o.max_position_range_m <= 0.5))
+    return fmt::format("max_position_range_m must be in (0, 0.5] m, not {}", o.max_position_range_m);
+  if (!(std::isfinite(o.max_rotation_range_deg) && o.max_rotation_range_deg > 0.0 && o.max_rotation_range_deg <= 45.0))
+    return fmt::format("max_rotation_range_deg must be in (0, 45] degrees, not {}", o.max_rotation_range_deg);
+  return validate(o.height);
+}
+
+PoseCalibrator::PoseCalibrator(const BodyReference& reference, const Mounting& defaults,
+                               const PoseCalibrationOptions& options)
+    : reference_(reference), defaults_(defaults), options_(options) {
+  if (std::string e = validate(options_); !e.empty()) throw std::invalid_argument("PoseCalibrationOptions: " + e);
+  // Up to 1000 samples a second per role (headsets report 72 to 120 Hz; more are thinned).
+  for (auto& w : window_) w.reserve(static_cast<std::size_t>(options_.still_s * 1000.0) + 4);
+}
+
+void PoseCalibrator::reset() {
+  for (auto& w : window_) w.clear();
+  any_invalid_ = {};
+  done_ = false;
+}
+
+std::optional<PoseCalibration> PoseCalibrator::push(const TrackerSample& s) {
+  if (done_) return std::nullopt;
+  const int r = static_cast<int>(s.role);
+  auto& w = window_[static_cast<std::size_t>(r)];
+  if (!s.valid) {
+    any_invalid_[static_cast<std::size_t>(r)] = true;
+    last_invalid_ns_[static_cast<std::size_t>(r)] = s.t_ns;
+    w.clear();  // a hand that was lost is not still
+    return std::nullopt;
+  }
+  if (!s.position_m.allFinite() || !s.rotation.coeffs().allFinite()) return std::nullopt;
+  if (!w.empty() && s.t_ns <= w.back().t_ns) return std::nullopt;
+  if (!w.empty() && s.t_ns - w.back().t_ns < 1'000'000) return std::nullopt;  // thinned to <= 1 kHz
+  if (!w.empty() && w.front().frame != s.frame) w.clear();
+  const auto still_ns = static_cast<std::int64_t>(std::llround(options_.still_s * 1e9));
+  if (w.size() == w.capacity()) w.erase(w.begin());
+  w.push_back(s);
+  std::size_t drop = 0;
+  while (drop + 1 < w.size() && s.t_ns - w[drop + 1].t_ns >= still_ns) ++drop;
+  if (drop > 0) w.erase(w.begin(), w.begin() + static_cast<std::ptrdiff_t>(drop));
+  if (s.role != Role::Head) return std::nullopt;
+  std::optional<PoseCalibration> c = try_estimate(s.t_ns);
+  if (c) done_ = true;
+  return c;
+}
+
+namespace {
+
+struct WindowStats {
+  bool covers = false;   // spans the whole still second
+  bool still = false;
+  Vec3 mean_p = Vec3::Zero();
+  Quat mean_q = Quat::Identity();
+  double max_deg = 0.0;
+};
+
+WindowStats window_stats(const std::vector<TrackerSample>& w, std::int64_t t_ns, std::int64_t still_ns,
+                         const PoseCalibrationOptions& o) {
+  WindowStats st;
+  if (w.size() < 3 || t_ns - w.front().t_ns < still_ns - 2'000'000 || t_ns - w.back().t_ns > 100'000'000) return st;
+  st.covers = true;
+  std::vector<Quat> qs;
+  qs.reserve(w.size());
+  for (const TrackerSample& s : w) {
+    st.mean_p += s.position_m;
+    qs.push_back(s.rotation);
+  }
+  st.mean_p /= static_cast<double>(w.size());
+  st.mean_q = mean_rotation(qs);
+  double max_d = 0.0;
+  for (const TrackerSample& s : w) {
+    max_d = std::max(max_d, (s.position_m - st.mean_p).norm());
+    st.max_deg = std::max(st.max_deg, geodesic_angle(s.rotation, st.mean_q) * 180.0 / M_PI);
+  }
+  st.still = max_d <= o.max_position_range_m && st.max_deg <= o.max_rotation_range_deg;
+  return st;
+}
+
+}  // namespace
+
+std::optional<PoseCalibration> PoseCalibrator::try_estimate(std::int64_t t_ns) const {
+  const auto still_ns = static_cast<std::int64_t>(std::llround(options_.still_s * 1e9));
+  std::array<WindowStats, kRoleCount> st;
+  for (Role r : kRoles) st[static_cast<size_t>(r)] = window_stats(window_[static_cast<size_t>(r)], t_ns, still_ns, options_);
+  const WindowStats& head = st[0];
+  if (!head.covers || !head.still) return std::nullopt;
+  std::array<bool, 2> hand_used{};
+  for (int h = 0; h < 2; ++h) {
+    const WindowStats& hs = st[static_cast<size_t>(h + 1)];
+    const bool lost_recently =
+        any_invalid_[static_cast<size_t>(h + 1)] && t_ns - last_invalid_ns_[static_cast<size_t>(h + 1)] < still_ns;
+    const bool tracked = !window_[static_cast<size_t>(h + 1)].empty() && !lost_recently;
+    if (tracked && !hs.covers) return std::nullopt;  // wait until the hand's second is complete
+    if (tracked && !hs.still) return std::nullopt;   // a moving hand: not the calibration pose
+    hand_used[static_cast<size_t>(h)] = tracked;
+  }
+  PoseCalibration c;
+  c.t_ns = t_ns;
+  c.mounting = defaults_;
+  c.device_frames = window_[0].front().frame == PoseFrame::Device;
+  for (Role r : kRoles) c.motion_deg[static_cast<size_t>(r)] = st[static_cast<size_t>(r)].max_deg;
+  if (c.device_frames) {
+    const Quat F = facing_from_device(head.mean_q);
+    RigidTransform& Th = c.mounting.T_device_joint[0];
+    Th.rotation = (head.mean_q.conjugate() * F * reference_.head_in_facing).normalized();
+    c.measured[0] = true;
+    c.rotation_sd_deg[0] = std::hypot(reference_.head_pitch_sd_deg, reference_.head_roll_sd_deg);
+    c.eye_offset_sd_cm = 100.0 * std::hypot(kEyeAboveHeadJointM, kEyeAheadOfHeadJointM) * 0.2;  // the prior's spread
+    std::array<Vec3, 2> wrist{};
+    for (int h = 0; h < 2; ++h) {
+      if (!hand_used[static_cast<size_t>(h)]) continue;
+      const WindowStats& hs = st[static_cast<size_t>(h + 1)];
+      if (window_[static_cast<size_t>(h + 1)].front().frame != PoseFrame::Device) continue;
+      RigidTransform& T = c.mounting.T_device_joint[static_cast<size_t>(h + 1)];
+      const RigidTransform& D = defaults_.T_device_joint[static_cast<size_t>(h + 1)];
+      T.rotation = (hs.mean_q.conjugate() * F * reference_.hand_in_facing[static_cast<size_t>(h)]).normalized();
+      // The controller turned in the hand about its grip point: the wrist offset turns with it.
+      T.position_m = (T.rotation * D.rotation.conjugate()) * D.position_m;
+      wrist[static_cast<size_t>(h)] = hs.mean_p + hs.mean_q * T.position_m;
+      c.measured[static_cast<size_t>(h + 1)] = true;
+      c.rotation_sd_deg[static_cast<size_t>(h + 1)] = reference_.hand_sd_deg[static_cast<size_t>(h)];
+    }
+    if (options_.estimate_eye_offset && c.measured[1] && c.measured[2]) {
+      // The Head joint straight below/behind the eyes at the reference's height and depth.
+      const Vec3 mid = 0.5 * (wrist[0] + wrist[1]);
+      const Quat Fi = F.conjugate();
+      Vec3 h = Fi * head.mean_p;  // in facing axes (a turn about +Y keeps heights)
+      h.y() = reference_.head_over_wrist_height * mid.y();
+      h.z() = (Fi * mid).z() + reference_.head_ahead_of_wrists_m;
+      Th.position_m = head.mean_q.conjugate() * (F * h - head.mean_p);
+      c.eye_offset_sd_cm = 100.0 * std::hypot(reference_.head_over_wrist_height_sd * mid.y(), reference_.head_ahead_sd_m);
+    }
+    c.measured_head_y_m = (head.mean_p + head.mean_q * Th.position_m).y();
+  } else {
+    c.measured_head_y_m = head.mean_p.y();
+  }
+  c.head_height_m = standing_height_from_head(c.measured_head_y_m, options_.height);
+  return c;
+}
+
+}  // namespace bodyd

@@ -87,9 +87,16 @@ std::optional<TrackerSample> TrackerLogParser::feed_line(std::string_view raw) {
         const size_t colon = body.find(':');
         bool is_pair = colon != std::string_view::npos && colon > 0;
         for (size_t i = 0; is_pair && i < colon; ++i) is_pair = is_key_char(body[i]);
-        if (is_pair)
+        if (is_pair) {
           metadata_.emplace_back(std::string(body.substr(0, colon)), std::string(trim(body.substr(colon + 1))));
-        else
+          if (metadata_.back().first == kTrackerLogPoseFrameKey) {
+            const std::optional<PoseFrame> f = pose_frame_from_name(metadata_.back().second);
+            if (!f)
+              fail(fmt::format("{}: must be 'joint' or 'device', found {} (docs/tracker-log.md)", kTrackerLogPoseFrameKey,
+                               quote(metadata_.back().second)));
+            frame_ = *f;
+          }
+        } else
           metadata_.emplace_back(std::string(), std::string(body));
         return std::nullopt;
       }
@@ -101,6 +108,7 @@ std::optional<TrackerSample> TrackerLogParser::feed_line(std::string_view raw) {
     case State::Samples: {
       if (trim(line).empty() || line.front() == '#') return std::nullopt;
       TrackerSample s = parse_sample(line);
+      s.frame = frame_;
       auto& last = last_t_ns_[static_cast<size_t>(s.role)];
       if (last && s.t_ns <= *last)
         fail(fmt::format("t_ns {} is not after the previous {} sample's t_ns {}: time must increase within "
@@ -299,8 +307,22 @@ void append_tracker_sample(std::string& out, const TrackerSample& s) {
 std::string format_tracker_log(const std::vector<TrackerSample>& samples, const TrackerLogMetadata& metadata) {
   std::string out = tracker_log_preamble(metadata);
   out.reserve(out.size() + samples.size() * 110);
+  // What the reader will say the samples are: they must all be that (a round trip keeps frames).
+  PoseFrame declared = PoseFrame::Joint;
+  for (const auto& [key, value] : metadata)
+    if (key == kTrackerLogPoseFrameKey) {
+      const std::optional<PoseFrame> f = pose_frame_from_name(value);
+      if (!f) throw TrackerLogError(fmt::format("cannot write tracker log: pose_frame '{}' is not joint or device", value));
+      declared = *f;
+    }
   std::array<std::optional<std::int64_t>, kRoleCount> last{};
   for (const TrackerSample& s : samples) {
+    if (s.valid && s.frame != declared)
+      throw TrackerLogError(fmt::format(
+          "cannot write tracker log: {} sample at t_ns {} is a {} pose but the metadata says pose_frame {} "
+          "(add the line '{}: {}')",
+          role_name(s.role), s.t_ns, pose_frame_name(s.frame), pose_frame_name(declared), kTrackerLogPoseFrameKey,
+          pose_frame_name(s.frame)));
     append_tracker_sample(out, s);  // checks the role before it indexes `last`
     auto& l = last[static_cast<size_t>(s.role)];
     if (l && s.t_ns <= *l)

@@ -90,6 +90,17 @@ fs::path user_config_file(const char* xdg_config_home, const char* home) {
 
 fs::path user_config_file() { return user_config_file(std::getenv("XDG_CONFIG_HOME"), std::getenv("HOME")); }
 
+fs::path user_state_file(std::string_view name, const char* xdg_state_home, const char* home) {
+  if (xdg_state_home && *xdg_state_home && fs::path(xdg_state_home).is_absolute())
+    return fs::path(xdg_state_home) / "bodyd" / name;
+  if (home && *home) return fs::path(home) / ".local" / "state" / "bodyd" / name;
+  return {};
+}
+
+fs::path user_state_file(std::string_view name) {
+  return user_state_file(name, std::getenv("XDG_STATE_HOME"), std::getenv("HOME"));
+}
+
 std::string tried_text(const DataFile& file) {
   std::string text;
   for (std::size_t i = 0; i < file.tried.size(); ++i) {

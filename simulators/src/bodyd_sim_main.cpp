@@ -44,6 +44,14 @@ int main(int argc, char** argv) {
                  "mean duration of a tracking-loss episode (exponential), ms")
       ->capture_default_str();
   app.add_option("--seed", opt.seed, "random seed")->capture_default_str();
+  std::string device_frames = "joint", reference_path;
+  app.add_option("--device-frames", device_frames,
+                 "joint: the skeleton's joints (default); xr: what a headset and controllers send (the headset at the "
+                 "eyes in the XR axes, the controllers' grip poses), with a mounting drawn from the seed "
+                 "(docs/simulator.md)")
+      ->check(CLI::IsMember({"joint", "xr"}))
+      ->capture_default_str();
+  app.add_option("--reference", reference_path, "body reference of the default mounting (default: the bundled data/body-reference.json)");
   app.add_flag("--quiet,-q", quiet, "print no summary");
   try {
     app.parse(argc, argv);
@@ -62,8 +70,12 @@ int main(int argc, char** argv) {
 
   try {
     const bodyd::Motion motion = bodyd::read_bvh(bvh_path);
+    if (device_frames == "xr")
+      opt.device_mounting = bodyd::draw_session_mounting(bodyd::default_mounting(bodyd::read_body_reference(
+                                                             bodyd::find_body_reference(reference_path))),
+                                                         bodyd::MountingSpread{}, opt.seed);
     const std::vector<bodyd::TrackerSample> samples = bodyd::simulate_trackers(motion, opt);
-    const bodyd::TrackerLogMetadata meta{
+    bodyd::TrackerLogMetadata meta{
         {"generator", "bodyd-sim"},
         {"source", std::filesystem::path(bvh_path).filename().string()},
         {"frames", fmt::format("{}", motion.frame_count())},
@@ -75,6 +87,10 @@ int main(int argc, char** argv) {
         {"dropout", fmt::format("rate_hz={} mean_ms={}", opt.dropout_rate_hz, opt.dropout_mean_ms)},
         {"seed", fmt::format("{}", opt.seed)},
     };
+    if (opt.device_mounting) {
+      meta.emplace_back(std::string(bodyd::kTrackerLogPoseFrameKey), "device");
+      meta.emplace_back("mounting_truth", bodyd::mounting_text(*opt.device_mounting));
+    }
     if (out_path == "-") {
       const std::string text = bodyd::format_tracker_log(samples, meta);
       std::fwrite(text.data(), 1, text.size(), stdout);
@@ -103,6 +119,9 @@ int main(int argc, char** argv) {
       }
     }
   } catch (const bodyd::BvhError& e) {
+    fmt::print(stderr, "bodyd-sim: {}\n", e.what());
+    return 1;
+  } catch (const bodyd::BodyReferenceError& e) {
     fmt::print(stderr, "bodyd-sim: {}\n", e.what());
     return 1;
   } catch (const bodyd::SimError& e) {

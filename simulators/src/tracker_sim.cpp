@@ -165,6 +165,33 @@ TrackerSample TrackerTrajectory::pose_at(Role role, std::int64_t t_ns) const {
 
 // ---------------------------------------------------------------------------------------------
 
+Mounting draw_session_mounting(const Mounting& base, const MountingSpread& spread, std::uint64_t seed) {
+  std::mt19937_64 gen(seed ^ 0x6d6f756e74696e67ULL);  // "mounting"
+  const auto uniform = [&](double half) {
+    return half * (2.0 * (static_cast<double>(gen() >> 11) * 0x1.0p-53) - 1.0);
+  };
+  const double d2r = M_PI / 180.0;
+  Mounting m = base;
+  RigidTransform& head = m.T_device_joint[static_cast<size_t>(Role::Head)];
+  // The headset turned on the head by `turn` (in its own axes, about the eyes): the joint, seen
+  // from the turned device, is turned back.
+  const Quat turn = (Quat(Eigen::AngleAxisd(uniform(spread.head_pitch_deg) * d2r, Vec3::UnitX())) *
+                     Quat(Eigen::AngleAxisd(uniform(spread.head_roll_deg) * d2r, Vec3::UnitZ())))
+                        .normalized();
+  head.rotation = (turn.conjugate() * head.rotation).normalized();
+  head.position_m = turn.conjugate() * head.position_m;
+  const Vec3 eye(uniform(spread.eye_offset_m), uniform(spread.eye_offset_m), uniform(spread.eye_offset_m));
+  head.position_m += eye;
+  for (Role r : {Role::LeftHand, Role::RightHand}) {
+    RigidTransform& T = m.T_device_joint[static_cast<size_t>(r)];
+    const Vec3 w(uniform(spread.grip_rotation_deg), uniform(spread.grip_rotation_deg), uniform(spread.grip_rotation_deg));
+    const Quat g = quat_from_axis_angle(w * d2r);
+    T.rotation = (g.conjugate() * T.rotation).normalized();
+    T.position_m = g.conjugate() * T.position_m;
+  }
+  return m;
+}
+
 std::vector<TrackerSample> simulate_trackers(const Motion& motion, const SimOptions& options) {
   if (std::string err = options.validate(); !err.empty()) throw SimError("bad simulator options: " + err);
   return simulate_trackers(TrackerTrajectory(motion), options);
@@ -201,6 +228,7 @@ std::vector<TrackerSample> simulate_trackers(const TrackerTrajectory& traj, cons
       const std::int64_t t_true_ns = std::llround(static_cast<double>(k) * period_ns);
       const double t_s = static_cast<double>(t_true_ns) * 1e-9;
       TrackerSample s = traj.pose_at(role, std::min(t_true_ns, traj.duration_ns()));
+      if (opt.device_mounting) s = joint_to_device(s, opt.device_mounting->T_device_joint[static_cast<size_t>(role)]);
       // Every stream draws for every sample, valid or not, so that one effect's
       // setting does not shift another's random numbers.
       const Vec3 dp(pos_rng.normal(), pos_rng.normal(), pos_rng.normal());

@@ -84,6 +84,17 @@ struct EvalOptions {
   // calibrate_from_head_height() at the sample that completes the first still stretch.
   bool calibrate = false;
   StandingHeightOptions calibration;
+  // Device frames (docs/evaluation.md "Device frames"): the source's samples are device poses
+  // (a headset at the eyes, controllers' grips) and every method maps them to joints through a
+  // mounting: the default from `body_reference`, and with `calibrate_pose` the one a
+  // PoseCalibrator measures from the clip's first still second (with `calibrate`, its height is
+  // applied too, instead of the StandingHeightDetector's). `true_mounting` gives the mounting the
+  // source used for a clip, to report the estimate's error.
+  bool device_frames = false;
+  BodyReference body_reference;
+  bool calibrate_pose = false;
+  PoseCalibrationOptions pose_calibration;
+  std::function<Mounting(int clip_index)> true_mounting;
   // Called after each clip (for progress); may be empty.
   std::function<void(int clip_index, int clip_count, const std::filesystem::path& clip)> on_clip;
 };
@@ -132,6 +143,20 @@ struct EvalReport {
   double calibration_scale_error = 0.0;      // mean |measured / true - 1| (0.01: 1%)
   double calibration_scale_error_max = 0.0;  // the largest
   double calibration_time_s = 0.0;     // mean time from a clip's first frame to its calibration
+  // With device_frames: the mean error of the mounting each method used against the truth, for
+  // the default mounting and (calibrate_pose) for the calibrated one over the clips it calibrated.
+  bool device_frames = false;
+  bool calibrate_pose = false;
+  int pose_calibrated_clips = 0;
+  struct MountingError {
+    double head_deg = 0.0;        // headset rotation on the head
+    double head_pitch_deg = 0.0;  // its pitch part (about the device's +X)
+    double grip_deg = 0.0;        // controllers' grip rotation (mean of both hands)
+    double eye_offset_cm = 0.0;   // the head's T_device_joint position
+    double grip_offset_cm = 0.0;  // the hands' T_device_joint position (mean of both)
+  };
+  MountingError default_mounting_error, calibrated_mounting_error;
+  double pose_calibration_time_s = 0.0;  // mean time from a clip's first sample to its calibration
   // Timing of "diffusion" if evaluated, otherwise of the first method.
   std::string timing_method;
   double ms_per_frame_p50 = 0.0;

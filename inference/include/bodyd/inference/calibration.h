@@ -12,8 +12,10 @@
 #pragma once
 
 #include "bodyd/inference/reconstructor.h"
+#include "bodyd/motion/mounting.h"
 #include "bodyd/motion/tracker.h"
 
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -100,6 +102,69 @@ class StandingHeightDetector {
   std::vector<std::uint32_t> histogram_;  // head heights, 1 mm bins from 0 (fallback)
   std::uint64_t histogram_count_ = 0;
   std::optional<StandingHeight> result_;
+};
+
+}  // namespace bodyd
+
+// ------------------------------------------------------------------ calibration pose
+// `bodyd-ctl calibrate --pose` (docs/control.md, docs/vr-apps.md): the user stands straight,
+// looks ahead, arms relaxed at the sides, for one second. From that still second the
+// PoseCalibrator estimates each device's mounting T_device_joint (motion/mounting.h) and the
+// standing head height:
+//  - the headset's pitch and roll on the head: the Head joint is taken to sit as the body
+//    reference's upright head looking ahead, turned to the headset's heading;
+//  - each controller's grip rotation: the wrist is taken to sit as the reference's relaxed
+//    wrist; the wrist offset turns with the controller (it is rotated about the grip point);
+//  - the eye offset (optional, `estimate_eye_offset`): the Head joint's height from the wrists'
+//    height and its depth from the wrists' (the reference's ratios); otherwise the default;
+//  - the standing head height: the Head joint's height through the new mounting, with the
+//    stance correction of standing_height_from_head().
+// Joint-frame samples (PoseFrame::Joint) have no mounting to learn: only the height is measured.
+
+namespace bodyd {
+
+struct PoseCalibrationOptions {
+  double still_s = 1.0;                 // how long every tracked device must hold still
+  double max_position_range_m = 0.03;   // each device's positions stay within this of their mean
+  double max_rotation_range_deg = 4.0;  // and its rotations within this of their mean
+  bool estimate_eye_offset = false;     // docs/evaluation.md "Device frames" says why it is off
+  StandingHeightOptions height;         // stance_ratio and the plausibility limits
+};
+[[nodiscard]] std::string validate(const PoseCalibrationOptions& options);
+
+struct PoseCalibration {
+  Mounting mounting;                           // the defaults where a role was not measured
+  std::array<bool, kRoleCount> measured{};     // which roles' mountings come from the still second
+  bool device_frames = false;                  // the head's samples were device poses
+  double head_height_m = 0.0;                  // standing head height to calibrate with
+  double measured_head_y_m = 0.0;              // the Head joint's mean height in the still second
+  // How certain: the spread of the reference pose the estimate assumes (a person's "looking
+  // ahead" and "arms relaxed" vary by this much) and the stillness measured.
+  std::array<double, kRoleCount> rotation_sd_deg{};
+  double eye_offset_sd_cm = 0.0;
+  std::array<double, kRoleCount> motion_deg{};  // largest rotation from the mean in the window
+  std::int64_t t_ns = 0;                        // the sample that completed the still second
+};
+
+class PoseCalibrator {
+ public:
+  PoseCalibrator(const BodyReference& reference, const Mounting& defaults, const PoseCalibrationOptions& options = {});
+  // Feeds a sample as the device sent it (before any mounting). Returns the result once: at the
+  // sample that completes a still second of the head and of every hand that is tracked in it.
+  [[nodiscard]] std::optional<PoseCalibration> push(const TrackerSample& sample);
+  void reset();
+  [[nodiscard]] bool done() const { return done_; }
+
+ private:
+  [[nodiscard]] std::optional<PoseCalibration> try_estimate(std::int64_t t_ns) const;
+
+  BodyReference reference_;
+  Mounting defaults_;
+  PoseCalibrationOptions options_;
+  std::array<std::vector<TrackerSample>, kRoleCount> window_;  // valid samples of the last still_s
+  std::array<std::int64_t, kRoleCount> last_invalid_ns_{};      // newest invalid sample per role
+  std::array<bool, kRoleCount> any_invalid_{};
+  bool done_ = false;
 };
 
 }  // namespace bodyd

@@ -37,6 +37,9 @@ class TrackerLogError : public std::runtime_error {
 
 inline constexpr std::string_view kTrackerLogVersionLine = "# bodyd-tracker-log v1";
 inline constexpr std::string_view kTrackerLogHeader = "t_ns,role,valid,px,py,pz,qx,qy,qz,qw";
+// The metadata line "# pose_frame: device" says the samples are device poses (docs/tracker-log.md;
+// TrackerSample::frame); "joint", or no such line, keeps them joint poses (every older log).
+inline constexpr std::string_view kTrackerLogPoseFrameKey = "pose_frame";
 // A valid sample's quaternion must have | |q| - 1 | <= this; it is then renormalised.
 inline constexpr double kTrackerLogQuatNormTolerance = limits::kQuatNormTolerance;
 // Plausible ranges (docs/tracker-log.md "Limits"): each position coordinate within
@@ -74,6 +77,7 @@ class TrackerLogParser {
   enum class State { Version, Preamble, Samples };
   [[noreturn]] void fail(const std::string& what) const;
   TrackerSample parse_sample(std::string_view line) const;
+  PoseFrame frame_ = PoseFrame::Joint;  // from the pose_frame metadata line
 
   std::string source_;
   State state_ = State::Version;

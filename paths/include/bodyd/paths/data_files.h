@@ -50,6 +50,11 @@ struct DataFile {
 [[nodiscard]] std::filesystem::path user_config_file();
 [[nodiscard]] std::filesystem::path user_config_file(const char* xdg_config_home, const char* home);
 
+// A file of the user's state (kept across restarts, not configuration):
+// $XDG_STATE_HOME/bodyd/NAME, by default ~/.local/state/bodyd/NAME. Empty when neither is set.
+[[nodiscard]] std::filesystem::path user_state_file(std::string_view name);
+[[nodiscard]] std::filesystem::path user_state_file(std::string_view name, const char* xdg_state_home, const char* home);
+
 // The running executable's path (/proc/self/exe); empty if it cannot be read.
 [[nodiscard]] std::filesystem::path executable_path();
 

@@ -13,7 +13,10 @@
 #pragma once
 
 #include "bodyd/motion/bvh.h"
+#include "bodyd/motion/mounting.h"
 #include "bodyd/motion/tracker.h"
+
+#include <optional>
 
 #include <array>
 #include <cstdint>
@@ -56,6 +59,12 @@ struct SimOptions {
 
   std::uint64_t seed = 1;
 
+  // Device frames (docs/simulator.md "Device frames"): when set, every sample is the pose a
+  // device mounted with this T_device_joint per role reports (the headset at the eyes in the XR
+  // axes, the controllers' grip poses; frame = PoseFrame::Device), computed from the joint's
+  // true pose before noise is added. draw_session_mounting() gives a random one.
+  std::optional<Mounting> device_mounting;
+
   // The rate of one role (the override, or rate_hz).
   [[nodiscard]] double rate_of(Role role) const;
   // Expected long-run fraction of hand samples that are invalid.
@@ -63,6 +72,19 @@ struct SimOptions {
   // Empty when the options are usable, otherwise what is wrong (names the field).
   [[nodiscard]] std::string validate() const;
 };
+
+// How far a session's mounting strays from the default (docs/simulator.md): each drawn
+// uniformly within +- the value, per session, from the seed.
+struct MountingSpread {
+  double eye_offset_m = 0.02;       // each axis of the head's T_device_joint position
+  double head_pitch_deg = 10.0;     // the headset pitched on the head (about its +X)
+  double head_roll_deg = 3.0;       // and rolled (about its -Z)
+  double grip_rotation_deg = 15.0;  // each controller turned in the hand about its grip point (each axis)
+};
+// `base` (the default mounting) with one session's perturbation drawn from `seed`: the headset
+// turned on the head about the eyes (T_device_joint rotation pre-multiplied by the inverse turn)
+// with its eye offset moved, each controller turned about its grip point.
+[[nodiscard]] Mounting draw_session_mounting(const Mounting& base, const MountingSpread& spread, std::uint64_t seed);
 
 // The true (noise-free, undelayed) trajectories of the three tracked joints of a clip.
 // Immutable after construction; pose_at() is thread-safe and does not allocate.
