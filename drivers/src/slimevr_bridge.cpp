@@ -106,6 +106,53 @@ std::string socket_path(std::string_view argument, std::string_view name, std::s
   return path;
 }
 
+int listen_unix(const std::string& path, std::string& error) {
+  const std::filesystem::path p(path);
+  if (std::string e = prepare_dir(p.parent_path().empty() ? std::filesystem::path(".") : p.parent_path()); !e.empty()) {
+    error = e;
+    return -1;
+  }
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  if (path.size() >= sizeof(addr.sun_path)) {
+    error = "path too long for a Unix socket";
+    return -1;
+  }
+  std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
+  struct stat st {};
+  if (::lstat(path.c_str(), &st) == 0) {
+    if (!S_ISSOCK(st.st_mode)) {
+      error = "exists and is not a socket; bodyd does not replace other files (remove it, or name another path)";
+      return -1;
+    }
+    const int probe = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    const bool live = probe >= 0 && ::connect(probe, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0;
+    if (probe >= 0) ::close(probe);
+    if (live) {
+      error = "in use: another program listens on it (a SlimeVR server, or another bodyd?); stop it, or name another path";
+      return -1;
+    }
+    ::unlink(path.c_str());  // stale, from a process that is gone
+  }
+  const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+  if (fd < 0) {
+    error = std::string("socket: ") + std::strerror(errno);
+    return -1;
+  }
+  // Mode 0600 from the start (the directory keeps others out in any case).
+  const mode_t old_mask = ::umask(0177);
+  const int bound = ::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
+  ::umask(old_mask);
+  if (bound != 0 || ::listen(fd, 8) != 0) {
+    error = std::string(bound != 0 ? "bind: " : "listen: ") + std::strerror(errno);
+    ::close(fd);
+    return -1;
+  }
+  return fd;
+}
+
+void limit_send_buffer(int fd, int bytes) { (void)::setsockopt(fd, SOL_SOCKET, SO_SNDBUF, &bytes, sizeof bytes); }
+
 // ---- the server ---------------------------------------------------------------------------------
 
 struct BridgeServer::Impl {
@@ -329,6 +376,7 @@ struct BridgeServer::Impl {
         reject("too_many_clients", "more than " + std::to_string(kMaxConnections) + " clients at once: refused");
         continue;
       }
+      limit_send_buffer(fd, kSendBufferBytes);
       auto c = std::make_unique<Connection>();
       c->fd = fd;
       c->window_start_ns = now_ns();
@@ -407,35 +455,19 @@ BridgeServer::~BridgeServer() {
 std::string BridgeServer::start() {
   std::lock_guard lock(impl_->mutex);
   if (impl_->users++ > 0) return {};
-  const std::filesystem::path p(path_);
   const auto fail = [&](std::string e) {
     impl_->users = 0;
-    if (impl_->listen_fd >= 0) ::close(impl_->listen_fd), impl_->listen_fd = -1;
     return "bridge socket " + path_ + ": " + e;
   };
-  if (std::string e = prepare_dir(p.parent_path().empty() ? std::filesystem::path(".") : p.parent_path()); !e.empty())
-    return fail(e);
-  sockaddr_un addr{};
-  addr.sun_family = AF_UNIX;
-  if (path_.size() >= sizeof(addr.sun_path)) return fail("path too long for a Unix socket");
-  std::memcpy(addr.sun_path, path_.c_str(), path_.size() + 1);
-  struct stat st {};
-  if (::lstat(path_.c_str(), &st) == 0) {
-    if (!S_ISSOCK(st.st_mode)) return fail("exists and is not a socket; bodyd does not replace other files (remove it, or name another path)");
-    const int probe = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-    const bool live = probe >= 0 && ::connect(probe, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0;
-    if (probe >= 0) ::close(probe);
-    if (live) return fail("in use: another program listens on it (a SlimeVR server, or another bodyd?); stop it, or name another path");
-    ::unlink(path_.c_str());  // stale, from a process that is gone
-  }
-  impl_->listen_fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
-  if (impl_->listen_fd < 0) return fail(std::string("socket: ") + std::strerror(errno));
-  if (::bind(impl_->listen_fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0)
-    return fail(std::string("bind: ") + std::strerror(errno));
-  ::chmod(path_.c_str(), 0600);
-  if (::listen(impl_->listen_fd, 8) != 0) return fail(std::string("listen: ") + std::strerror(errno));
+  std::string e;
+  impl_->listen_fd = listen_unix(path_, e);
+  if (impl_->listen_fd < 0) return fail(e);
   impl_->wake_fd = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
-  if (impl_->wake_fd < 0) return fail(std::string("eventfd: ") + std::strerror(errno));
+  if (impl_->wake_fd < 0) {
+    ::close(impl_->listen_fd);
+    impl_->listen_fd = -1;
+    return fail(std::string("eventfd: ") + std::strerror(errno));
+  }
   impl_->stop_flag.store(false);
   impl_->stats.listening = true;
   impl_->thread = std::thread([this] { impl_->run(); });

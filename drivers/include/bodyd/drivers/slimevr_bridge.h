@@ -134,10 +134,18 @@ inline constexpr std::string_view kMonadoInputSocketName = "SlimeVRInput";
 // default_socket_dir()/`name` when empty. Empty and `error` when it cannot be made.
 [[nodiscard]] std::string socket_path(std::string_view argument, std::string_view name, std::string& error);
 
+// Makes a listening, non-blocking Unix socket at `path`: its directory made (0700) or checked to
+// be private, a stale socket file of a process that is gone replaced, a live one refused, the
+// socket file 0600. The fd, or -1 and `error` (what is wrong and what to do).
+[[nodiscard]] int listen_unix(const std::string& path, std::string& error);
+// Sets SO_SNDBUF (a client that does not read fills it soon and is then noticed).
+void limit_send_buffer(int fd, int bytes);
+
 // ---- the server ---------------------------------------------------------------------------------
 
 inline constexpr std::size_t kMaxConnections = 4;
 inline constexpr std::size_t kMaxPendingOutBytes = 64 * 1024;  // a client that reads nothing is dropped past this
+inline constexpr int kSendBufferBytes = 16 * 1024;              // SO_SNDBUF of each connection
 inline constexpr std::uint32_t kMaxFramesPerSecond = 2000;     // a client sending more is dropped (flood)
 inline constexpr std::int32_t kProtocolVersion = 5;            // what the server answers a Version with
 

@@ -1,0 +1,169 @@
+// bodyd as Monado's SolarXR server (issue 17 item 2), against a client written only from the
+// protocols' schemas in another language: tests/drivers/slimevr/solarxr_client.py (Debian's
+// python3-flatbuffers with the test's own schema through flatc --python, and the driver
+// protocol's feeder) does what Monado does at session start (SettingsRequest + PollDataFeed,
+// exactly one DataFeedUpdate within 4 s, then StartDataFeed) and feeds a clip's headset and
+// controllers into SlimeVRInput at 90 Hz: the feeder alone drives the reconstruction. Each
+// update's bones must follow the ZeroMQ pose under the documented convention
+// (docs/protocol-solarxr.md): heads within 1 mm, limb tails on the child joints within 1 mm,
+// and rotation_g = R_joint * K with one constant K per bone (within 0.1 degree); the synthetic
+// trackers are the joints within 1 mm / 0.1 degree. Skips when python3-flatbuffers is missing.
+#include "slimevr_helpers.h"
+
+namespace bodyd {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace test::slimevr;
+
+struct BoneRef {
+  int part;
+  const char* owner;
+  const char* head_a;
+  const char* head_b;
+  double mix;
+  const char* child;  // the joint at the tail (limbs), or nullptr
+};
+// docs/protocol-solarxr.md, "Bones".
+const BoneRef kBones[] = {
+    {1, "Head", "Head", "Head", 0, nullptr},          {2, "Neck", "Neck", "Neck", 0, nullptr},
+    {22, "Chest", "Chest", "Chest", 0, nullptr},      {3, "Spine", "Spine", "Spine", 0, nullptr},
+    {4, "Hips", "Spine", "Hips", 0.5, nullptr},       {5, "Hips", "Hips", "Hips", 0, nullptr},
+    {20, "Shoulder_L", "Shoulder_L", "Shoulder_L", 0, "UpperArm_L"},
+    {21, "Shoulder_R", "Shoulder_R", "Shoulder_R", 0, "UpperArm_R"},
+    {16, "UpperArm_L", "UpperArm_L", "UpperArm_L", 0, "LowerArm_L"},
+    {17, "UpperArm_R", "UpperArm_R", "UpperArm_R", 0, "LowerArm_R"},
+    {14, "LowerArm_L", "LowerArm_L", "LowerArm_L", 0, "Hand_L"},
+    {15, "LowerArm_R", "LowerArm_R", "LowerArm_R", 0, "Hand_R"},
+    {18, "Hand_L", "Hand_L", "Hand_L", 0, nullptr},   {19, "Hand_R", "Hand_R", "Hand_R", 0, nullptr},
+    {6, "UpperLeg_L", "UpperLeg_L", "UpperLeg_L", 0, "LowerLeg_L"},
+    {7, "UpperLeg_R", "UpperLeg_R", "UpperLeg_R", 0, "LowerLeg_R"},
+    {8, "LowerLeg_L", "LowerLeg_L", "LowerLeg_L", 0, "Foot_L"},
+    {9, "LowerLeg_R", "LowerLeg_R", "LowerLeg_R", 0, "Foot_R"},
+    {10, "Foot_L", "Foot_L", "Foot_L", 0, "Toes_L"},  {11, "Foot_R", "Foot_R", "Foot_R", 0, "Toes_R"},
+};
+// The synthetic trackers: tracker_num, SolarXR body part, joint.
+const std::tuple<int, int, const char*> kTrackers[] = {{1, 5, "Hips"},       {2, 10, "Foot_L"},     {3, 11, "Foot_R"},
+                                                       {4, 3, "Chest"},      {5, 8, "LowerLeg_L"},  {6, 9, "LowerLeg_R"},
+                                                       {7, 14, "LowerArm_L"}, {8, 15, "LowerArm_R"}};
+
+Vec3 joint_p(const protocol::PoseMessage& pose, std::size_t j) { return vec3(pose.joints[j].position_m); }
+Quat joint_q(const protocol::PoseMessage& pose, std::size_t j) { return quat_xyzw(pose.joints[j].rotation_xyzw); }
+
+TEST(MonadoBridge, HandshakeThenBonesFollowTheZmqPoseFedByTheFeeder) {
+  std::string python;
+  if (std::string why = python_skip_reason(python, true); !why.empty()) GTEST_SKIP() << why;
+  if (!fs::exists(pb_dir() / "solarxr_protocol" / "MessageBundle.py")) GTEST_SKIP() << "flatc --python did not run (flatbuffers-compiler missing at configure time?)";
+  test::TempDir dir;
+  const fs::path run = dir.path / "run";
+  test::Child daemon({(test::bin_dir() / "bodyd").string(), "--method", "ik", "--source", "monado:" + run.string(),
+                      "--output", "monado:" + run.string() + "?trackers=waist,feet,chest,knees,elbows", "--pub",
+                      "tcp://127.0.0.1:*", "--control", "none", "--endpoints-file", (dir.path / "endpoints.json").string()},
+                     dir.path / "bodyd.err");
+  const auto endpoints = test::wait_endpoints(dir.path / "endpoints.json", 20000);
+  ASSERT_TRUE(endpoints) << daemon.log();
+  zmq::context_t ctx;
+  zmq::socket_t sub = test::sub_socket(ctx, (*endpoints)["pub"].get<std::string>());
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+
+  write_poses(dir.path / "poses.txt");
+  test::Child client({python, client_script("solarxr_client.py").string(), pb_dir().string(), run.string(),
+                      (dir.path / "poses.txt").string(), (dir.path / "received.jsonl").string()},
+                     dir.path / "client.err");
+  protocol::SkeletonMessage skeleton;
+  std::vector<protocol::PoseMessage> poses;
+  auto quiet_since = std::chrono::steady_clock::now();
+  std::size_t last = 0;
+  collect(sub, skeleton, poses, [&] {
+    if (poses.size() != last) last = poses.size(), quiet_since = std::chrono::steady_clock::now();
+    return client.wait(0).has_value() && std::chrono::steady_clock::now() - quiet_since > std::chrono::milliseconds(500);
+  });
+  ASSERT_EQ(client.wait(0), 0) << client.log() << daemon.log();
+  daemon.signal(SIGINT);
+  ASSERT_EQ(daemon.wait(10000), 0) << daemon.log();
+  ASSERT_GT(poses.size(), 100u) << "the feeder's samples drive the reconstruction: " << daemon.log();
+
+  const std::vector<nlohmann::json> records = read_jsonl(dir.path / "received.jsonl");
+  std::vector<nlohmann::json> updates;
+  bool settings = false;
+  for (const auto& r : records) {
+    if (r["kind"] == "settings") {
+      settings = true;
+      EXPECT_EQ(r["tx"].get<int>(), 41);  // the request's transaction id
+      for (const char* k : {"Waist", "Chest", "LeftFoot", "RightFoot", "LeftKnee", "RightKnee", "LeftElbow", "RightElbow"})
+        EXPECT_TRUE(r["steamvr"][k].get<bool>()) << k;
+    } else if (r["kind"] == "update") {
+      updates.push_back(r);
+    }
+  }
+  EXPECT_TRUE(settings) << "no SettingsResponse";
+  ASSERT_GT(updates.size(), 100u);
+  // The poll's answer names the synthetic trackers (Monado makes its generic trackers from it).
+  ASSERT_EQ(updates[0]["trackers"].size(), std::size(kTrackers));
+  for (std::size_t k = 0; k < std::size(kTrackers); ++k) {
+    EXPECT_EQ(updates[0]["trackers"][k]["num"].get<int>(), std::get<0>(kTrackers[k]));
+    EXPECT_EQ(updates[0]["trackers"][k]["body_part"].get<int>(), std::get<1>(kTrackers[k]));
+    EXPECT_FALSE(updates[0]["trackers"][k]["name"].get<std::string>().empty());
+  }
+
+  std::vector<std::size_t> tracker_joint;
+  for (const auto& t : kTrackers) tracker_joint.push_back(joint_index(skeleton, std::get<2>(t)));
+  const auto tracker_error = [&](const nlohmann::json& u, const protocol::PoseMessage& pose) {
+    double mm = 0, deg = 0;
+    if (u["trackers"].size() != std::size(kTrackers)) return std::pair{1e9, 1e9};
+    for (std::size_t k = 0; k < std::size(kTrackers); ++k) {
+      const auto& t = u["trackers"][k];
+      if (!t.contains("p")) return std::pair{1e9, 1e9};
+      mm = std::max(mm, (vec3(t["p"]) - joint_p(pose, tracker_joint[k])).norm() * 1000.0);
+      deg = std::max(deg, angle_deg(quat_xyzw(t["q"]), joint_q(pose, tracker_joint[k])));
+    }
+    return std::pair{mm, deg};
+  };
+
+  double tracker_mm = 0, tracker_deg = 0, head_mm = 0, tail_mm = 0, k_deg = 0;
+  std::map<int, Quat> k_first;
+  std::size_t matched = 0, next = 0;
+  for (const nlohmann::json& u : updates) {
+    if (u["bones"].empty()) continue;  // the poll's answer before the first pose
+    ASSERT_EQ(u["bones"].size(), std::size(kBones));
+    std::size_t p = next;
+    while (p < poses.size() && tracker_error(u, poses[p]).first > 1.0) ++p;
+    ASSERT_LT(p, poses.size()) << "update " << matched << " matches no pose from " << next;
+    const auto [mm, deg] = tracker_error(u, poses[p]);
+    tracker_mm = std::max(tracker_mm, mm);
+    tracker_deg = std::max(tracker_deg, deg);
+    const protocol::PoseMessage& pose = poses[p];
+    for (std::size_t b = 0; b < std::size(kBones); ++b) {
+      const BoneRef& ref = kBones[b];
+      const nlohmann::json& bone = u["bones"][b];
+      ASSERT_EQ(bone["part"].get<int>(), ref.part);
+      const Vec3 expect_head = (1.0 - ref.mix) * joint_p(pose, joint_index(skeleton, ref.head_a)) +
+                               ref.mix * joint_p(pose, joint_index(skeleton, ref.head_b));
+      const Vec3 head = vec3(bone["head"]);
+      const Quat q = quat_xyzw(bone["q"]);
+      head_mm = std::max(head_mm, (head - expect_head).norm() * 1000.0);
+      EXPECT_GT(bone["len"].get<double>(), 0.01) << ref.part;
+      if (ref.child != nullptr) {
+        const Vec3 tail = head + q * Vec3(0, -bone["len"].get<double>(), 0);
+        tail_mm = std::max(tail_mm, (tail - joint_p(pose, joint_index(skeleton, ref.child))).norm() * 1000.0);
+      }
+      const Quat k = (joint_q(pose, joint_index(skeleton, ref.owner)).conjugate() * q).normalized();
+      if (!k_first.count(ref.part)) k_first[ref.part] = k;
+      k_deg = std::max(k_deg, angle_deg(k, k_first[ref.part]));
+    }
+    ++matched;
+    next = p + 1;
+  }
+  EXPECT_GT(matched, 100u);
+  EXPECT_LE(tracker_mm, 1.0);
+  EXPECT_LE(tracker_deg, 0.1);
+  EXPECT_LE(head_mm, 1.0);
+  EXPECT_LE(tail_mm, 1.0);
+  EXPECT_LE(k_deg, 0.1);
+  std::cout << matched << " updates with bones for " << poses.size() << " poses; trackers " << tracker_mm << " mm "
+            << tracker_deg << " deg; bone heads " << head_mm << " mm, limb tails " << tail_mm << " mm, K drift " << k_deg
+            << " deg\n";
+}
+
+}  // namespace
+}  // namespace bodyd

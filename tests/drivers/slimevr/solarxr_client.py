@@ -1,0 +1,206 @@
+#!/usr/bin/env python3
+"""Stands in for Monado's SolarXR driver on bodyd's SlimeVRRpc and SlimeVRInput sockets.
+
+Written from the protocols' descriptions only (docs/protocol-solarxr.md, the upstream
+schemas), with Debian's python3-flatbuffers and python3-protobuf, and the test's own schema
+files (solarxr_test.fbs through flatc --python, driver_messages.proto through protoc, both
+generated into PB_DIR at build time).
+
+  solarxr_client.py PB_DIR DIR POSES OUT [--rate HZ]
+
+As Monado does at session start: connects to DIR/SlimeVRRpc, sends one MessageBundle with a
+SettingsRequest and a PollDataFeed, and waits at most 4 s for exactly one DataFeedUpdate (it
+fails otherwise, as Monado gives up); then sends StartDataFeed, and its feeder plays POSES'
+headset and controllers into DIR/SlimeVRInput (SlimeVR's driver protocol) at HZ. Every
+DataFeedUpdate and the SettingsResponse are written to OUT as JSON lines.
+"""
+import json
+import select
+import socket
+import struct
+import sys
+import time
+
+sys.path.insert(0, sys.argv[1])
+import flatbuffers  # noqa: E402
+from solarxr_protocol import MessageBundle as MB  # noqa: E402
+from solarxr_protocol.data_feed import DataFeedConfig as DFC  # noqa: E402
+from solarxr_protocol.data_feed import DataFeedMessageHeader as DFH  # noqa: E402
+from solarxr_protocol.data_feed import PollDataFeed as PDF  # noqa: E402
+from solarxr_protocol.data_feed import StartDataFeed as SDF  # noqa: E402
+from solarxr_protocol.data_feed import DataFeedUpdate as DFU  # noqa: E402
+from solarxr_protocol.data_feed.DataFeedMessage import DataFeedMessage  # noqa: E402
+from solarxr_protocol.data_feed.tracker import TrackerDataMask as TDM  # noqa: E402
+from solarxr_protocol.datatypes import TransactionId as TX  # noqa: E402
+from solarxr_protocol.rpc import RpcMessageHeader as RMH  # noqa: E402
+from solarxr_protocol.rpc import SettingsRequest as SRQ  # noqa: E402
+from solarxr_protocol.rpc import SettingsResponse as SRS  # noqa: E402
+from solarxr_protocol.rpc.RpcMessage import RpcMessage  # noqa: E402
+
+import driver_client as feeder  # noqa: E402  (the driver protocol side: the same messages)
+
+
+def mask(b, info, pose):
+    TDM.TrackerDataMaskStart(b)
+    TDM.TrackerDataMaskAddInfo(b, info)
+    TDM.TrackerDataMaskAddRotation(b, pose)
+    TDM.TrackerDataMaskAddPosition(b, pose)
+    return TDM.TrackerDataMaskEnd(b)
+
+
+def config(b, info, pose):
+    m = mask(b, info, pose)
+    DFC.DataFeedConfigStart(b)
+    DFC.DataFeedConfigAddSyntheticTrackersMask(b, m)
+    DFC.DataFeedConfigAddBoneMask(b, True)
+    return DFC.DataFeedConfigEnd(b)
+
+
+def bundle(feed_type, feed_builder, with_settings):
+    b = flatbuffers.Builder(256)
+    msg = feed_builder(b)
+    DFH.DataFeedMessageHeaderStart(b)
+    DFH.DataFeedMessageHeaderAddMessageType(b, feed_type)
+    DFH.DataFeedMessageHeaderAddMessage(b, msg)
+    header = DFH.DataFeedMessageHeaderEnd(b)
+    rpc = None
+    if with_settings:
+        SRQ.SettingsRequestStart(b)
+        req = SRQ.SettingsRequestEnd(b)
+        RMH.RpcMessageHeaderStart(b)
+        RMH.RpcMessageHeaderAddTxId(b, TX.CreateTransactionId(b, 41))
+        RMH.RpcMessageHeaderAddMessageType(b, RpcMessage.SettingsRequest)
+        RMH.RpcMessageHeaderAddMessage(b, req)
+        rh = RMH.RpcMessageHeaderEnd(b)
+        MB.MessageBundleStartRpcMsgsVector(b, 1)
+        b.PrependUOffsetTRelative(rh)
+        rpc = b.EndVector()
+    MB.MessageBundleStartDataFeedMsgsVector(b, 1)
+    b.PrependUOffsetTRelative(header)
+    feeds = b.EndVector()
+    MB.MessageBundleStart(b)
+    MB.MessageBundleAddDataFeedMsgs(b, feeds)
+    if rpc is not None:
+        MB.MessageBundleAddRpcMsgs(b, rpc)
+    b.Finish(MB.MessageBundleEnd(b))
+    data = bytes(b.Output())
+    return struct.pack("<I", len(data) + 4) + data
+
+
+def poll_msg(b):
+    c = config(b, True, True)
+    PDF.PollDataFeedStart(b)
+    PDF.PollDataFeedAddConfig(b, c)
+    return PDF.PollDataFeedEnd(b)
+
+
+def start_msg(b):
+    c = config(b, False, True)
+    SDF.StartDataFeedStartDataFeedsVector(b, 1)
+    b.PrependUOffsetTRelative(c)
+    v = b.EndVector()
+    SDF.StartDataFeedStart(b)
+    SDF.StartDataFeedAddDataFeeds(b, v)
+    return SDF.StartDataFeedEnd(b)
+
+
+class Rpc:
+    def __init__(self, s, out):
+        self.s, self.out, self.buf, self.updates = s, out, b"", 0
+        self.settings = None
+
+    def poll(self, wait_s):
+        r, _, _ = select.select([self.s], [], [], wait_s)
+        if not r:
+            return
+        data = self.s.recv(1 << 20)
+        if not data:
+            raise SystemExit("bodyd closed SlimeVRRpc")
+        self.buf += data
+        while len(self.buf) >= 4:
+            (n,) = struct.unpack("<I", self.buf[:4])
+            if n < 4:
+                raise SystemExit("bad frame length %d" % n)
+            if len(self.buf) < n:
+                break
+            self.handle(self.buf[4:n])
+            self.buf = self.buf[n:]
+
+    def handle(self, payload):
+        m = MB.MessageBundle.GetRootAs(bytearray(payload), 0)
+        for i in range(m.RpcMsgsLength()):
+            h = m.RpcMsgs(i)
+            if h.MessageType() == RpcMessage.SettingsResponse:
+                r = SRS.SettingsResponse()
+                r.Init(h.Message().Bytes, h.Message().Pos)
+                t = r.SteamVrTrackers()
+                self.settings = {k: getattr(t, k)() for k in ("Waist", "Chest", "LeftFoot", "RightFoot", "LeftKnee",
+                                                              "RightKnee", "LeftElbow", "RightElbow")}
+                self.out.write(json.dumps({"kind": "settings", "tx": h.TxId().Id(), "steamvr": self.settings}) + "\n")
+        for i in range(m.DataFeedMsgsLength()):
+            h = m.DataFeedMsgs(i)
+            if h.MessageType() != DataFeedMessage.DataFeedUpdate:
+                continue
+            u = DFU.DataFeedUpdate()
+            u.Init(h.Message().Bytes, h.Message().Pos)
+            rec = {"kind": "update", "t": time.monotonic(), "trackers": [], "bones": []}
+            for k in range(u.SyntheticTrackersLength()):
+                t = u.SyntheticTrackers(k)
+                tr = {"num": t.TrackerId().TrackerNum(), "status": t.Status()}
+                if t.Info() is not None:
+                    tr["body_part"] = t.Info().BodyPart()
+                    tr["name"] = (t.Info().DisplayName() or b"").decode()
+                if t.Position() is not None:
+                    p, q = t.Position(), t.Rotation()
+                    tr["p"] = [p.X(), p.Y(), p.Z()]
+                    tr["q"] = [q.X(), q.Y(), q.Z(), q.W()]
+                rec["trackers"].append(tr)
+            for k in range(u.BonesLength()):
+                bo = u.Bones(k)
+                q, h3 = bo.RotationG(), bo.HeadPositionG()
+                rec["bones"].append({"part": bo.BodyPart(), "q": [q.X(), q.Y(), q.Z(), q.W()], "len": bo.BoneLength(),
+                                     "head": [h3.X(), h3.Y(), h3.Z()]})
+            self.updates += 1
+            self.out.write(json.dumps(rec) + "\n")
+
+
+def main():
+    d, poses, out_path = sys.argv[2], sys.argv[3], sys.argv[4]
+    rate = 90.0
+    if len(sys.argv) > 6 and sys.argv[5] == "--rate":
+        rate = float(sys.argv[6])
+    with open(out_path, "w") as out:
+        s = feeder.connect(d + "/SlimeVRRpc")
+        rpc = Rpc(s, out)
+        t0 = time.monotonic()
+        s.sendall(bundle(DataFeedMessage.PollDataFeed, poll_msg, True))
+        while rpc.updates == 0 and time.monotonic() - t0 < 4.0:
+            rpc.poll(0.05)
+        if rpc.updates != 1:
+            raise SystemExit("no DataFeedUpdate within the 4 s Monado waits")
+        out.write(json.dumps({"kind": "first_update_s", "s": time.monotonic() - t0}) + "\n")
+        deadline = time.monotonic() + 2.0
+        while rpc.settings is None and time.monotonic() < deadline:
+            rpc.poll(0.05)
+        s.sendall(bundle(DataFeedMessage.StartDataFeed, start_msg, False))
+        f = feeder.connect(d + "/SlimeVRInput")
+        feeder.announce(f, ["head", "left_hand", "right_hand"])
+        period = 1.0 / rate
+        next_t = time.monotonic()
+        for fr in feeder.read_frames(poses):
+            f.sendall(b"".join(feeder.position(role, *vals) for role, vals in fr))
+            next_t += period
+            while True:
+                left = next_t - time.monotonic()
+                rpc.poll(max(0.0, left))
+                if left <= 0:
+                    break
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:
+            rpc.poll(0.05)
+        f.close()
+        s.close()
+
+
+if __name__ == "__main__":
+    main()
