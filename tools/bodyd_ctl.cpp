@@ -18,6 +18,7 @@
 #include <nlohmann/json.hpp>
 #include <zmq.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -195,6 +196,41 @@ std::string calibration_text(const json& r) {
   return s;
 }
 
+// A JSON value of an output's status as text: strings bare, arrays as "a, b", numbers as JSON.
+std::string value_text(const json& v) {
+  if (v.is_string()) return v.get<std::string>();
+  if (v.is_boolean()) return v.get<bool>() ? "yes" : "no";
+  if (v.is_array()) {
+    std::string s;
+    for (const auto& e : v) s += (s.empty() ? "" : ", ") + value_text(e);
+    return s.empty() ? "none" : s;
+  }
+  return v.dump();
+}
+
+// One output of the status reply (docs/control.md, "outputs"): its name, what it sent, its
+// rate limit and last error, then the output's own keys (docs/outputs.md) as "key value".
+std::string output_text(const json& o) {
+  if (!o.is_object()) return value_text(o);
+  std::string s = fmt::format("{}: {} sent, {} failed", o.value("name", std::string("?")), value_text(o.value("sent", json(0))),
+                              value_text(o.value("send_failed", json(0))));
+  const double rate = o.value("rate_hz", 0.0);
+  if (rate > 0)
+    s += fmt::format(", at most {} poses/s ({} skipped)", value_text(o["rate_hz"]),
+                     value_text(o.value("skipped_by_rate", json(0))));
+  for (const auto& [key, value] : o.items()) {
+    if (key == "name" || key == "sent" || key == "send_failed" || key == "rate_hz" || key == "skipped_by_rate" ||
+        key == "last_error")
+      continue;
+    std::string name = key;
+    std::replace(name.begin(), name.end(), '_', ' ');
+    s += ", " + name + " " + value_text(value);
+  }
+  const std::string err = o.value("last_error", std::string());
+  if (!err.empty()) s += "; last error: " + err;
+  return s;
+}
+
 void print_status(const json& r) {
   std::cout << fmt::format("bodyd: up {}, method {}", duration_text(r.value("uptime_s", 0.0)), r.value("method", std::string("?")));
   const std::string model = r.value("model", std::string());
@@ -229,7 +265,7 @@ void print_status(const json& r) {
   std::cout << "calibration: " << calibration_text(r) << "\n";
   if (r.contains("outputs") && r["outputs"].is_array() && !r["outputs"].empty()) {
     std::cout << "outputs:\n";
-    for (const auto& o : r["outputs"]) std::cout << "  " << o.dump() << "\n";
+    for (const auto& o : r["outputs"]) std::cout << "  " << output_text(o) << "\n";
   }
   std::cout << fmt::format("endpoints: poses {}, control {}{}\n", r.value("pub", std::string("?")),
                            r.value("control", std::string("?")), r.value("curve", false) ? ", CURVE on" : "");

@@ -63,6 +63,14 @@ TEST_F(Ctl, StatusIsASummaryAndJsonIsTheRawReply) {
                            "samples: ", " dropped, queue ", "poses: ", " out", "reconstruction: p50 ", "latency ",
                            "calibration: head height ", "endpoints: poses ipc://"})
     EXPECT_NE(r.out.find(part), std::string::npos) << "missing \"" << part << "\" in:\n" << r.out;
+  // Outputs in words, not raw JSON (issue 20 item 8): the pose stream first, what it sent, its own keys.
+  const std::size_t outputs = r.out.find("outputs:\n");
+  ASSERT_NE(outputs, std::string::npos) << r.out;
+  const std::string output_line = r.out.substr(outputs + 9, r.out.find('\n', outputs + 9) - outputs - 9);
+  EXPECT_EQ(output_line.rfind("  zmq:ipc://", 0), 0u) << output_line;
+  for (const char* part : {" sent, ", " failed", "subscriptions "})
+    EXPECT_NE(output_line.find(part), std::string::npos) << "missing \"" << part << "\" in: " << output_line;
+  for (const char c : {'{', '}', '"'}) EXPECT_EQ(output_line.find(c), std::string::npos) << "JSON in: " << output_line;
   const json j = status();
   EXPECT_EQ(j["ok"], true);
   EXPECT_GE(j["frames_out"].get<int>(), 10);
