@@ -1,5 +1,9 @@
 #include "bodyd/daemon/config.h"
 
+#include "bodyd/daemon/output.h"
+#include "bodyd/drivers/device_list.h"
+#include "bodyd/drivers/network_source.h"
+#include "bodyd/drivers/open_source.h"
 #include "bodyd/motion/limits.h"
 #include "bodyd/paths/data_files.h"
 
@@ -255,6 +259,7 @@ std::string apply_config_json(const json& j, const std::string& source, DaemonCo
     else if (key == "wait_for_subscriber") ok = get_value(value, w, config.wait_for_subscriber, error);
     else if (key == "endpoints_file") ok = get_value(value, w, config.endpoints_file, error);
     else if (key == "record_trackers") ok = get_value(value, w, config.record_trackers_file, error);
+    else if (key == "overwrite") ok = get_value(value, w, config.record_trackers_overwrite, error);
     else if (key == "rate_hz") ok = get_value(value, w, config.rate_hz, error);
     else if (key == "queue_capacity") ok = get_value(value, w, config.queue_capacity, error);
     else if (key == "queue_max_age_ms") ok = get_value(value, w, config.queue_max_age_ms, error);
@@ -388,6 +393,43 @@ std::string validate_config(const DaemonConfig& c) {
   return {};
 }
 
+std::string check_specs(const DaemonConfig& c) {
+  std::string error;
+  for (const std::string& text : c.sources) {
+    const std::optional<drivers::SourceSpec> spec = drivers::parse_source_spec(text, error);
+    if (!spec) return error;
+    using drivers::SourceKind;
+    switch (spec->kind) {
+      case SourceKind::Hid:
+      case SourceKind::Usb:
+        if (!drivers::parse_device_ids(spec->argument, error)) return "source \"" + text + "\": " + error;
+        break;
+      case SourceKind::Vrchat:
+      case SourceKind::Vmc:
+      case SourceKind::Udp: {
+        const drivers::NetworkKind kind = spec->kind == SourceKind::Vrchat ? drivers::NetworkKind::Vrchat
+                                          : spec->kind == SourceKind::Vmc  ? drivers::NetworkKind::Vmc
+                                                                           : drivers::NetworkKind::Udp;
+        if (!drivers::parse_network_spec(kind, text, spec->argument, error)) return error;
+        break;
+      }
+      case SourceKind::Replay:
+      case SourceKind::Sim: break;  // a missing or bad file is found when it is opened
+      case SourceKind::Steamvr:
+      case SourceKind::Monado: break;  // any path: checked when the socket is made
+    }
+  }
+  // Made, not opened: the factories check the target and the options.
+  const OutputEnv env{c};
+  for (const std::string& text : c.outputs) {
+    OutputSpec spec;
+    double rate_hz = 0.0;
+    if (!parse_output_spec(text, spec, error) || !take_rate_option(spec, rate_hz, error) || !make_output(spec, env, error))
+      return error;
+  }
+  return {};
+}
+
 json config_to_json(const DaemonConfig& c) {
   json offsets = json::object();
   for (Role r : kRoles) {
@@ -424,6 +466,7 @@ json config_to_json(const DaemonConfig& c) {
       {"wait_for_subscriber", c.wait_for_subscriber},
       {"endpoints_file", c.endpoints_file},
       {"record_trackers", c.record_trackers_file},
+      {"overwrite", c.record_trackers_overwrite},
       {"outputs", c.outputs},
       {"rate_hz", c.rate_hz},
       {"queue_capacity", c.queue_capacity},
@@ -522,6 +565,8 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
                  "only clients whose public key is in DIR (NAME.public files) may connect (needs --curve-secret-key)");
   app.add_option("--record-trackers", config.record_trackers_file,
                  "write every tracker sample received to FILE (tracker log v1; replay it with --replay FILE --fast)");
+  app.add_flag("--overwrite", config.record_trackers_overwrite,
+               "--record-trackers may replace an existing file (without it an existing file is refused)");
   app.add_option("--rate-hz", config.rate_hz, "output rate limit; 0: one pose per head sample")->check(CLI::NonNegativeNumber);
   app.add_option("--queue-capacity", config.queue_capacity, "tracker samples the queue holds");
   app.add_option("--queue-max-age-ms", config.queue_max_age_ms,
@@ -597,7 +642,9 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
     if (!gen_keys_client.empty()) result.gen_keys_name = gen_keys_client;
     return result;
   }
-  if (std::string e = validate_config(config); !e.empty()) {
+  std::string e = validate_config(config);
+  if (e.empty()) e = check_specs(config);
+  if (!e.empty()) {
     std::cerr << "bodyd: " << e << "\n";
     result.action = CliResult::Action::Exit;
     result.exit_code = 2;

@@ -27,6 +27,7 @@
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <cstring>
 #include <ctime>
 #include <fstream>
 #include <mutex>
@@ -550,7 +551,9 @@ struct Daemon::Impl final : ControlTarget {
         spdlog::info("every source has finished; {} poses published", seq);
         notify();
       }
-      warn_if_no_head(monotonic_ns());
+      const std::int64_t now_ns = monotonic_ns();
+      warn_if_no_head(now_ns);
+      recorder.poll(now_ns);  // the recording reaches the file at least every half second
     }
   }
 
@@ -762,7 +765,7 @@ std::string Daemon::start() {
         {"model", d.model_path_text.empty() ? "none" : d.model_path_text},
         {"rate_hz", fmt::format("{}", d.config.rate_hz)},
         {"replay", "bodyd --replay FILE --fast, without offsets, with the same method, model, calibration, rate_hz"}};
-    if (std::string re = d.recorder.open(d.config.record_trackers_file, meta); !re.empty()) return re;
+    if (std::string re = d.recorder.open(d.config.record_trackers_file, meta, d.config.record_trackers_overwrite); !re.empty()) return re;
     spdlog::info("recording every tracker sample to {}", d.config.record_trackers_file);
   }
 
@@ -815,7 +818,7 @@ int Daemon::run(const volatile std::sig_atomic_t* signal_flag) {
   if (!d.started) return 1;
   for (;;) {
     if (signal_flag && *signal_flag) {
-      spdlog::info("signal received: shutting down");
+      spdlog::info("signal received ({}): shutting down", strsignal(static_cast<int>(*signal_flag)));
       break;
     }
     if (d.stop_flag.load() || d.shutdown_requested.load()) break;

@@ -25,16 +25,21 @@ namespace {
 
 volatile std::sig_atomic_t g_stop_signal = 0;
 
-// Only sets the flag: Daemon::run() polls it (async-signal-safe).
-extern "C" void on_stop_signal(int) { g_stop_signal = 1; }
+// Only records the signal: Daemon::run() polls the flag (async-signal-safe).
+extern "C" void on_stop_signal(int signal_number) { g_stop_signal = signal_number; }
 
+// docs/daemon.md, "Signals": INT, TERM, HUP (the terminal closed) and QUIT shut down cleanly
+// (the recording flushed, "stopped" logged, exit 0); USR1, USR2, ALRM, PIPE are ignored, and so
+// is XFSZ, so that a file over the size limit is a write error that is reported.
 void install_signal_handlers() {
-  struct sigaction action {};
-  action.sa_handler = on_stop_signal;
-  sigemptyset(&action.sa_mask);
-  sigaction(SIGINT, &action, nullptr);
-  sigaction(SIGTERM, &action, nullptr);
-  std::signal(SIGPIPE, SIG_IGN);
+  struct sigaction stop {};
+  stop.sa_handler = on_stop_signal;
+  sigemptyset(&stop.sa_mask);
+  for (int s : {SIGINT, SIGTERM, SIGHUP, SIGQUIT}) sigaction(s, &stop, nullptr);
+  struct sigaction ignore {};
+  ignore.sa_handler = SIG_IGN;
+  sigemptyset(&ignore.sa_mask);
+  for (int s : {SIGUSR1, SIGUSR2, SIGALRM, SIGPIPE, SIGXFSZ}) sigaction(s, &ignore, nullptr);
 }
 
 // Under systemd with WatchdogSec=: pings the watchdog while the daemon is alive (its

@@ -439,6 +439,33 @@ TEST(Config, EveryBadCommandLineExits2) {
   EXPECT_EQ(daemon::parse_command_line(2, help, c).exit_code, 0);
 }
 
+// Issue 20 item 7: a malformed --source or --output spec is a bad command line (2), found
+// before anything is opened; a well-formed one still runs.
+TEST(Config, MalformedSourceAndOutputSpecsExit2) {
+  for (std::vector<const char*> argv :
+       {std::vector<const char*>{"bodyd", "--source", "bogus:x"}, std::vector<const char*>{"bodyd", "--source", "vmc:abc"},
+        std::vector<const char*>{"bodyd", "--source", "vmc:127.0.0.1:99999"},
+        std::vector<const char*>{"bodyd", "--source", "vrchat:9001?nope=1"},
+        std::vector<const char*>{"bodyd", "--source", "udp:"}, std::vector<const char*>{"bodyd", "--source", "hid:zz:1"},
+        std::vector<const char*>{"bodyd", "--source", "replay:"},
+        std::vector<const char*>{"bodyd", "--output", "nosuch:127.0.0.1:9000"},
+        std::vector<const char*>{"bodyd", "--output", "vrchat:127.0.0.1:70000"},
+        std::vector<const char*>{"bodyd", "--output", "vrchat:127.0.0.1:9000?slots=wings"},
+        std::vector<const char*>{"bodyd", "--output", "vmc:127.0.0.1:39539?rate=fast"}}) {
+    daemon::DaemonConfig c;
+    testing::internal::CaptureStderr();
+    const auto r = daemon::parse_command_line(static_cast<int>(argv.size()), argv.data(), c);
+    const std::string err = testing::internal::GetCapturedStderr();
+    EXPECT_EQ(r.action, daemon::CliResult::Action::Exit) << argv[2];
+    EXPECT_EQ(r.exit_code, 2) << argv[2];
+    EXPECT_NE(err.find(argv[2]), std::string::npos) << err;  // the message names the spec
+  }
+  const char* good[] = {"bodyd", "--source", "vmc:39539?head=HMD-1", "--source", "hid:1209:B0D1", "--output",
+                        "vrchat:127.0.0.1:9000?slots=hip,feet&rate=60"};
+  daemon::DaemonConfig c;
+  EXPECT_EQ(daemon::parse_command_line(7, good, c).action, daemon::CliResult::Action::Run);
+}
+
 // Issue 11, item 3: an ipc:// endpoint never replaces a file that is not a socket, and the
 // socket directory must be private.
 TEST(Endpoint, IpcNeverReplacesAFileAndNeedsAPrivateDirectory) {

@@ -13,9 +13,12 @@
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 
 #include <cstring>
 #include <map>
+#include <memory>
+#include <sstream>
 
 namespace bodyd::test {
 namespace {
@@ -181,6 +184,223 @@ TEST(RecordTrackers, LiveUdpSessionReplaysToBitIdenticalPoses) {
     ASSERT_EQ(live[i].flags, replay[i].flags);
     ASSERT_EQ(std::memcmp(live[i].joints.data(), replay[i].joints.data(), live[i].joints.size() * sizeof(live[i].joints[0])), 0);
   }
+}
+
+// Issue 20: a live udp: session recorded by bodyd (`extra` flags, e.g. --overwrite), the
+// control socket to ask for samples_in, and a sender of tracker-log lines.
+class UdpRecording {
+ public:
+  UdpRecording(const fs::path& dir, const fs::path& recording, std::vector<std::string> prefix = {},
+               std::vector<std::string> extra = {})
+      : dir_(dir), control_("ipc://" + (dir / "rec.control").string()) {
+    port_ = free_udp_port();
+    std::vector<std::string> args = prefix;
+    for (const std::string& a : {kBodyd, std::string("--method"), std::string("ik"), std::string("--source"),
+                                 "udp:127.0.0.1:" + std::to_string(port_), std::string("--record-trackers"),
+                                 recording.string(), std::string("--pub"), "ipc://" + (dir / "rec.pose").string(),
+                                 std::string("--control"), control_, std::string("--endpoints-file"),
+                                 (dir / "rec.json").string()})
+      args.push_back(a);
+    args.insert(args.end(), extra.begin(), extra.end());
+    bodyd_ = std::make_unique<Process>(args, ProcessOptions{.output_dir = dir, .name = "rec"});
+    started_ = wait_for_file(dir / "rec.json", 20000).has_value();
+    samples_ = read_tracker_log(source_dir() / "data/demo/walk.csv").samples;
+  }
+  bool started() const { return started_; }
+  Process& bodyd() { return *bodyd_; }
+
+  static int free_udp_port() {
+    const int fd = socket(AF_INET, SOCK_DGRAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    socklen_t len = sizeof(a);
+    bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a));
+    getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
+    close(fd);
+    return ntohs(a.sin_port);
+  }
+
+  // Sends the bundled recording's first `n` samples, one line per datagram, as fast as bodyd
+  // takes them (the head times increase; loopback UDP with a 1 MiB buffer loses none here).
+  void send(std::size_t n) {
+    const int fd = socket(AF_INET, SOCK_DGRAM, 0);
+    sockaddr_in to{};
+    to.sin_family = AF_INET;
+    to.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    to.sin_port = htons(static_cast<std::uint16_t>(port_));
+    for (std::size_t i = 0; i < n; ++i) {
+      std::string line;
+      append_tracker_sample(line, samples_[i]);
+      sendto(fd, line.data(), line.size(), 0, reinterpret_cast<sockaddr*>(&to), sizeof(to));
+      if (i % 64 == 63) std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    close(fd);
+  }
+
+  // The daemon's samples_in once it reaches `n` (or the last value seen after ~10 s).
+  std::uint64_t wait_samples_in(std::uint64_t n) {
+    zmq::context_t ctx;
+    zmq::socket_t req(ctx, zmq::socket_type::req);
+    req.set(zmq::sockopt::linger, 0);
+    req.set(zmq::sockopt::rcvtimeo, 3000);
+    req.connect(control_);
+    std::uint64_t in = 0;
+    for (int i = 0; i < 200 && in < n; ++i) {
+      req.send(zmq::buffer(std::string(R"({"cmd":"status"})")));
+      zmq::message_t reply;
+      if (!req.recv(reply)) break;
+      in = nlohmann::json::parse(reply.to_string())["samples_in"].get<std::uint64_t>();
+      if (in < n) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    return in;
+  }
+
+ private:
+  fs::path dir_;
+  std::string control_;
+  int port_ = 0;
+  std::unique_ptr<Process> bodyd_;
+  bool started_ = false;
+  std::vector<TrackerSample> samples_;
+};
+
+// Sample lines in the file as it is on disk now.
+std::size_t samples_on_disk(const fs::path& p) {
+  std::size_t n = 0;
+  std::istringstream in(read_file(p));
+  for (std::string line; std::getline(in, line);) n += !line.empty() && line[0] != '#' && !line.starts_with("t_ns");
+  return n;
+}
+
+// Issue 20 item 3: closing the terminal (SIGHUP) stops bodyd as SIGTERM does, with the
+// recording written and the "stopped" line logged.
+TEST(RecordTrackers, SighupStopsCleanlyWithTheRecordingWritten) {
+  ScratchDir dir;
+  const fs::path recording = dir.path / "r.csv";
+  UdpRecording session(dir.path, recording);
+  ASSERT_TRUE(session.started()) << session.bodyd().log();
+  session.send(300);
+  ASSERT_EQ(session.wait_samples_in(300), 300u) << session.bodyd().log();
+  session.bodyd().signal(SIGHUP);
+  ASSERT_EQ(session.bodyd().wait(20000), 0) << session.bodyd().log();  // 129 (killed by SIGHUP) before
+  const std::string err = session.bodyd().err();
+  EXPECT_NE(err.find("signal received (Hangup): shutting down"), std::string::npos) << err;
+  EXPECT_NE(err.find("stopped:"), std::string::npos) << err;
+  EXPECT_NE(err.find("300 samples recorded"), std::string::npos) << err;
+  EXPECT_EQ(read_tracker_log(recording).samples.size(), 300u);
+}
+
+// Issue 20 item 3: the recording reaches the file within about half a second, so a kill -9
+// loses at most that; what is on disk reads back as a tracker log.
+TEST(RecordTrackers, AKillLosesAtMostTheLastSecond) {
+  ScratchDir dir;
+  const fs::path recording = dir.path / "r.csv";
+  UdpRecording session(dir.path, recording);
+  ASSERT_TRUE(session.started()) << session.bodyd().log();
+  session.send(300);  // about 20 KB of lines: less than the 64 KiB buffer
+  ASSERT_EQ(session.wait_samples_in(300), 300u) << session.bodyd().log();
+  // Nothing more arrives; the periodic write must bring every sample to the file (before the
+  // fix it stayed in the buffer until 64 KiB or exit).
+  for (int i = 0; i < 100 && samples_on_disk(recording) < 300; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  session.bodyd().signal(SIGKILL);
+  session.bodyd().wait(10000);
+  EXPECT_EQ(samples_on_disk(recording), 300u);
+  EXPECT_EQ(read_tracker_log(recording).samples.size(), 300u);
+}
+
+// Issue 20 item 5: after a write error (here the file-size limit, RLIMIT_FSIZE, which bodyd
+// turns into an error instead of dying of SIGXFSZ) the log says what the file really holds,
+// and the file is cut back to whole lines.
+TEST(RecordTrackers, AWriteErrorReportsWhatWasReallyWritten) {
+  if (!fs::exists("/usr/bin/prlimit")) GTEST_SKIP() << "prlimit (util-linux) is not installed";
+  ScratchDir dir;
+  const fs::path recording = dir.path / "r.csv";
+  // 24 KiB for every file bodyd writes: the recording, and its own log (which stays smaller).
+  UdpRecording session(dir.path, recording, {"/usr/bin/prlimit", "--fsize=24576", "--"});
+  ASSERT_TRUE(session.started()) << session.bodyd().log();
+  session.send(1000);  // about 70 KB of lines
+  ASSERT_EQ(session.wait_samples_in(1000), 1000u) << session.bodyd().log();
+  session.bodyd().signal(SIGTERM);
+  ASSERT_EQ(session.bodyd().wait(20000), 0) << session.bodyd().log();
+  const std::string err = session.bodyd().err();
+  const std::size_t in_file = read_tracker_log(recording).samples.size();  // whole lines only
+  EXPECT_GT(in_file, 0u);
+  EXPECT_LT(in_file, 1000u);
+  EXPECT_NE(err.find("write failed after " + std::to_string(in_file) + " samples"), std::string::npos) << err;
+  EXPECT_NE(err.find("incomplete: " + std::to_string(in_file) + " samples recorded, " + std::to_string(1000 - in_file) +
+                     " not recorded"),
+            std::string::npos)
+      << err;
+  EXPECT_EQ(err.find("1000 samples recorded"), std::string::npos) << err;
+}
+
+// Issue 20 item 5: an existing file, a symbolic link (even with --overwrite) and a FIFO are
+// refused before anything else starts; --overwrite (or config "overwrite") replaces a file.
+TEST(RecordTrackers, ExistingFilesLinksAndFifosAreRefused) {
+  ScratchDir dir;
+  const std::vector<std::string> base{kBodyd, "--method", "ik", "--pub", "ipc://" + (dir.path / "pose").string(),
+                                      "--control", "none", "--record-trackers"};
+  auto bodyd_recording = [&](const fs::path& file, std::vector<std::string> extra = {}) {
+    auto args = base;
+    args.push_back(file.string());
+    args.insert(args.end(), extra.begin(), extra.end());
+    return run(args, {.output_dir = dir.path}, 20000);  // -1: it hung (a FIFO opened blocking)
+  };
+  std::ofstream(dir.path / "t") << "precious\n";
+  fs::create_symlink(dir.path / "t", dir.path / "l.csv");
+  RunResult r = bodyd_recording(dir.path / "t");
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_NE(r.err.find("exists"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--overwrite"), std::string::npos) << r.err;
+  for (const auto& extra : {std::vector<std::string>{}, std::vector<std::string>{"--overwrite"}}) {
+    r = bodyd_recording(dir.path / "l.csv", extra);
+    EXPECT_EQ(r.exit_code, 1) << r.err;
+    EXPECT_NE(r.err.find("symbolic link"), std::string::npos) << r.err;
+  }
+  EXPECT_EQ(read_file(dir.path / "t"), "precious\n");
+  ASSERT_EQ(mkfifo((dir.path / "f.csv").c_str(), 0600), 0);
+  r = bodyd_recording(dir.path / "f.csv");
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_NE(r.err.find("not a regular file"), std::string::npos) << r.err;
+
+  // --overwrite, and the config key, replace a regular file.
+  const std::string log = (dir.path / "log.csv").string();
+  std::vector<TrackerSample> first = read_tracker_log(source_dir() / "data/demo/walk.csv").samples;
+  first.resize(30);
+  write_tracker_log(log, first);
+  r = bodyd_recording(dir.path / "t", {"--overwrite", "--replay", log, "--fast", "--exit-at-end"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(read_tracker_log(dir.path / "t").samples.size(), 30u);
+  std::ofstream(dir.path / "config.json") << R"({"overwrite": true})";
+  r = bodyd_recording(dir.path / "t", {"--config", (dir.path / "config.json").string(), "--replay", log, "--fast",
+                                       "--exit-at-end"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(read_tracker_log(dir.path / "t").samples.size(), 30u);
+}
+
+// Issue 20 item 3: USR1, USR2 and ALRM are ignored (bodyd keeps running and answering); QUIT
+// stops it cleanly like TERM.
+TEST(Signals, UsrAndAlrmAreIgnoredQuitStopsCleanly) {
+  ScratchDir dir;
+  const std::string control = "ipc://" + (dir.path / "control").string();
+  Process bodyd({kBodyd, "--method", "ik", "--pub", "ipc://" + (dir.path / "pose").string(), "--control", control,
+                 "--endpoints-file", (dir.path / "e.json").string()},
+                {.output_dir = dir.path, .name = "bodyd"});
+  ASSERT_TRUE(wait_for_file(dir.path / "e.json", 20000)) << bodyd.log();
+  for (int sig : {SIGUSR1, SIGUSR2, SIGALRM}) bodyd.signal(sig);
+  zmq::context_t ctx;
+  zmq::socket_t req(ctx, zmq::socket_type::req);
+  req.set(zmq::sockopt::linger, 0);
+  req.set(zmq::sockopt::rcvtimeo, 5000);
+  req.connect(control);
+  req.send(zmq::buffer(std::string(R"({"cmd":"status"})")));
+  zmq::message_t reply;
+  ASSERT_TRUE(req.recv(reply)) << bodyd.log();  // still there
+  EXPECT_FALSE(bodyd.wait(0)) << bodyd.log();
+  bodyd.signal(SIGQUIT);
+  ASSERT_EQ(bodyd.wait(20000), 0) << bodyd.log();  // 131 (core dump) before
+  EXPECT_NE(bodyd.err().find("stopped:"), std::string::npos) << bodyd.err();
 }
 
 TEST(RecordTrackers, UnwritableFileIsAStartError) {

@@ -61,6 +61,7 @@ struct DaemonConfig {
   bool wait_for_subscriber = false;   // start sources when the first subscription arrives
   std::string endpoints_file;         // write the bound endpoints as JSON here (tests, scripts)
   std::string record_trackers_file;   // set: every tracker sample received is written here (tracker log v1)
+  bool record_trackers_overwrite = false;  // --overwrite: replace an existing record_trackers_file
   // Outputs besides --pub (docs/outputs.md): specs SCHEME:TARGET?KEY=VALUE&..., e.g.
   // "vrchat:127.0.0.1:9000?slots=hip,feet". The config file's "outputs" list may also hold
   // objects {"type": SCHEME, "target": TARGET, KEY: VALUE...}, converted to this form.
@@ -113,6 +114,10 @@ struct DaemonConfig {
 
 // Checks values a reader of the file or flags could get wrong (rates, sizes, names). Empty when fine.
 [[nodiscard]] std::string validate_config(const DaemonConfig& config);
+
+// Checks that every --source and --output spec is well formed (kind, address, port, options):
+// parsed and made, nothing opened, so a typo exits 2 like any bad command line. Empty when fine.
+[[nodiscard]] std::string check_specs(const DaemonConfig& config);
 
 // The configuration as JSON (every key; the format load_config_file reads).
 [[nodiscard]] nlohmann::json config_to_json(const DaemonConfig& config);

@@ -68,10 +68,10 @@ class Daemon {
   // Returns an empty string, or what is wrong and what to do (nothing keeps running then).
   [[nodiscard]] std::string start();
 
-  // Blocks until a stop condition: *signal_flag becomes non-zero (may be null), a shutdown
-  // request, request_stop(), or (exit_at_end) every source finished and everything queued
-  // was published. Then stops everything. Returns the process exit code (0, or 1 after a
-  // fatal error).
+  // Blocks until a stop condition: *signal_flag becomes non-zero (the signal's number, for the
+  // log; may be null), a shutdown request, request_stop(), or (exit_at_end) every source
+  // finished and everything queued was published. Then stops everything. Returns the process
+  // exit code (0, or 1 after a fatal error).
   int run(const volatile std::sig_atomic_t* signal_flag = nullptr);
 
   // Thread-safe; run() returns soon after.
