@@ -249,3 +249,73 @@ TEST(Unity, ScaledSkeletonKeepsTheConventions) {
     EXPECT_LT(geodesic_angle(rig.tpose_global_inverse[b], rig1.tpose_global_inverse[b]), 1e-12);
   }
 }
+
+// Issue 20 item 9: the general recipe of docs/protocol.md ("Unity", per pose) for an avatar
+// with its own bone axes, its own size and a placed root. The avatar's T-pose is bodyd's turned
+// to face Unity +Z and scaled by k, but each bone's frame is an arbitrary rotation X_b of it
+// (A[b] = Y180 * U(T[j]) * X_b): forward kinematics over the avatar's own hierarchy with
+//   bone.rotation = root.rotation * D * Y180 * A[b],   D = U(R[j]) * Inverse(U(T[j]))
+// and the hips placed by the documented scaling must put every joint at the root's transform of
+// k * U(the joint's bodyd position), i.e. the user's motion in Unity axes at the avatar's size.
+TEST(Unity, DocumentedRecipeDrivesAnAvatarWithItsOwnBoneAxesAndSize) {
+  const Motion m = walk();
+  const Skeleton& s = m.skeleton;
+  RestPose rest;
+  UnityRig rig;
+  std::string error;
+  ASSERT_TRUE(make_rest_pose(s, rest, error)) << error;
+  ASSERT_TRUE(make_unity_rig(s, rig, error)) << error;
+  const Quat y180(Eigen::AngleAxisd(M_PI, Vec3::UnitY()));
+  std::mt19937 rng(20);
+  const double k = 1.3;  // the avatar is 30 % larger than the user
+  const Quat root_rotation = random_quat(rng);
+  const Vec3 root_position(0.5, -0.2, 2.0);
+  constexpr size_t n = kHumanoidBones.size();
+  // The avatar, read in its T-pose as the doc says: A[b] relative to its root, its bones'
+  // offsets in their parents' frames, hAvatar, fAvatar.
+  std::array<Quat, n> avatar_rotation{};
+  std::array<Vec3, n> avatar_tpose_position{}, avatar_offset{};
+  for (size_t b = 0; b < n; ++b) {
+    const auto j = static_cast<size_t>(rig.joint[b]);
+    avatar_rotation[b] = (y180 * unity_from_bodyd(rest.global.rotations[j]) * random_quat(rng)).normalized();
+    avatar_tpose_position[b] = k * (y180 * unity_from_bodyd(rest.global.positions[j]));
+  }
+  for (size_t b = 1; b < n; ++b) {
+    const auto p = static_cast<size_t>(rig.parent[b]);
+    avatar_offset[b] = avatar_rotation[p].conjugate() * (avatar_tpose_position[b] - avatar_tpose_position[p]);
+  }
+  const auto toes_l = static_cast<size_t>(s.find("Toes_L")), toes_r = static_cast<size_t>(s.find("Toes_R"));
+  const double h_user = rest.global.positions[static_cast<size_t>(s.find("Hips"))].y();
+  const double f_user = std::min(rest.global.positions[toes_l].y(), rest.global.positions[toes_r].y());
+  const double h_avatar = avatar_tpose_position[0].y(), f_avatar = k * f_user;
+  const double scale = (h_avatar - f_avatar) / (h_user - f_user);
+  EXPECT_NEAR(scale, k, 1e-12);
+
+  double worst = 0.0;
+  for (const Pose& frame : m.frames) {
+    const GlobalPose g = forward_kinematics(s, frame);
+    std::array<Quat, n> world{};
+    std::array<Vec3, n> position{};
+    for (size_t b = 0; b < n; ++b) {
+      const auto j = static_cast<size_t>(rig.joint[b]);
+      const Quat d = unity_from_bodyd(g.rotations[j]) * unity_from_bodyd(rest.global.rotations[j]).conjugate();
+      world[b] = root_rotation * d * y180 * avatar_rotation[b];
+      if (b == 0) {
+        const Vec3 p = unity_from_bodyd(g.positions[j]);
+        position[b] = root_position + root_rotation * Vec3(scale * p.x(), f_avatar + scale * (p.y() - f_user), scale * p.z());
+      } else {
+        const auto p = static_cast<size_t>(rig.parent[b]);
+        position[b] = position[p] + world[p] * avatar_offset[b];
+      }
+      const Vec3 expected = root_position + root_rotation * (k * unity_from_bodyd(g.positions[j]));
+      worst = std::max(worst, (position[b] - expected).norm());
+    }
+  }
+  EXPECT_LT(worst, 1e-5);  // metres (the data's position channels stretch bones by micrometres)
+
+  // The reference T-pose (facing bodyd +Z) turns the avatar to face its root's -Z.
+  const Quat d0 = Quat::Identity();
+  const Quat hips_world = d0 * y180 * avatar_rotation[0];
+  const Vec3 forward_in_tpose = avatar_rotation[0].conjugate() * Vec3::UnitZ();  // the avatar's +Z in the Hips frame
+  EXPECT_LT((hips_world * forward_in_tpose - Vec3(0, 0, -1)).norm(), 1e-9);
+}
