@@ -107,7 +107,12 @@ int main(int argc, char** argv) {
       std::cout << "public key: " << keys.public_key << "\n";
       return 0;
     }
-    case CliResult::Action::ListDevices: std::cout << bodyd::drivers::list_devices_text(); return 0;
+    case CliResult::Action::ListDevices: {
+      // The bundled recording, named as the thing to try when no tracker is found.
+      const std::filesystem::path demo = bundled_recording_path();
+      std::cout << bodyd::drivers::list_devices_text(std::filesystem::is_regular_file(demo) ? demo.string() : std::string());
+      return 0;
+    }
     case CliResult::Action::Run: break;
   }
 

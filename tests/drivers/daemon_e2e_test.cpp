@@ -178,6 +178,12 @@ TEST(DaemonWithDevices, ListDevices) {
   EXPECT_TRUE(out.find("no tracker device found") != std::string::npos || out.find("hid:") != std::string::npos ||
               out.find("usb:") != std::string::npos)
       << out;
+  // With nothing found it names the bundled recording where this bodyd finds it (the source tree's).
+  if (out.find("no tracker device found") != std::string::npos) {
+    EXPECT_NE(out.find("bodyd --source replay:" + (test::source_dir() / "data/demo/walk.csv").string()), std::string::npos)
+        << out;
+    EXPECT_NE(out.find("bodyd --source vrchat:"), std::string::npos) << out;
+  }
 }
 
 TEST(DaemonWithDevices, MissingDeviceIsReportedAndAwaited) {
