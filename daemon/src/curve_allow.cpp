@@ -2,11 +2,14 @@
 
 #include "bodyd/daemon/endpoint.h"
 
+#include "bodyd/motion/printable.h"
+
 #include <spdlog/spdlog.h>
 #include <zmq.h>
 
 #include <algorithm>
 #include <array>
+#include <bit>
 
 namespace bodyd::daemon {
 
@@ -21,6 +24,13 @@ std::string load_curve_allow_dir(const std::filesystem::path& dir, std::set<std:
   if (ec) return "--curve-allow " + dir.string() + ": cannot list: " + ec.message();
   std::sort(files.begin(), files.end());
   for (const auto& path : files) {
+    // A link would admit whatever key it points to, from anywhere (issue 20): refused.
+    if (path.extension() == ".public" && fs::is_symlink(fs::symlink_status(path, ec))) {
+      const fs::path target = fs::read_symlink(path, ec);
+      return "--curve-allow " + dir.string() + ": " + path.filename().string() + " is a symbolic link (to " +
+             target.string() + "): refused, as a link admits a key kept elsewhere. Copy the key file itself into " +
+             dir.string() + " (cp -L)";
+    }
     if (path.extension() != ".public" || !fs::is_regular_file(path, ec)) {
       out_skipped.push_back(path.filename().string());
       continue;
@@ -106,17 +116,17 @@ void ZapAllowList::loop() {
         text = "OK";
         user = z85;
         accepted_.fetch_add(1);
-        spdlog::debug("CURVE allow-list: accepted client {} from {}", z85, frames[3]);
+        spdlog::debug("CURVE allow-list: accepted client {} from {}", z85, printable(frames[3], 64));
       } else {
-        refused_.fetch_add(1);
+        const std::uint64_t n = refused_.fetch_add(1) + 1;
         text = "client key not allowed";
-        // Once per key at warning level: a client retrying every few ms must not flood the log.
-        if (refused_logged_.insert(z85).second)
+        // A client retrying every few ms, or many made-up keys, must not flood the log (issue 20):
+        // each of the first kLoggedKeys keys once, and then the 1st, 2nd, 4th, 8th... refusal.
+        const bool new_key = refused_logged_.size() < kLoggedKeys && refused_logged_.insert(z85).second;
+        if (new_key || std::has_single_bit(n))
           spdlog::warn("CURVE allow-list: refused client key {} from {} (not in --curve-allow {}; add its .public file "
-                       "there and restart bodyd to let it in)",
-                       z85, frames[3], dir_);
-        else
-          spdlog::debug("CURVE allow-list: refused client key {} from {} again", z85, frames[3]);
+                       "there and restart bodyd to let it in; {} refused so far, logged at a limited rate)",
+                       z85, printable(frames[3], 64), dir_, n);
       }
     }
     const std::array<std::string, 6> reply{"1.0", request_id, status, text, user, ""};

@@ -53,7 +53,8 @@ bool split_host_port(std::string_view target, std::string_view default_host, int
   return true;
 }
 
-std::string OscSender::open(const std::string& host, const std::string& port, const std::string& what) {
+std::string OscSender::open(const std::string& host, const std::string& port, const std::string& what,
+                            bool allow_many_receivers) {
   close();
   addrinfo hints{};
   hints.ai_family = AF_UNSPEC;
@@ -75,14 +76,39 @@ std::string OscSender::open(const std::string& host, const std::string& port, co
     loopback_ = IN6_IS_ADDR_LOOPBACK(&in6->sin6_addr);
     address_ = "[" + std::string(text) + "]:" + port;
   }
+  // Not one receiver's address (issue 20): refused like a broadcast address, whose refusal is
+  // the kernel's (no SO_BROADCAST), unless the user consents with --allow-remote.
+  const char* fan_out = nullptr;
+  if (a.ai_family == AF_INET) {
+    const std::uint32_t ip = ntohl(reinterpret_cast<const sockaddr_in*>(a.ai_addr)->sin_addr.s_addr);
+    if (ip == INADDR_ANY) fan_out = "the unspecified address";
+    else if (ip == INADDR_BROADCAST) fan_out = "the broadcast address";
+    else if ((ip >> 28) == 0xE) fan_out = "a multicast address";
+  } else {
+    const auto& in6 = reinterpret_cast<const sockaddr_in6*>(a.ai_addr)->sin6_addr;
+    if (IN6_IS_ADDR_UNSPECIFIED(&in6)) fan_out = "the unspecified address";
+    else if (IN6_IS_ADDR_MULTICAST(&in6)) fan_out = "a multicast address";
+  }
+  if (fan_out && !allow_many_receivers) {
+    ::freeaddrinfo(found);
+    return what + ": " + address_ + " is " + fan_out +
+           ", not one receiver's: refused, as a broadcast address is. Name the receiving app's address (127.0.0.1 "
+           "when it runs on this machine), or give --allow-remote (config \"allow_remote\": true) to send there anyway";
+  }
   fd_ = ::socket(a.ai_family, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, IPPROTO_UDP);
   std::string error;
+  if (fd_ >= 0 && allow_many_receivers && a.ai_family == AF_INET) {
+    const int one = 1;  // with consent, broadcast addresses too (the kernel refuses them without it)
+    ::setsockopt(fd_, SOL_SOCKET, SO_BROADCAST, &one, sizeof one);
+  }
   if (fd_ < 0) error = what + ": socket: " + std::strerror(errno);
   // connect(): the kernel fixes the destination (sends go nowhere else) and reports "nothing
   // listens" (ICMP port unreachable) on a later send, which the output counts.
   else if (::connect(fd_, a.ai_addr, a.ai_addrlen) != 0)
     error = what + ": cannot send to " + address_ + ": " + std::strerror(errno) +
-            (errno == EACCES ? " (a broadcast address? name one receiver's address)" : "");
+            (errno == EACCES ? " (a broadcast address? name one receiver's address, or give --allow-remote to send "
+                               "there anyway)"
+                             : "");
   ::freeaddrinfo(found);
   if (!error.empty()) {
     close();

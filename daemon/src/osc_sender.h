@@ -3,8 +3,10 @@
 // OscSender: one UDP socket connected to the address the user named (resolved once, at
 // open()), sending with MSG_DONTWAIT: a send never blocks the reconstruction thread; a full
 // socket buffer or an ICMP "port unreachable" from an earlier datagram (nothing listens) is
-// returned as a failure for the caller to count, never retried. No SO_BROADCAST: a
-// broadcast address fails instead of reaching the whole network.
+// returned as a failure for the caller to count, never retried. An address that is not one
+// receiver's (broadcast, multicast 224.0.0.0/4 or ff00::/8, unspecified 0.0.0.0 or ::) is
+// refused unless the user consents (--allow-remote): a broadcast address by the kernel (no
+// SO_BROADCAST without consent), the others by open().
 //
 // OscBundle: an OSC bundle built once with liblo (its messages, paths and type tags fixed),
 // whose numeric arguments are rewritten in place for each pose and serialised into a
@@ -37,8 +39,10 @@ class OscSender {
 
   // Resolves host:port (numeric or a name, IPv4 or IPv6) and opens the socket. Logs once
   // when the address is not a loopback one (OSC has neither authentication nor encryption).
-  // `what` names the output in messages. Empty, or what is wrong and what to do.
-  [[nodiscard]] std::string open(const std::string& host, const std::string& port, const std::string& what);
+  // `allow_many_receivers` (--allow-remote): broadcast, multicast and unspecified addresses
+  // are allowed. `what` names the output in messages. Empty, or what is wrong and what to do.
+  [[nodiscard]] std::string open(const std::string& host, const std::string& port, const std::string& what,
+                                 bool allow_many_receivers = false);
   // Sends one datagram without blocking. False with `out_error` set when it was not sent.
   [[nodiscard]] bool send(const void* data, std::size_t size, std::string& out_error);
   // Sends one serialised bundle (empty: liblo could not serialise it) and counts it when sent.

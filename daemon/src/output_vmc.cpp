@@ -3,6 +3,7 @@
 // sent as one OSC bundle.
 #include "bodyd/daemon/vmc.h"
 
+#include "bodyd/daemon/config.h"
 #include "bodyd/daemon/output.h"
 #include "osc_sender.h"
 
@@ -21,7 +22,8 @@ class VmcOutput final : public Output {
 
   std::string name() const override { return "vmc:" + (sender_.address().empty() ? host_ + ":" + port_ : sender_.address()); }
 
-  std::string open() override { return sender_.open(host_, port_, "--output vmc:" + host_ + ":" + port_); }
+  std::string open() override { return sender_.open(host_, port_, "--output vmc:" + host_ + ":" + port_, allow_remote_); }
+  void allow_many_receivers(bool allow) { allow_remote_ = allow; }  // --allow-remote (osc_sender.h)
 
   // The rig is rebuilt for every new skeleton (calibration scales the bones).
   void set_skeleton(const Skeleton& skeleton, const std::vector<std::uint8_t>&) override {
@@ -62,6 +64,7 @@ class VmcOutput final : public Output {
  private:
   std::string host_, port_;
   OscSender sender_;
+  bool allow_remote_ = false;
   vmc::BundleEncoder encoder_;
   UnityRig rig_;
   bool rig_ok_ = false;
@@ -75,7 +78,6 @@ class VmcOutput final : public Output {
 }  // namespace
 
 std::unique_ptr<Output> make_vmc_output(const OutputSpec& spec, const OutputEnv& env, std::string& error) {
-  (void)env;
   if (std::string e = check_options(spec, {}); !e.empty()) {
     error = e;
     return nullptr;
@@ -83,7 +85,9 @@ std::unique_ptr<Output> make_vmc_output(const OutputSpec& spec, const OutputEnv&
   std::string host, port;
   if (!split_host_port(spec.target, vmc::kDefaultHost, vmc::kDefaultPort, host, port, "--output " + spec.text, error))
     return nullptr;
-  return std::make_unique<VmcOutput>(host, port);
+  auto output = std::make_unique<VmcOutput>(host, port);
+  output->allow_many_receivers(env.config.allow_remote);
+  return output;
 }
 
 }  // namespace bodyd::daemon

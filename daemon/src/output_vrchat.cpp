@@ -1,6 +1,7 @@
 // `--output vrchat:HOST:PORT`: VRChat's OSC trackers (bodyd/daemon/vrchat.h, docs/outputs.md).
 #include "bodyd/daemon/vrchat.h"
 
+#include "bodyd/daemon/config.h"
 #include "bodyd/daemon/output.h"
 #include "bodyd/motion/humanoid.h"
 #include "osc_sender.h"
@@ -96,7 +97,8 @@ class VrchatOutput final : public Output {
 
   std::string name() const override { return "vrchat:" + (sender_.address().empty() ? host_ + ":" + port_ : sender_.address()); }
 
-  std::string open() override { return sender_.open(host_, port_, "--output vrchat:" + host_ + ":" + port_); }
+  std::string open() override { return sender_.open(host_, port_, "--output vrchat:" + host_ + ":" + port_, allow_remote_); }
+  void allow_many_receivers(bool allow) { allow_remote_ = allow; }  // --allow-remote (osc_sender.h)
 
   void set_skeleton(const Skeleton& skeleton, const std::vector<std::uint8_t>&) override {
     missing_.clear();
@@ -149,6 +151,7 @@ class VrchatOutput final : public Output {
   std::string host_, port_;
   vrchat::SlotMask slots_;
   OscSender sender_;
+  bool allow_remote_ = false;
   OscBundle with_head_, without_head_;
   std::vector<int> joints_;  // per configured slot, in slot order
   std::string missing_;      // joints the skeleton lacks ("" when all are there)
@@ -157,7 +160,6 @@ class VrchatOutput final : public Output {
 }  // namespace
 
 std::unique_ptr<Output> make_vrchat_output(const OutputSpec& spec, const OutputEnv& env, std::string& error) {
-  (void)env;
   if (std::string e = check_options(spec, {"slots"}); !e.empty()) {
     error = e;
     return nullptr;
@@ -172,7 +174,9 @@ std::unique_ptr<Output> make_vrchat_output(const OutputSpec& spec, const OutputE
       return nullptr;
     }
   }
-  return std::make_unique<VrchatOutput>(host, port, slots);
+  auto output = std::make_unique<VrchatOutput>(host, port, slots);
+  output->allow_many_receivers(env.config.allow_remote);
+  return output;
 }
 
 }  // namespace bodyd::daemon

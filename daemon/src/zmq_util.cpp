@@ -7,6 +7,8 @@
 #include <zmq.h>
 
 #include <cerrno>
+#include <mutex>
+#include <set>
 
 namespace bodyd::daemon {
 
@@ -35,7 +37,16 @@ std::string ZmqSocket::allow_only_keys_in(const std::string& dir) {
   std::set<std::string> keys;
   std::vector<std::string> skipped;
   if (std::string e = load_curve_allow_dir(dir, keys, skipped); !e.empty()) return e;
+  // Both sockets load the list; what it holds is said once per directory (issue 20).
+  static std::mutex said_mutex;
+  static std::set<std::string> said;
+  bool first = false;
+  {
+    std::lock_guard lock(said_mutex);
+    first = said.insert(dir).second;
+  }
   for (const auto& name : skipped) {
+    if (!first) break;
     if (name.size() > 7 && name.substr(name.size() - 7) == ".secret")
       spdlog::warn("--curve-allow {}: {} is a secret key: it belongs to its client only, not here (ignored)", dir, name);
     else

@@ -1,6 +1,9 @@
 #include "bodyd/drivers/network_source.h"
 
 #include "oscquery.h"
+#include "vmc_roles.h"
+
+#include "bodyd/motion/printable.h"
 
 #include <spdlog/spdlog.h>
 
@@ -65,67 +68,6 @@ std::string address_text(const sockaddr_in& a) {
   inet_ntop(AF_INET, &a.sin_addr, text, sizeof text);
   return std::string(text) + ":" + std::to_string(ntohs(a.sin_port));
 }
-
-// Decides which VMC serial is which role (docs/vr-apps.md "VMC in"): configured serials
-// first; otherwise the first HMD is the head, and the first two controllers are the hands,
-// left being the one further to the head's left (along the headset's -x axis) when both and
-// the head have been seen. Receiver thread only.
-class VmcRoles {
- public:
-  VmcRoles(std::string name, std::map<std::string, Role> configured)
-      : name_(std::move(name)), assigned_(std::move(configured)) {
-    for (const auto& [serial, role] : assigned_) taken_[static_cast<int>(role)] = true;
-  }
-
-  std::optional<Role> role_of(const VmcPose& pose) {
-    if (auto it = assigned_.find(pose.serial); it != assigned_.end()) {
-      if (it->second == Role::Head) head_ = pose;
-      return it->second;
-    }
-    if (pose.device == VmcDevice::Hmd && !taken_[static_cast<int>(Role::Head)]) {
-      assign(pose.serial, Role::Head, "the first HMD");
-      head_ = pose;
-      return Role::Head;
-    }
-    if (pose.device != VmcDevice::Controller) return std::nullopt;
-    const bool left_free = !taken_[static_cast<int>(Role::LeftHand)];
-    const bool right_free = !taken_[static_cast<int>(Role::RightHand)];
-    if (!left_free && !right_free) return std::nullopt;
-    seen_[pose.serial] = pose.position_m;
-    if (!head_) return std::nullopt;  // sides are decided relative to the head
-    if (left_free && right_free) {
-      if (seen_.size() < 2) return std::nullopt;
-      // The first two controllers seen (std::map orders by serial: deterministic).
-      auto a = seen_.begin(), b = std::next(a);
-      const Vec3 right_axis = head_->rotation * Vec3::UnitX();
-      const double side_a = (a->second - head_->position_m).dot(right_axis);
-      const double side_b = (b->second - head_->position_m).dot(right_axis);
-      const bool a_left = side_a < side_b;
-      const std::string left = a_left ? a->first : b->first, right = a_left ? b->first : a->first;
-      assign(left, Role::LeftHand, "the controller on the head's left");
-      assign(right, Role::RightHand, "the controller on the head's right");
-    } else {
-      assign(pose.serial, left_free ? Role::LeftHand : Role::RightHand, "the only hand not configured");
-    }
-    auto it = assigned_.find(pose.serial);
-    return it == assigned_.end() ? std::nullopt : std::optional<Role>(it->second);
-  }
-
- private:
-  void assign(const std::string& serial, Role role, const char* why) {
-    assigned_[serial] = role;
-    taken_[static_cast<int>(role)] = true;
-    seen_.erase(serial);
-    spdlog::info("{}: serial \"{}\" is {} ({}; set {}={} to fix it)", name_, serial, role_name(role), why,
-                 role_name(role), serial);
-  }
-
-  std::string name_;
-  std::map<std::string, Role> assigned_;
-  std::array<bool, kRoleCount> taken_{};
-  std::map<std::string, Vec3> seen_;  // controllers without a role yet: last position
-  std::optional<VmcPose> head_;       // the head device's last pose
-};
 
 class UdpSource final : public NetworkSource {
  public:
@@ -216,7 +158,8 @@ class UdpSource final : public NetworkSource {
         continue;
       }
       const std::int64_t arrival_ns = monotonic_ns();  // stamped before any decoding
-      datagrams_.fetch_add(1, std::memory_order_relaxed);
+      // The first datagram makes start()'s "nothing received yet" untrue (issue 20).
+      if (datagrams_.fetch_add(1, std::memory_order_relaxed) == 0) set_error({});
       last_datagram_ns_.store(arrival_ns, std::memory_order_relaxed);
       const auto size = static_cast<std::size_t>(n);
       if (size > buffer_.size()) {
@@ -266,7 +209,7 @@ class UdpSource final : public NetworkSource {
       VmcPose pose;
       use = decode_vmc_message(m, pose, why);
       if (use == MessageUse::Use) {
-        const std::optional<Role> role = vmc_roles_.role_of(pose);
+        const std::optional<Role> role = vmc_roles_.role_of(pose, arrival_ns);
         if (!role) {
           unassigned_.fetch_add(1, std::memory_order_relaxed);
           return;
@@ -281,7 +224,7 @@ class UdpSource final : public NetworkSource {
       }
     }
     if (use == MessageUse::Ignore) ignored_.fetch_add(1, std::memory_order_relaxed);
-    if (use == MessageUse::Reject) reject(why, m.address + " with type tags ," + m.type_tags, from);
+    if (use == MessageUse::Reject) reject(why, quote_printable(m.address, 64) + " with type tags ," + printable(m.type_tags), from);
   }
 
   struct Pending {
@@ -330,7 +273,7 @@ class UdpSource final : public NetworkSource {
   std::vector<std::uint8_t> buffer_;
   std::vector<OscMessage> messages_;
   std::vector<Pending> pending_;
-  VmcRoles vmc_roles_;
+  detail::VmcRoles vmc_roles_;
   // Counters: written by the receiver thread, read by any.
   std::atomic<std::uint64_t> datagrams_{0}, samples_{0}, ignored_{0}, unassigned_{0}, total_rejected_{0};
   std::array<std::atomic<std::uint64_t>, kInputRejectCount> rejected_{};

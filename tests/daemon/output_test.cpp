@@ -116,6 +116,35 @@ TEST(OutputRegistry, VrchatOutputNamesTheDefaultLoopbackAddress) {
   out->close();
 }
 
+// Issue 20 item 7: an address that is not one receiver's (multicast, unspecified, broadcast)
+// is refused like a broadcast address, for both OSC outputs, unless --allow-remote.
+TEST(OutputRegistry, MulticastUnspecifiedAndBroadcastNeedAllowRemote) {
+  for (const char* text : {"vrchat:224.0.0.1:9000", "vmc:239.1.2.3:39539", "vrchat:0.0.0.0:9000", "vmc:0.0.0.0:39539",
+                           "vrchat:255.255.255.255:9000", "vrchat:[ff02::1]:9000", "vmc:[::]:39539"}) {
+    SCOPED_TRACE(text);
+    daemon::DaemonConfig config;
+    OutputSpec spec;
+    std::string error;
+    ASSERT_TRUE(daemon::parse_output_spec(text, spec, error)) << error;
+    auto out = daemon::make_output(spec, daemon::OutputEnv{config}, error);
+    ASSERT_TRUE(out) << error;
+    const std::string e = out->open();
+    EXPECT_NE(e.find("not one receiver's: refused"), std::string::npos) << e;
+    EXPECT_NE(e.find("--allow-remote"), std::string::npos) << e;
+    // With consent the address is used (the unspecified one is this machine on Linux; the
+    // others may have no route here, which is then the error, not the refusal).
+    config.allow_remote = true;
+    auto allowed = daemon::make_output(spec, daemon::OutputEnv{config}, error);
+    ASSERT_TRUE(allowed) << error;
+    const std::string e2 = allowed->open();
+    EXPECT_EQ(e2.find("not one receiver's"), std::string::npos) << e2;
+    if (std::string(text) == "vrchat:0.0.0.0:9000") {
+      EXPECT_EQ(e2, "");
+    }
+    allowed->close();
+  }
+}
+
 TEST(RateGate, PassesAtMostTheRateAndToleratesJitter) {
   daemon::RateGate every;
   daemon::RateGate gate(30.0);

@@ -302,5 +302,100 @@ TEST(DaemonNetworkInputs, VrchatSenderDrivesThePoseStream) {
   fs::remove_all(dir);
 }
 
+// Issue 20 item 2: one forged VMC packet (a serial holding terminal escapes and a fake log
+// line) arrives before the real headset. It may hold the head only until it has been silent
+// for a second; then the real headset (osc.js playing the bundled recording) gets it and keeps
+// it while a second forged serial sends; the forged serials reach the log escaped.
+TEST(DaemonNetworkInputs, AForgedVmcSerialCannotKeepOrStealTheHead) {
+  if (std::system("node --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "node is not installed (scripts/setup)";
+  if (!fs::exists(test::source_dir() / "tests/node/node_modules/osc/package.json"))
+    GTEST_SKIP() << "the npm package osc is not installed in tests/node (scripts/setup runs npm ci there)";
+  const fs::path dir = fs::temp_directory_path() / ("bodyd-net-vmc-" + std::to_string(getpid()));
+  fs::create_directories(dir);
+  std::vector<TrackerSample> samples = read_tracker_log(test::source_dir() / "data/demo/walk.csv").samples;
+  samples.resize(3 * 360);  // 360 time steps, 4 s at the sender's 11 ms
+  write_tracker_log(dir / "walk.csv", samples);
+  const int port = free_port();
+  Daemon daemon({"--method", "ik", "--pub", "tcp://127.0.0.1:*", "--control",
+                 "tcp://127.0.0.1:" + std::to_string(free_port(SOCK_STREAM)), "--endpoints-file",
+                 (dir / "endpoints.json").string(), "--source", "vmc:127.0.0.1:" + std::to_string(port)},
+                dir);
+  nlohmann::json endpoints;
+  for (int i = 0; i < 500 && !endpoints.contains("control"); ++i) {
+    endpoints = nlohmann::json::parse(read_file(dir / "endpoints.json"), nullptr, false);
+    if (endpoints.is_discarded()) endpoints = nlohmann::json::object();
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_TRUE(endpoints.contains("control")) << daemon.err();
+  zmq::context_t ctx;
+  zmq::socket_t sub(ctx, zmq::socket_type::sub);
+  sub.set(zmq::sockopt::linger, 0);
+  sub.set(zmq::sockopt::subscribe, "");
+  sub.connect(endpoints["pub"].get<std::string>());
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));  // the subscription reaches the publisher
+
+  const int fd = socket(AF_INET, SOCK_DGRAM, 0);
+  sockaddr_in to{};
+  to.sin_family = AF_INET;
+  to.sin_port = htons(static_cast<std::uint16_t>(port));
+  to.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  auto send = [&](const Bytes& b) { sendto(fd, b.data(), b.size(), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to); };
+  const char* forged = "X\x1b[2J\n2026-12-02 00:00:00.000 bodyd critical: FAKE LINE";
+  send(osc_vmc("/VMC/Ext/Hmd/Pos", forged, {5, 3, 5, 0, 0, 0, 1}));
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+
+  std::thread sender([&] {
+    const std::string command = "NODE_PATH='" + (test::source_dir() / "tests/node/node_modules").string() + "' node '" +
+                                (test::source_dir() / "tests/drivers/node/send_trackers.js").string() +
+                                "' vmc 127.0.0.1 " + std::to_string(port) + " '" + (dir / "walk.csv").string() +
+                                "' 11 > '" + (dir / "sender.txt").string() + "' 2>&1";
+    EXPECT_EQ(std::system(command.c_str()), 0) << read_file(dir / "sender.txt");
+  });
+  // While the real headset streams (from about 2.5 s on): a second forged serial at 30 Hz.
+  std::thread forger([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(2500));
+    for (int i = 0; i < 15; ++i) {
+      send(osc_vmc("/VMC/Ext/Hmd/Pos", "FORGED-2", {5, 3, 5, 0, 0, 0, 1}));
+      std::this_thread::sleep_for(std::chrono::milliseconds(33));
+    }
+  });
+  const std::uint32_t all = protocol::kFlagHeadValid | protocol::kFlagLeftHandValid | protocol::kFlagRightHandValid;
+  int poses = 0, tracked = 0;
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (std::chrono::steady_clock::now() < end) {
+    const std::optional<protocol::PoseMessage> next = test::poll_pose(sub, std::chrono::milliseconds(50));
+    if (!next) continue;
+    ++poses;
+    if ((next->flags & all) == all) ++tracked;
+  }
+  sender.join();
+  forger.join();
+  close(fd);
+  // The first second goes to the forged serial's timeout, then HMD-1's poses are tracked (about
+  // 100 to 250 in the collection window on a loaded machine; before the fix: the forged serial
+  // kept the head and no pose came after the first).
+  EXPECT_GE(tracked, 60) << poses << " poses\n" << daemon.err();
+
+  zmq::socket_t req(ctx, zmq::socket_type::req);
+  req.set(zmq::sockopt::linger, 0);
+  req.set(zmq::sockopt::rcvtimeo, 5000);
+  req.connect(endpoints["control"].get<std::string>());
+  req.send(zmq::buffer(std::string(R"({"cmd":"status"})")));
+  zmq::message_t reply;
+  ASSERT_TRUE(req.recv(reply)) << daemon.err();
+  const auto status = nlohmann::json::parse(reply.to_string(), nullptr, false);
+  ASSERT_TRUE(status.contains("sources")) << reply.to_string();
+  // FORGED-2's 15 poses were dropped, never used as the head.
+  EXPECT_GE(status["sources"][0]["counters"]["unassigned"].get<int>(), 15) << status.dump(2);
+  EXPECT_EQ(daemon.stop(5000), 0) << daemon.err();
+  const std::string log = daemon.err();
+  EXPECT_NE(log.find("serial \"HMD-1\" is head (the next HMD after \"X\\x1b[2J\\x0a2026-12-02"), std::string::npos)
+      << log;
+  EXPECT_NE(log.find("serial \"FORGED-2\" ignored: the head is held by \"HMD-1\""), std::string::npos) << log;
+  EXPECT_EQ(log.find('\x1b'), std::string::npos) << "a raw escape reached the log";
+  EXPECT_EQ(log.find("\n2026-12-02 00:00:00.000 bodyd critical: FAKE"), std::string::npos) << "a forged log line";
+  fs::remove_all(dir);
+}
+
 }  // namespace
 }  // namespace bodyd

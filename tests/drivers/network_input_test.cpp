@@ -11,6 +11,7 @@
 #include "bodyd/simulators/tracker_sim.h"
 
 #include "../../drivers/src/oscquery.h"
+#include "../../drivers/src/vmc_roles.h"
 #include "../test_paths.h"
 #include "osc_helpers.h"
 #include "sink_helpers.h"
@@ -18,6 +19,8 @@
 #include <gtest/gtest.h>
 #include <lo/lo.h>
 #include <nlohmann/json.hpp>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -32,6 +35,7 @@
 #include <functional>
 #include <limits>
 #include <mutex>
+#include <sstream>
 #include <thread>
 
 namespace bodyd::drivers {
@@ -485,6 +489,141 @@ TEST(NetworkSource, VmcConfiguredSerials) {
   source->stop();
   EXPECT_EQ(sink.samples()[0].sample.role, Role::LeftHand);
   EXPECT_EQ(sink.samples()[1].sample.role, Role::RightHand);
+}
+
+// ---- VMC roles (issue 20 item 2): times chosen by the test -------------------------------------------
+VmcPose vmc_pose(VmcDevice device, const std::string& serial, double x_m, double y_m = 1.0) {
+  VmcPose p;
+  p.device = device;
+  p.serial = serial;
+  p.position_m = Vec3(x_m, y_m, 0);
+  return p;
+}
+
+// What spdlog's default logger writes while the object lives.
+class LogCapture {
+ public:
+  LogCapture() : previous_(spdlog::default_logger()) {
+    auto logger = std::make_shared<spdlog::logger>("capture", std::make_shared<spdlog::sinks::ostream_sink_mt>(text_));
+    logger->set_pattern("%l: %v");
+    spdlog::set_default_logger(logger);
+  }
+  ~LogCapture() { spdlog::set_default_logger(previous_); }
+  std::string text() const { return text_.str(); }
+
+ private:
+  std::ostringstream text_;
+  std::shared_ptr<spdlog::logger> previous_;
+};
+
+constexpr std::int64_t kFrameNs = 11'000'000;  // 90 Hz
+
+TEST(VmcRoles, AStreamingHolderKeepsItsRoleAndASilentOneLosesIt) {
+  const LogCapture log;
+  detail::VmcRoles roles("vmc:test", {});
+  constexpr std::int64_t kStale = detail::VmcRoles::kStaleNs;
+  // One forged packet comes first and takes the head: nothing tells it from a headset yet.
+  EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Hmd, "FORGED", 5, 3), 0), Role::Head);
+  // The real headset, streaming: unassigned while the forged serial's last pose is recent...
+  std::int64_t t = kFrameNs;
+  for (; t < kStale; t += kFrameNs) EXPECT_FALSE(roles.role_of(vmc_pose(VmcDevice::Hmd, "REAL", 0, 1.6), t)) << t;
+  // ...and the head once the forged one has been silent for kStaleNs (before the fix: never).
+  EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Hmd, "REAL", 0, 1.6), t), Role::Head);
+  // Now no newcomer takes it from the streaming headset, however often it sends.
+  for (int i = 0; i < 300; ++i) {
+    t += kFrameNs;
+    EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Hmd, "REAL", 0, 1.6), t), Role::Head);
+    EXPECT_FALSE(roles.role_of(vmc_pose(VmcDevice::Hmd, "FORGED-2", 5, 3), t + 1));
+  }
+  EXPECT_EQ(roles.holder(Role::Head), "REAL");
+  // The hands likewise: two controllers take them; a third one waits.
+  EXPECT_FALSE(roles.role_of(vmc_pose(VmcDevice::Controller, "A", 0.3), t));
+  EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Controller, "B", -0.3), t), Role::LeftHand);  // -x: the head's left
+  EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Controller, "A", 0.3), t + 1), Role::RightHand);
+  for (int i = 0; i < 100; ++i) {  // B is silent from now on
+    t += kFrameNs;
+    EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Controller, "A", 0.3), t), Role::RightHand);
+    EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Hmd, "REAL", 0, 1.6), t), Role::Head);
+    if (i < 80) EXPECT_FALSE(roles.role_of(vmc_pose(VmcDevice::Controller, "C", 0.4), t)) << i;  // B is recent
+  }
+  // B has been silent for 100 frames (1.1 s): C takes the left hand; A keeps the right.
+  EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Controller, "C", -0.4), t + kFrameNs), Role::LeftHand);
+  EXPECT_EQ(roles.holder(Role::RightHand), "A");
+  const std::string text = log.text();
+  EXPECT_NE(text.find("serial \"FORGED\" sent nothing for 1.0 s: head is free"), std::string::npos) << text;
+  EXPECT_NE(text.find("serial \"REAL\" is head (the next HMD after \"FORGED\" went silent"), std::string::npos) << text;
+  EXPECT_NE(text.find("serial \"FORGED-2\" ignored: the head is held by \"REAL\""), std::string::npos) << text;
+  // Refusals are logged at a limited rate: 300 refused packets, 9 lines (1st, 2nd, 4th, ... 256th).
+  std::size_t lines = 0;
+  for (std::size_t at = text.find("\"FORGED-2\" ignored"); at != std::string::npos; at = text.find("\"FORGED-2\" ignored", at + 1))
+    ++lines;
+  EXPECT_EQ(lines, 9u) << text;
+}
+
+TEST(VmcRoles, ConfiguredSerialsAreNeverTakenOrReleased) {
+  detail::VmcRoles roles("vmc:test", {{"H", Role::Head}});
+  EXPECT_FALSE(roles.role_of(vmc_pose(VmcDevice::Hmd, "OTHER", 0, 1.6), 0));
+  EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Hmd, "H", 0, 1.6), 1), Role::Head);
+  // Silent for a long time: still the head's, and nobody else gets it.
+  EXPECT_FALSE(roles.role_of(vmc_pose(VmcDevice::Hmd, "OTHER", 0, 1.6), 100 * detail::VmcRoles::kStaleNs));
+  EXPECT_EQ(roles.holder(Role::Head), "H");
+}
+
+TEST(VmcRoles, SerialsBeyondTheLimitAreNotTrackedAndSilentOnesAreForgotten) {
+  const LogCapture log;
+  detail::VmcRoles roles("vmc:test", {});
+  // Before any head: controllers wait as candidates; a flood of made-up serials is capped.
+  for (int i = 0; i < 1000; ++i)
+    EXPECT_FALSE(roles.role_of(vmc_pose(VmcDevice::Controller, "FAKE-" + std::to_string(i), 0.1), i));
+  EXPECT_EQ(roles.candidates(), detail::VmcRoles::kMaxCandidates);
+  const std::string text = log.text();
+  EXPECT_NE(text.find("controller serial \"FAKE-16\" ignored: 16 controllers without a role are already waiting"),
+            std::string::npos)
+      << text;
+  // Logged at a limited rate: 984 ignored, 10 lines (1st, 2nd, 4th, ... 512th).
+  std::size_t lines = 0;
+  for (std::size_t at = text.find("controllers without a role"); at != std::string::npos;
+       at = text.find("controllers without a role", at + 1))
+    ++lines;
+  EXPECT_EQ(lines, 10u);
+  // A second later the made-up ones are forgotten: the real devices get their roles.
+  const std::int64_t t = 1000 + detail::VmcRoles::kStaleNs;
+  EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Hmd, "HMD", 0, 1.6), t), Role::Head);
+  EXPECT_FALSE(roles.role_of(vmc_pose(VmcDevice::Controller, "R", 0.3), t + 1));
+  EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Controller, "L", -0.3), t + 2), Role::LeftHand);
+  EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Controller, "R", 0.3), t + 3), Role::RightHand);
+  EXPECT_EQ(roles.candidates(), 0u);
+}
+
+// A serial is text from the network: escaped in every log line (as the udp: input's lines
+// are, through printable()), so it can neither move the terminal nor forge a log line.
+TEST(VmcRoles, SerialsAreEscapedInTheLog) {
+  const LogCapture log;
+  detail::VmcRoles roles("vmc:test", {});
+  const std::string forged = "X\x1b[2J\n2026-12-02 00:00:00.000 bodyd critical: FAKE LINE";
+  EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Hmd, forged, 0, 1.6), 0), Role::Head);
+  EXPECT_FALSE(roles.role_of(vmc_pose(VmcDevice::Hmd, forged + "2", 0, 1.6), 1));
+  EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Hmd, "Y", 0, 1.6), 2 * detail::VmcRoles::kStaleNs), Role::Head);
+  const std::string text = log.text();
+  EXPECT_EQ(text.find('\x1b'), std::string::npos) << text;
+  EXPECT_EQ(text.find("\n2026-12-02"), std::string::npos) << text;
+  EXPECT_NE(text.find("serial \"X\\x1b[2J\\x0a2026-12-02 00:00:00.000 bodyd critical: FAKE LINE\" is head"),
+            std::string::npos)
+      << text;
+}
+
+// Issue 20 item 7: last_error says "nothing received yet" only until something is received.
+TEST(NetworkSource, LastErrorForgetsNothingReceivedOnceDatagramsCome) {
+  auto source = open_test_source(NetworkKind::Vrchat);
+  ASSERT_TRUE(source);
+  CaptureSink sink;
+  ASSERT_EQ(source->start(sink, 0), "");
+  EXPECT_NE(source->status().last_error.find("nothing received yet"), std::string::npos);
+  UdpSender sender(source->bound_port());
+  for (int i = 0; i < 10; ++i) sender.send(osc_floats("/tracking/vrsystem/head/pose", {0, 1.6f, 0, 0, 0, 0}));
+  ASSERT_TRUE(wait_for([&] { return source->stats().samples == 10; }));
+  EXPECT_EQ(source->status().last_error, "") << source->status().last_error;
+  source->stop();
 }
 
 TEST(NetworkSource, UdpLinesKeepTheSendersTimeAsDeviceTime) {

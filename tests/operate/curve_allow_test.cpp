@@ -12,6 +12,8 @@
 #include <nlohmann/json.hpp>
 #include <zmq.hpp>
 
+#include <thread>
+
 namespace bodyd::test {
 namespace {
 
@@ -131,6 +133,74 @@ TEST(CurveAllowList, LoaderReadsPublicFilesAndNamesABadOne) {
   keys.clear();
   const std::string e = daemon::load_curve_allow_dir(dir.path, keys, skipped);
   EXPECT_NE(e.find("c.public"), std::string::npos) << e;
+}
+
+// Issue 20 item 7: a NAME.public that is a symbolic link is refused, saying so (it would admit a
+// key kept anywhere).
+TEST(CurveAllowList, APublicSymlinkIsRefused) {
+  ScratchDir dir;
+  daemon::CurveKeyPair a, elsewhere;
+  fs::create_directories(dir.path / "allow");
+  fs::create_directories(dir.path / "other");
+  ASSERT_EQ(daemon::generate_curve_keys(dir.path / "allow", a, "a"), "");
+  ASSERT_EQ(daemon::generate_curve_keys(dir.path / "other", elsewhere, "x"), "");
+  fs::create_symlink(dir.path / "other/x.public", dir.path / "allow/x.public");
+  std::set<std::string> keys;
+  std::vector<std::string> skipped;
+  const std::string e = daemon::load_curve_allow_dir(dir.path / "allow", keys, skipped);
+  EXPECT_NE(e.find("x.public is a symbolic link"), std::string::npos) << e;
+  EXPECT_NE(e.find("refused"), std::string::npos) << e;
+  EXPECT_EQ(keys.count(elsewhere.public_key), 0u);
+}
+
+// Issue 20 item 7: the .secret-in-the-allow-list warning once (both sockets load the list), and
+// refused handshakes logged at a limited rate: 200 clients with made-up keys give a handful of
+// lines, not one each.
+TEST(CurveAllowList, WarningsOnceAndRefusalsAtALimitedRate) {
+  ScratchDir dir;
+  ASSERT_EQ(run({kBodyd, "--gen-keys", (dir.path / "server").string()}, {.output_dir = dir.path}).exit_code, 0);
+  ASSERT_EQ(run({kBodyd, "--gen-keys", (dir.path / "allow").string(), "--client", "alice"}, {.output_dir = dir.path})
+                .exit_code,
+            0);  // alice.secret stays in the allow-list directory: a mistake worth a warning
+  Process bodyd({kBodyd, "--method", "ik", "--pub", "tcp://127.0.0.1:0", "--control", "tcp://127.0.0.1:0",
+                 "--curve-secret-key", (dir.path / "server/server.secret").string(), "--curve-allow",
+                 (dir.path / "allow").string(), "--endpoints-file", (dir.path / "endpoints.json").string()},
+                {.output_dir = dir.path, .name = "bodyd"});
+  const auto endpoints = wait_for_file(dir.path / "endpoints.json", 20000);
+  ASSERT_TRUE(endpoints) << bodyd.log();
+  const json e = json::parse(*endpoints);
+  const std::string server_public = key_of(dir.path / "server/server.public");
+  {
+    zmq::context_t ctx;
+    std::vector<zmq::socket_t> clients;
+    for (int i = 0; i < 200; ++i) {
+      char pub[41], secret[41];
+      ASSERT_EQ(zmq_curve_keypair(pub, secret), 0);
+      zmq::socket_t sub(ctx, zmq::socket_type::sub);
+      sub.set(zmq::sockopt::linger, 0);
+      sub.set(zmq::sockopt::curve_serverkey, server_public);
+      sub.set(zmq::sockopt::curve_publickey, std::string(pub));
+      sub.set(zmq::sockopt::curve_secretkey, std::string(secret));
+      sub.set(zmq::sockopt::subscribe, "");
+      sub.connect(e["pub"].get<std::string>());
+      clients.push_back(std::move(sub));
+    }
+    // Until bodyd has refused at least 128 handshakes (it says so at each power of two).
+    for (int i = 0; i < 200 && bodyd.err().find("128 refused so far") == std::string::npos; ++i)
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  bodyd.signal(SIGTERM);
+  ASSERT_EQ(bodyd.wait(10000), 0) << bodyd.log();
+  const std::string err = bodyd.err();
+  ASSERT_NE(err.find("128 refused so far"), std::string::npos) << err;
+  auto count = [&](const std::string& what) {
+    std::size_t n = 0;
+    for (auto at = err.find(what); at != std::string::npos; at = err.find(what, at + 1)) ++n;
+    return n;
+  };
+  EXPECT_EQ(count("alice.secret is a secret key"), 1u) << err;
+  // The first 8 keys once each, then the 16th, 32nd, 64th, 128th refusal (before: 200 lines).
+  EXPECT_LE(count("refused client key"), 12u) << err;
 }
 
 }  // namespace

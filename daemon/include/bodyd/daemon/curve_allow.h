@@ -21,7 +21,8 @@ namespace bodyd::daemon {
 // The allowed client keys of DIR: every regular file NAME.public holding one Z85 key (the
 // format of read_curve_key_file). Other files are skipped and listed in `out_skipped` (a
 // *.secret file there is a mistake worth a warning). Empty on success; otherwise which file
-// is wrong and why, or that DIR holds no key at all (nobody could connect).
+// is wrong and why (a NAME.public that is a symbolic link is refused), or that DIR holds no
+// key at all (nobody could connect).
 [[nodiscard]] std::string load_curve_allow_dir(const std::filesystem::path& dir, std::set<std::string>& out_keys,
                                                std::vector<std::string>& out_skipped);
 
@@ -48,6 +49,7 @@ class ZapAllowList {
   void* socket_ = nullptr;
   std::set<std::string> keys_;
   std::string dir_;
+  static constexpr std::size_t kLoggedKeys = 8;  // refused keys each logged once; then at a limited rate
   std::set<std::string> refused_logged_;
   std::thread thread_;
   std::atomic<bool> stop_{false};
