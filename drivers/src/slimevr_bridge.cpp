@@ -163,6 +163,7 @@ struct BridgeServer::Impl {
   };
   struct Connection {
     int fd = -1;
+    std::uint64_t number = 0;  // 1, 2, ... in the order of connection (logs)
     std::vector<std::uint8_t> in, out;
     std::map<std::int32_t, Device> devices;  // by tracker_id
     std::int64_t window_start_ns = 0;
@@ -215,7 +216,7 @@ struct BridgeServer::Impl {
       return;
     }
     if (c.out.size() > kMaxPendingOutBytes) {
-      reject("slow_reader", "a client read nothing of " + std::to_string(c.out.size()) +
+      reject("slow_reader", "client " + std::to_string(c.number) + " read nothing of " + std::to_string(c.out.size()) +
                                 " bytes waiting: the connection is dropped");
       ++stats.dropped;
       c.drop = true;
@@ -348,7 +349,7 @@ struct BridgeServer::Impl {
           c.window_frames = 0;
         }
         if (++c.window_frames > kMaxFramesPerSecond) {
-          reject("flood", "a client sent more than " + std::to_string(kMaxFramesPerSecond) +
+          reject("flood", "client " + std::to_string(c.number) + " sent more than " + std::to_string(kMaxFramesPerSecond) +
                               " frames in a second: the connection is dropped");
           ++stats.dropped;
           c.drop = true;
@@ -381,9 +382,10 @@ struct BridgeServer::Impl {
       c->fd = fd;
       c->window_start_ns = now_ns();
       ++stats.connections;
+      c->number = stats.connections;
       announce(*c);
       flush(*c);
-      spdlog::info("bridge {}: a client connected ({} now)", path, connections.size() + 1);
+      spdlog::info("bridge {}: client {} connected ({} now)", path, c->number, connections.size() + 1);
       connections.push_back(std::move(c));
     }
   }
@@ -396,8 +398,9 @@ struct BridgeServer::Impl {
       }
       push_invalid(**it);
       ::close((*it)->fd);
+      const std::uint64_t number = (*it)->number;
       it = connections.erase(it);
-      spdlog::info("bridge {}: a client left ({} now)", path, connections.size());
+      spdlog::info("bridge {}: client {} left ({} now)", path, number, connections.size());
     }
   }
 

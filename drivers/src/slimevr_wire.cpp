@@ -4,6 +4,8 @@
 
 #include "slimevr_bridge.pb.h"
 
+#include <google/protobuf/stubs/logging.h>
+
 #include <limits>
 
 namespace bodyd::drivers::slimevr {
@@ -50,6 +52,9 @@ bool decode_message(const std::uint8_t* payload, std::size_t size, Message& out,
     return false;
   }
   bodyd_slimevr::ProtobufMessage m;
+  // protobuf writes a line to stderr for each string that is not UTF-8: a client could flood
+  // the log with them. The bridge counts and rate-limits its own messages instead.
+  const google::protobuf::LogSilencer quiet;
   if (!m.ParseFromArray(payload, static_cast<int>(size))) {
     error = "not a ProtobufMessage (" + std::to_string(size) + " bytes)";
     return false;

@@ -3,6 +3,7 @@
 // same targets run for as long as one likes under libFuzzer with `make fuzz`
 // (docs/reliability.md). A broken promise aborts the test, like a libFuzzer finding.
 #include "input_fuzz_targets.h"
+#include "bridge_fuzz_targets.h"
 
 #include "../test_paths.h"
 
@@ -99,6 +100,39 @@ TEST(BriefFuzz, Config) { fuzz_loop(fuzz_config, seeds("config"), 20000, 2000); 
 TEST(BriefFuzz, ControlRequest) { fuzz_loop(fuzz_control, seeds("control"), 20000, 2000); }
 TEST(BriefFuzz, ModelFile) { fuzz_loop(fuzz_model, seeds("model", {kTinyModel}), 1500, 2000); }
 TEST(BriefFuzz, PoseMessage) { fuzz_loop(fuzz_pose_message, seeds("pose_message"), 20000, 2000); }
+TEST(BriefFuzz, SlimevrBridge) { fuzz_loop(fuzz_slimevr_bridge, seeds("slimevr_bridge"), 20000, 2000); }
+TEST(BriefFuzz, Solarxr) { fuzz_loop(fuzz_solarxr, seeds("solarxr"), 20000, 2000); }
+
+// The bridges' seeds are valid: every frame of a driver stream decodes, the SolarXR bundles ask
+// for what Monado asks.
+TEST(BriefFuzz, BridgeSeedsAreValidInputs) {
+  namespace sv = drivers::slimevr;
+  for (const Bytes& s : seeds("slimevr_bridge")) {
+    std::size_t at = 0, frames = 0;
+    while (at < s.size()) {
+      const sv::FrameView f = sv::next_frame(s.data() + at, s.size() - at);
+      ASSERT_EQ(f.result, sv::FrameResult::Frame);
+      sv::Message m;
+      std::string e;
+      EXPECT_TRUE(sv::decode_message(f.payload, f.payload_bytes, m, e)) << e;
+      at += f.frame_bytes;
+      ++frames;
+    }
+    EXPECT_GT(frames, 1u);
+  }
+  int polls = 0, starts = 0, settings = 0;
+  for (const Bytes& s : seeds("solarxr")) {
+    daemon::solarxr::Request r;
+    std::string e;
+    ASSERT_TRUE(daemon::solarxr::decode_request(s.data(), s.size(), r, e)) << e;
+    polls += r.polls;
+    starts += r.start_feed;
+    settings += static_cast<int>(r.settings_requests.size());
+  }
+  EXPECT_EQ(polls, 1);
+  EXPECT_EQ(starts, 1);
+  EXPECT_EQ(settings, 1);
+}
 
 // The seeds reach past the first check: each is a valid input of its reader (a seed that is
 // rejected at its first byte would leave the fuzzer to find the format on its own).

@@ -9,7 +9,8 @@ upstream schema), with Debian's python3-protobuf and the test's own .proto
       Connects (waiting up to 20 s for the socket), sends Version, TrackerAdded for the
       headset (role 19) and the controllers (13, 14) and TrackerStatus OK, then one Position per
       device per frame of POSES (lines "t_ns role x y z qx qy qz qw", role head/left_hand/
-      right_hand; a frame starts at each head line) at HZ frames per second. Everything the
+      right_hand; a frame starts at each head line) at HZ frames per second (the file
+      REPEAT times with --repeat REPEAT). Everything the
       server sends is written to OUT, one JSON object per line. With --reconnect-after N the
       connection is closed after N frames and opened again (a driver that restarts).
   driver_client.py PB_DIR bad SOCKET KIND OUT
@@ -145,6 +146,7 @@ def play(args):
     rate = 90.0
     reconnect_after = -1
     hands = True
+    repeat = 1
     i = 3
     while i < len(args):
         if args[i] == "--rate":
@@ -153,10 +155,12 @@ def play(args):
             reconnect_after = int(args[i + 1]); i += 2
         elif args[i] == "--no-hands":
             hands = False; i += 1
+        elif args[i] == "--repeat":
+            repeat = int(args[i + 1]); i += 2
         else:
             raise SystemExit("unknown option " + args[i])
     roles = ["head", "left_hand", "right_hand"] if hands else ["head"]
-    frames = read_frames(poses)
+    frames = read_frames(poses) * repeat
     with open(out_path, "w") as out:
         reader = Reader(out)
         s = connect(path)
@@ -176,7 +180,11 @@ def play(args):
             data = b"".join(position(role, *vals) for role, vals in fr if role in roles)
             s.sendall(data)
             next_t += period
-            reader.poll(s, max(0.0, next_t - time.monotonic()))
+            while True:  # the frame's period, reading what bodyd sends meanwhile
+                left = next_t - time.monotonic()
+                reader.poll(s, max(0.0, left))
+                if left <= 0 or reader.closed:
+                    break
             if reader.closed:
                 raise SystemExit("bodyd closed the connection after frame %d" % n)
         end = time.monotonic() + 1.0
