@@ -93,7 +93,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--calibration-pose", calibration_pose,
                  "with --device-frames xr: first-still (the clip's first still second, default), none (the default "
-                 "mounting only), or a frame number N (that frame's pose held for 1.2 s before the clip starts)")
+                 "mounting only), a frame number N (that frame's pose held for 1.2 s before the clip starts), or truth (analysis: "
+                 "the true mounting, what a perfect calibration gives)")
       ->capture_default_str();
   app.add_option("--reference", reference_path, "body reference of the default mounting (default: data/body-reference.json)");
   app.add_option("--tracker-rate-hz", tracker_rate_hz, "tracker sample rate (default: the clip's frame rate)")
@@ -136,8 +137,9 @@ int main(int argc, char** argv) {
     if (device_frames == "xr") {
       options.device_frames = true;
       options.body_reference = bodyd::read_body_reference(bodyd::find_body_reference(reference_path));
-      if (calibration_pose != "none") options.calibrate_pose = true;
-      if (calibration_pose != "none" && calibration_pose != "first-still") {
+      if (calibration_pose == "truth") options.oracle_mounting = true;
+      else if (calibration_pose != "none") options.calibrate_pose = true;
+      if (calibration_pose != "none" && calibration_pose != "first-still" && calibration_pose != "truth") {
         try {
           std::size_t used = 0;
           hold_frame = std::stoi(calibration_pose, &used);

@@ -18,8 +18,8 @@
 namespace bodyd::daemon {
 
 struct Command {
-  enum class Kind { Height, FromHead, Swap, Recentre } kind = Kind::Height;
-  double height_m = 0.0;                 // Height: the standing head height (0: the model's size)
+  enum class Kind { Height, FromHead, Swap, Recentre, PoseBegin, PoseCancel } kind = Kind::Height;
+  double height_m = 0.0;                 // Height: the standing head height (0: the model's size); PoseBegin: timeout, s
   std::unique_ptr<Reconstructor> recon;  // Swap: the new reconstructor
   std::string model_path;                // Swap: its model file ("" for ik)
 };

@@ -259,6 +259,7 @@ std::string apply_config_json(const json& j, const std::string& source, DaemonCo
     else if (key == "wait_for_subscriber") ok = get_value(value, w, config.wait_for_subscriber, error);
     else if (key == "endpoints_file") ok = get_value(value, w, config.endpoints_file, error);
     else if (key == "record_trackers") ok = get_value(value, w, config.record_trackers_file, error);
+    else if (key == "mounting_file") ok = get_value(value, w, config.mounting_file, error);
     else if (key == "overwrite") ok = get_value(value, w, config.record_trackers_overwrite, error);
     else if (key == "rate_hz") ok = get_value(value, w, config.rate_hz, error);
     else if (key == "queue_capacity") ok = get_value(value, w, config.queue_capacity, error);
@@ -466,6 +467,7 @@ json config_to_json(const DaemonConfig& c) {
       {"wait_for_subscriber", c.wait_for_subscriber},
       {"endpoints_file", c.endpoints_file},
       {"record_trackers", c.record_trackers_file},
+      {"mounting_file", c.mounting_file},
       {"overwrite", c.record_trackers_overwrite},
       {"outputs", c.outputs},
       {"rate_hz", c.rate_hz},
@@ -563,6 +565,8 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
   app.add_option("--endpoints-file", config.endpoints_file, "write the bound endpoints here as JSON");
   app.add_option("--curve-allow", config.curve_allow_dir,
                  "only clients whose public key is in DIR (NAME.public files) may connect (needs --curve-secret-key)");
+  app.add_option("--mounting-file", config.mounting_file,
+                 "keep the calibration pose's device mountings in this JSON file across restarts (docs/daemon.md)");
   app.add_option("--record-trackers", config.record_trackers_file,
                  "write every tracker sample received to FILE (tracker log v1; replay it with --replay FILE --fast)");
   app.add_flag("--overwrite", config.record_trackers_overwrite,
@@ -613,6 +617,8 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
   if (!sources.empty()) config.sources = sources;
   if (!output_flags.empty()) config.outputs = output_flags;
   if (no_filter) config.filter.enabled = false;
+  // The systemd unit's daemon keeps its calibration pose across restarts by default.
+  if (user_config && config.mounting_file.empty()) config.mounting_file = paths::user_state_file("mounting.json").string();
   for (const auto& o : offset_flags) {
     if (std::string e = parse_offset_flag(o, config); !e.empty()) {
       std::cerr << "bodyd: " << e << "\n";

@@ -40,17 +40,30 @@ json dispatch(const json& request, ControlTarget& target) {
     return target.shutdown();
   }
   if (cmd == "calibrate") {
-    if (auto e = unknown_key(request, cmd, {"user_height_m", "head_height_m", "from"}); !e.empty()) return control_error(e);
+    if (auto e = unknown_key(request, cmd, {"user_height_m", "head_height_m", "from", "timeout_s"}); !e.empty())
+      return control_error(e);
     const int given = int(request.contains("user_height_m")) + int(request.contains("head_height_m")) +
                       int(request.contains("from"));
     if (given != 1)
       return control_error(
           "calibrate takes exactly one of \"user_height_m\": METRES (body height), \"head_height_m\": METRES "
-          "(standing head height) or \"from\": \"head\"");
+          "(standing head height) or \"from\": \"head\" or \"pose\"");
     if (request.contains("from")) {
       const json& from = request["from"];
-      if (!from.is_string() || from.get<std::string>() != "head")
-        return control_error("calibrate \"from\" must be \"head\" (the height is taken from the standing head height)");
+      const std::string what = from.is_string() ? from.get<std::string>() : std::string();
+      if (what != "head" && what != "pose")
+        return control_error(
+            "calibrate \"from\" must be \"head\" (the height from the standing head height) or \"pose\" (the "
+            "calibration pose: stand straight, look ahead, arms relaxed at the sides, for one second)");
+      double timeout_s = 5.0;
+      if (request.contains("timeout_s")) {
+        if (what != "pose") return control_error("calibrate: \"timeout_s\" goes only with \"from\": \"pose\"");
+        const json& t = request["timeout_s"];
+        if (!t.is_number() || !std::isfinite(t.get<double>()) || t.get<double>() < 1.0 || t.get<double>() > 30.0)
+          return control_error("calibrate \"timeout_s\" must be a number of seconds from 1 to 30");
+        timeout_s = t.get<double>();
+      }
+      if (what == "pose") return target.calibrate_pose(timeout_s);
       return target.calibrate_from_head();
     }
     const char* key = request.contains("user_height_m") ? "user_height_m" : "head_height_m";
@@ -80,6 +93,7 @@ json dispatch(const json& request, ControlTarget& target) {
 json control_error(const std::string& message) { return json{{"ok", false}, {"error", message}}; }
 
 json ControlTarget::recentre() { return control_error("reset: re-centring is not supported here"); }
+json ControlTarget::calibrate_pose(double) { return control_error("calibrate from pose: not supported here"); }
 
 json handle_control_request(std::string_view request, ControlTarget& target) {
   json parsed = json::parse(request.begin(), request.end(), nullptr, /*allow_exceptions=*/false);

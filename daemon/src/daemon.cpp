@@ -14,6 +14,7 @@
 #include "bodyd/protocol/pose_message.h"
 #include "command_channel.h"
 #include "control_server.h"
+#include "mounting_state.h"
 #include "pose_wire.h"
 #include "stats.h"
 #include "zmq_publisher.h"
@@ -133,7 +134,7 @@ struct Daemon::Impl final : ControlTarget {
   std::string method_name, model_path_text;
   double head_height_m = 0.0;
   bool height_calibrated = false;
-  // Where the height came from: "none" (the model's size), "config", "control" or "auto"; and the
+  // Where the height came from: "none" (the model's size), "config", "control", "auto" or "file" (the mounting file); and the
   // auto calibration's state: "off", "waiting", "still", "fallback", "superseded" (a height came
   // from the config or the control socket first) or "refused" (an implausible height).
   std::string calibration_source = "none";
@@ -171,6 +172,25 @@ struct Daemon::Impl final : ControlTarget {
   // calibrate_from_head_height() as bodyd-eval --body-scale (inference/calibration.h).
   StandingHeightDetector height_detector;
   bool auto_calibrating = false;
+
+  // Device mounting (docs/daemon.md "Device mounting"): device poses (PoseFrame::Device) become
+  // joint poses through `mounting` before the per-device offsets. Each role's mounting is the
+  // default (from the body reference), or one a calibration pose measured ("pose", "auto" for
+  // the head's refinement by the auto calibration) or read from config.mounting_file ("file").
+  // Reconstruction thread; status reads mounting_status (shared_mutex).
+  BodyReference body_reference;
+  Mounting default_mount;
+  Mounting mounting;
+  std::array<std::string, kRoleCount> mounting_origin{"default", "default", "default"};
+  std::array<bool, kRoleCount> device_frames_seen{};  // a device sample of the role has arrived
+  json mounting_status = json::object();
+  // The calibration pose: started by the control thread (calibrate_pose), fed raw samples here,
+  // its result handed back through pose_result (shared_mutex).
+  std::optional<PoseCalibrator> pose_calibrator;
+  std::int64_t pose_deadline_ns = 0;
+  std::optional<json> pose_result;
+  // The auto calibration's head refinement: a calibrator fed raw samples while it waits.
+  std::optional<PoseCalibrator> auto_pose;
 
   Impl(DaemonConfig c, ReconstructorFactory f)
       : config(std::move(c)),
@@ -247,6 +267,11 @@ struct Daemon::Impl final : ControlTarget {
   void handle_sample(drivers::SourceSample& in) {
     TrackerSample& s = in.sample;
     if (s.role == Role::Head) head_as_received = s;
+    feed_pose_calibrators(s);
+    if (s.frame == PoseFrame::Device) {
+      device_frames_seen[static_cast<int>(s.role)] = true;
+      s = device_to_joint(s, mounting.T_device_joint[static_cast<int>(s.role)]);
+    }
     apply_offset(s);
     apply_recentre(s);
     if (recorder.is_open()) {
@@ -348,6 +373,138 @@ struct Daemon::Impl final : ControlTarget {
     timing.seq = seq++;
     stats.latency.add(timing.published_ns - timing.arrival_ns);
     if (observer) observer(timing);
+  }
+
+  // ---------------------------------------------------------------- device mounting
+  // Reconstruction thread: the raw sample (before mounting, offsets, re-centring) to the
+  // calibration pose in progress and to the auto calibration's head refinement.
+  void feed_pose_calibrators(const TrackerSample& raw) {
+    if (pose_calibrator) {
+      if (std::optional<PoseCalibration> c = pose_calibrator->push(raw)) {
+        json reply = apply_pose_calibration(*c, "pose");
+        pose_calibrator.reset();
+        std::lock_guard lock(shared_mutex);
+        pose_result = std::move(reply);
+      } else if (monotonic_ns() > pose_deadline_ns) {
+        const std::string refusal = pose_calibrator->last_refusal();
+        pose_calibrator.reset();
+        std::lock_guard lock(shared_mutex);
+        pose_result = control_error(
+            refusal.empty()
+                ? "calibrate from pose: no still second (the headset and every tracked controller held still for 1 s) "
+                  "before the timeout: stand straight, look ahead, let the arms hang relaxed at the sides, hold still "
+                  "and retry"
+                : "calibrate from pose: not the calibration pose: " + refusal + "; then retry");
+      }
+    }
+    if (auto_pose) {
+      if (std::optional<PoseCalibration> c = auto_pose->push(raw)) {
+        auto_pose.reset();
+        refine_head_mounting(*c);
+      }
+    }
+  }
+
+  // The auto calibration's refinement of the headset's mounting (pitch and roll) from a still
+  // second, kept only when plausible: within kMaxAutoHeadChangeDeg of the default (a user who
+  // stands still looking down at a menu must not get a bent body).
+  static constexpr double kMaxAutoHeadChangeDeg = 15.0;
+  void refine_head_mounting(const PoseCalibration& c) {
+    if (!c.device_frames || mounting_origin[0] != "default") return;
+    const RigidTransform& T = c.mounting.T_device_joint[0];
+    const double change_deg = mounting_difference(T, default_mount.T_device_joint[0]).angle_deg;
+    if (change_deg > kMaxAutoHeadChangeDeg) {
+      spdlog::info("auto calibration: the headset's still second is {:.1f} deg from looking ahead (looking up or down?): "
+                   "the default head mounting stays (`bodyd-ctl calibrate --pose` measures it)",
+                   change_deg);
+      return;
+    }
+    mounting.T_device_joint[0] = T;
+    mounting_origin[0] = "auto";
+    publish_mounting_status();
+    spdlog::info("auto calibration: the headset sits {:.1f} deg from the default on the head (from a still second)", change_deg);
+    recorder.comment(fmt::format("t_ns {}: mounting head {} (auto)", c.t_ns, transform_text(mounting.T_device_joint[0])));
+  }
+
+  // Applies a calibration pose's result: mountings, the height, the mounting file. Returns the
+  // control reply.
+  json apply_pose_calibration(const PoseCalibration& c, const std::string& origin) {
+    json roles = json::object();
+    for (Role r : kRoles) {
+      const int i = static_cast<int>(r);
+      if (!c.measured[i]) continue;
+      mounting.T_device_joint[i] = c.mounting.T_device_joint[i];
+      mounting_origin[i] = origin;
+      const MountingDifference d = mounting_difference(mounting.T_device_joint[i], default_mount.T_device_joint[i]);
+      roles[std::string(role_name(r))] = {{"from_default_deg", d.angle_deg},
+                                          {"from_default_cm", d.position_cm},
+                                          {"sd_deg", c.rotation_sd_deg[i]},
+                                          {"motion_deg", c.motion_deg[i]}};
+    }
+    recon->reset();  // the inputs jumped
+    std::string height_error = calibrate_from_head_height(*recon, c.head_height_m);
+    if (height_error.empty()) {
+      manual_calibration_applied();
+      if (auto_calibrating) auto_calibrating = false;
+      auto_pose.reset();
+    }
+    refresh_skeleton();
+    pub->publish_skeleton(monotonic_ns());
+    publish_mounting_status();
+    spdlog::info("calibrated from the calibration pose: standing head height {:.3f} m{}; mounting {}", recon->user_height(),
+                 height_error.empty() ? "" : " (the height was refused: " + height_error + ")", mounting_text(mounting));
+    recorder.comment(fmt::format("t_ns {}: calibrate pose head_height_m {} mounting {}", c.t_ns, recon->user_height(),
+                                 mounting_text(mounting)));
+    std::string file_error;
+    if (!config.mounting_file.empty()) {
+      MountingState st;
+      st.mounting = mounting;
+      for (Role r : kRoles) st.measured[static_cast<int>(r)] = mounting_origin[static_cast<int>(r)] != "default";
+      st.head_height_m = height_error.empty() ? recon->user_height() : 0.0;
+      st.calibrated = utc_now();
+      file_error = write_mounting_state(config.mounting_file, st);
+      if (!file_error.empty()) spdlog::warn("calibration pose: {} (the calibration holds until bodyd stops)", file_error);
+    }
+    std::lock_guard lock(shared_mutex);
+    json reply{{"ok", height_error.empty()},
+               {"device_frames", c.device_frames},
+               {"head_height_m", head_height_m},
+               {"user_height_m", head_height_m / kHeadHeightPerStature},
+               {"eye_offset_sd_cm", c.eye_offset_sd_cm},
+               {"roles", roles},
+               {"mounting", mounting_status},
+               {"skeleton_id", skeleton_msg.skeleton_id}};
+    if (!height_error.empty()) reply["error"] = "calibrate from pose: " + height_error;
+    if (!c.device_frames)
+      reply["note"] = "the sources deliver joint poses: there is no device mounting to learn, only the height";
+    if (!config.mounting_file.empty()) reply["mounting_file"] = config.mounting_file;
+    if (!file_error.empty()) reply["mounting_file_error"] = file_error;
+    return reply;
+  }
+
+  static std::string utc_now() {
+    const std::time_t now = std::time(nullptr);
+    char text[32] = {};
+    std::strftime(text, sizeof(text), "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
+    return text;
+  }
+
+  // Reconstruction thread (or start()): the mounting as status shows it.
+  void publish_mounting_status() {
+    json roles = json::object();
+    for (Role r : kRoles) {
+      const int i = static_cast<int>(r);
+      const RigidTransform& T = mounting.T_device_joint[i];
+      const MountingDifference d = mounting_difference(T, default_mount.T_device_joint[i]);
+      roles[std::string(role_name(r))] = {{"origin", mounting_origin[i]},
+                                          {"device_frames", device_frames_seen[i]},
+                                          {"position_m", {T.position_m.x(), T.position_m.y(), T.position_m.z()}},
+                                          {"rotation_xyzw", {T.rotation.x(), T.rotation.y(), T.rotation.z(), T.rotation.w()}},
+                                          {"from_default_deg", d.angle_deg},
+                                          {"from_default_cm", d.position_cm}};
+    }
+    std::lock_guard lock(shared_mutex);
+    mounting_status = json{{"roles", roles}, {"file", config.mounting_file}};
   }
 
   // Feeds the head sample `s` (as the reconstructor gets it) to the detector; when it reports,
@@ -456,6 +613,25 @@ struct Daemon::Impl final : ControlTarget {
                     {"heading_deg", heading_deg},
                     {"origin_m", {c.origin_m.x(), c.origin_m.z()}},
                     {"recentred", true}};
+      }
+      case Command::Kind::PoseBegin: {
+        if (last_valid_head_arrival_ns == 0 || monotonic_ns() - last_valid_head_arrival_ns > 2'000'000'000)
+          return control_error(
+              "calibrate from pose: no valid head sample in the last 2 s: wear the headset (is it tracking?) and retry");
+        pose_calibrator.emplace(body_reference, default_mount, PoseCalibrationOptions{});
+        pose_deadline_ns = monotonic_ns() + static_cast<std::int64_t>(c.height_m * 1e9);
+        {
+          std::lock_guard lock(shared_mutex);
+          pose_result.reset();
+        }
+        spdlog::info("calibration pose: waiting up to {:.0f} s for a still second (stand straight, look ahead, arms "
+                     "relaxed at the sides)",
+                     c.height_m);
+        return json{{"ok", true}};
+      }
+      case Command::Kind::PoseCancel: {
+        pose_calibrator.reset();
+        return json{{"ok", true}};
       }
       case Command::Kind::Swap: {
         bool calibrated;
@@ -582,6 +758,7 @@ struct Daemon::Impl final : ControlTarget {
     {
       std::lock_guard lock(shared_mutex);
       j.update(recentre_status);
+      j["mounting"] = mounting_status;
     }
     if (!config.record_trackers_file.empty()) j["record_trackers"] = config.record_trackers_file;
     json src = json::array();
@@ -673,6 +850,38 @@ struct Daemon::Impl final : ControlTarget {
     return commands.run(std::move(c));
   }
 
+  // Control thread: starts the calibration pose on the reconstruction thread, then waits for
+  // its result (the reconstruction thread ends it at the still second or the deadline).
+  json calibrate_pose(double timeout_s) override {
+    Command c;
+    c.kind = Command::Kind::PoseBegin;
+    c.height_m = timeout_s;
+    json started = commands.run(std::move(c));
+    if (!started.value("ok", false)) return started;
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s + 1.0);
+    while (std::chrono::steady_clock::now() < give_up && !stop_flag.load()) {
+      {
+        std::lock_guard lock(shared_mutex);
+        if (pose_result) {
+          json r = std::move(*pose_result);
+          pose_result.reset();
+          return r;
+        }
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    Command cancel;
+    cancel.kind = Command::Kind::PoseCancel;
+    (void)commands.run(std::move(cancel));
+    std::lock_guard lock(shared_mutex);
+    if (pose_result) {
+      json r = std::move(*pose_result);
+      pose_result.reset();
+      return r;
+    }
+    return control_error("calibrate from pose: no samples arrived before the timeout (is the headset tracking?)");
+  }
+
   json shutdown() override {
     spdlog::info("shutdown requested on the control socket");
     shutdown_requested.store(true);
@@ -714,6 +923,42 @@ std::string Daemon::start() {
     spdlog::info("auto calibration: the user's size from the head's first still half second (off: --no-auto-calibrate)");
   }
   d.model_path_text = choice.method == "ik" ? std::string() : choice.model_path.string();
+
+  // Device mounting: the defaults from the body reference, then what a calibration pose stored.
+  try {
+    d.body_reference = read_body_reference(find_body_reference());
+  } catch (const BodyReferenceError& e) {
+    return std::string("device mounting: ") + e.what();
+  }
+  d.default_mount = default_mounting(d.body_reference);
+  d.mounting = d.default_mount;
+  if (!d.config.mounting_file.empty()) {
+    std::string merror;
+    if (std::optional<MountingState> st = read_mounting_state(d.config.mounting_file, merror)) {
+      for (Role r : kRoles) {
+        const int i = static_cast<int>(r);
+        if (!st->measured[i]) continue;
+        d.mounting.T_device_joint[i] = st->mounting.T_device_joint[i];
+        d.mounting_origin[i] = "file";
+      }
+      spdlog::info("device mounting from {} (calibrated {}): {}", d.config.mounting_file, st->calibrated,
+                   mounting_text(d.mounting));
+      if (st->head_height_m > 0.0 && !d.height_calibrated) {
+        d.recon->set_user_height(st->head_height_m);
+        d.height_calibrated = true;
+        d.calibration_source = "file";
+        if (d.auto_calibrating) {
+          d.auto_calibrating = false;
+          d.auto_calibration = "superseded";
+        }
+      }
+    } else if (!merror.empty()) {
+      spdlog::warn("{}: the default device mounting is used", merror);
+    }
+  }
+  if (d.auto_calibrating && d.mounting_origin[0] == "default")
+    d.auto_pose.emplace(d.body_reference, d.default_mount, PoseCalibrationOptions{});
+  d.publish_mounting_status();
   d.refresh_skeleton();
   spdlog::info("reconstruction: {}{}, standing head height {:.3f} m, skeleton {} joints (id {:#010x})", d.recon->name(),
                d.model_path_text.empty() ? "" : " (" + d.model_path_text + ")", d.recon->user_height(),

@@ -396,7 +396,8 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
         if (options.device_frames) {
           std::optional<PoseCalibrator> calibrator;
           if (options.calibrate_pose) calibrator.emplace(options.body_reference, defaults, options.pose_calibration);
-          auto wrapped = std::make_unique<Mounted>(std::move(reconstructor), defaults, std::move(calibrator),
+          const Mounting start = options.oracle_mounting && options.true_mounting ? options.true_mounting(index) : defaults;
+          auto wrapped = std::make_unique<Mounted>(std::move(reconstructor), start, std::move(calibrator),
                                                    options.calibrate && method != "ik");
           mounted = wrapped.get();
           reconstructor = std::move(wrapped);

@@ -145,6 +145,10 @@ std::string validate(const PoseCalibrationOptions& o) {
     return fmt::format("max_position_range_m must be in (0, 0.5] m, not {}", o.max_position_range_m);
   if (!(std::isfinite(o.max_rotation_range_deg) && o.max_rotation_range_deg > 0.0 && o.max_rotation_range_deg <= 45.0))
     return fmt::format("max_rotation_range_deg must be in (0, 45] degrees, not {}", o.max_rotation_range_deg);
+  if (!(std::isfinite(o.max_head_change_deg) && o.max_head_change_deg > 0.0 && o.max_head_change_deg <= 180.0))
+    return fmt::format("max_head_change_deg must be in (0, 180] degrees, not {}", o.max_head_change_deg);
+  if (!(std::isfinite(o.max_grip_change_deg) && o.max_grip_change_deg > 0.0 && o.max_grip_change_deg <= 180.0))
+    return fmt::format("max_grip_change_deg must be in (0, 180] degrees, not {}", o.max_grip_change_deg);
   return validate(o.height);
 }
 
@@ -246,7 +250,10 @@ std::optional<PoseCalibration> PoseCalibrator::try_estimate(std::int64_t t_ns) c
   if (c.device_frames) {
     const Quat F = facing_from_device(head.mean_q);
     RigidTransform& Th = c.mounting.T_device_joint[0];
+    const RigidTransform& Dh = defaults_.T_device_joint[0];
     Th.rotation = (head.mean_q.conjugate() * F * reference_.head_in_facing).normalized();
+    // The eye offset is the head's: it turns with the headset's turn on the head.
+    Th.position_m = (Th.rotation * Dh.rotation.conjugate()) * Dh.position_m;
     c.measured[0] = true;
     c.rotation_sd_deg[0] = std::hypot(reference_.head_pitch_sd_deg, reference_.head_roll_sd_deg);
     c.eye_offset_sd_cm = 100.0 * std::hypot(kEyeAboveHeadJointM, kEyeAheadOfHeadJointM) * 0.2;  // the prior's spread
@@ -275,11 +282,41 @@ std::optional<PoseCalibration> PoseCalibrator::try_estimate(std::int64_t t_ns) c
       c.eye_offset_sd_cm = 100.0 * std::hypot(reference_.head_over_wrist_height_sd * mid.y(), reference_.head_ahead_sd_m);
     }
     c.measured_head_y_m = (head.mean_p + head.mean_q * Th.position_m).y();
+    const std::array<Vec3, kRoleCount> device_p{head.mean_p, st[1].mean_p, st[2].mean_p};
+    if (std::string why = pose_problem(c, device_p); !why.empty()) {
+      refusal_ = std::move(why);
+      return std::nullopt;
+    }
   } else {
     c.measured_head_y_m = head.mean_p.y();
   }
   c.head_height_m = standing_height_from_head(c.measured_head_y_m, options_.height);
+  refusal_.clear();
   return c;
+}
+
+std::string PoseCalibrator::pose_problem(const PoseCalibration& c, const std::array<Vec3, kRoleCount>& device_p) const {
+  const double head_y = device_p[0].y();
+  for (int h = 1; h <= 2; ++h) {
+    if (!c.measured[static_cast<size_t>(h)]) continue;
+    const Vec3& p = device_p[static_cast<size_t>(h)];
+    const double horizontal = std::hypot(p.x() - device_p[0].x(), p.z() - device_p[0].z());
+    if (p.y() < 0.35 * head_y || p.y() > 0.8 * head_y || horizontal > 0.45)
+      return fmt::format("the {} is not hanging at your side ({:.2f} m high with the headset at {:.2f} m, {:.2f} m "
+                         "from it horizontally): let both arms hang relaxed",
+                         role_name(kRoles[static_cast<size_t>(h)]), p.y(), head_y, horizontal);
+    const double change = mounting_difference(c.mounting.T_device_joint[static_cast<size_t>(h)],
+                                              defaults_.T_device_joint[static_cast<size_t>(h)])
+                              .angle_deg;
+    if (change > options_.max_grip_change_deg)
+      return fmt::format("the {} controller is turned {:.0f} degrees from pointing ahead: hold each controller "
+                         "naturally, pointing forward",
+                         role_name(kRoles[static_cast<size_t>(h)]), change);
+  }
+  const double head_change = mounting_difference(c.mounting.T_device_joint[0], defaults_.T_device_joint[0]).angle_deg;
+  if (head_change > options_.max_head_change_deg)
+    return fmt::format("the headset is tilted {:.0f} degrees from level: look straight ahead", head_change);
+  return {};
 }
 
 }  // namespace bodyd

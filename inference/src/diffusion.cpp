@@ -94,6 +94,7 @@ void DiffusionReconstructor::reset() {
   emitted_dropped_ = false;
   have_last_ = false;
   hand_was_valid_ = {};
+  hand_ever_valid_ = {};
   hand_offset_ = {Vec3::Zero(), Vec3::Zero()};
   hand_rot_offset_ = {Quat::Identity(), Quat::Identity()};
   foot_locked_ = {};
@@ -329,7 +330,12 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
       base_p = tracker_p[r];
       base_q = tracker_q[r];
     }
-    if (valid != hand_was_valid_[s] && have_last_ && emitted_count_ > 0) {
+    if (valid && !hand_ever_valid_[s]) {
+      // The hand's first sample since the start: it is where the tracker is from this pose on
+      // (easing in from the model's guess made the hands slide in from up to 0.9 m at start-up).
+      hand_offset_[s] = Vec3::Zero();
+      hand_rot_offset_[s] = Quat::Identity();
+    } else if (valid != hand_was_valid_[s] && have_last_ && emitted_count_ > 0) {
       // The ease starts where the hand would be now had it kept its last velocity (the last two
       // emitted frames), not where it was: a hand frozen for a frame while the body moves (a run
       // carries it 10-20 cm a frame) is itself a jump.
@@ -353,6 +359,7 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
       hand_rot_offset_[s] = slerp(Quat::Identity(), hand_rot_offset_[s], decay);
     }
     hand_was_valid_[s] = valid;
+    hand_ever_valid_[s] = hand_ever_valid_[s] || valid;
     hand_goal_valid[s] = valid || hand_offset_[s].squaredNorm() > 1e-10;
     hand_goal_p[s] = base_p + hand_offset_[s];
     hand_goal_q[s] = (hand_rot_offset_[s] * base_q).normalized();

@@ -29,6 +29,10 @@ class ControlTarget {
   // Re-centres the tracking space: the user's current facing and floor position become forward
   // and the origin ("reset", docs/control.md). The default answers that it is not supported.
   virtual nlohmann::json recentre();
+  // The calibration pose ({"cmd":"calibrate","from":"pose"}, docs/control.md): waits up to
+  // `timeout_s` for a still second of the trackers and learns each device's mounting and the
+  // height from it. The default answers that it is not supported.
+  virtual nlohmann::json calibrate_pose(double timeout_s);
 };
 
 // The commands, for messages.

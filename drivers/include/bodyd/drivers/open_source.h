@@ -30,7 +30,16 @@ enum class SourceKind { Replay, Sim, Hid, Usb, Vrchat, Vmc, Udp, Steamvr, Monado
 struct SourceSpec {
   SourceKind kind = SourceKind::Replay;
   std::string argument;   // the file, "VID:PID", or "[HOST:]PORT[?options]" (may be empty for vrchat:, vmc:)
+  // "frames=joint" or "frames=device" at the end of the spec (after '?' or '&', removed from
+  // `argument`): what the source's poses are, overriding what the source declares
+  // (docs/drivers.md "Device frames").
+  std::optional<PoseFrame> frame;
 };
+
+// What a source of this kind delivers when the spec does not say (docs/drivers.md): the VR apps'
+// inputs (vrchat:, vmc:, udp:, steamvr:, monado:) device poses; sim:, hid: and usb: joint poses;
+// replay: what the log's header says (nullopt: the log decides).
+[[nodiscard]] std::optional<PoseFrame> declared_pose_frame(SourceKind kind);
 
 // Parses a spec; on failure returns nullopt and says what is wrong in `error`.
 [[nodiscard]] std::optional<SourceSpec> parse_source_spec(std::string_view text, std::string& error);

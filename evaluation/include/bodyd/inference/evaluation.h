@@ -95,6 +95,8 @@ struct EvalOptions {
   bool calibrate_pose = false;
   PoseCalibrationOptions pose_calibration;
   std::function<Mounting(int clip_index)> true_mounting;
+  // Analysis only: map through the true mounting (what a perfect calibration would give).
+  bool oracle_mounting = false;
   // Called after each clip (for progress); may be empty.
   std::function<void(int clip_index, int clip_count, const std::filesystem::path& clip)> on_clip;
 };

@@ -128,6 +128,13 @@ struct PoseCalibrationOptions {
   double max_position_range_m = 0.03;   // each device's positions stay within this of their mean
   double max_rotation_range_deg = 4.0;  // and its rotations within this of their mean
   bool estimate_eye_offset = false;     // docs/evaluation.md "Device frames" says why it is off
+  // The pose must be the calibration pose (device frames): each tracked hand hangs at the side
+  // (its grip 0.35 to 0.8 of the head's height from the floor, within 0.45 m of the head
+  // horizontally), and the measured mounting is within these of the default: the headset
+  // (a user looking up or down) and each controller (a hand turned, or a controller not
+  // pointing ahead). Otherwise the still second is refused (PoseCalibrator::last_refusal()).
+  double max_head_change_deg = 25.0;
+  double max_grip_change_deg = 50.0;
   StandingHeightOptions height;         // stance_ratio and the plausibility limits
 };
 [[nodiscard]] std::string validate(const PoseCalibrationOptions& options);
@@ -154,9 +161,12 @@ class PoseCalibrator {
   [[nodiscard]] std::optional<PoseCalibration> push(const TrackerSample& sample);
   void reset();
   [[nodiscard]] bool done() const { return done_; }
+  // Why the last still second was not the calibration pose (empty when none was refused).
+  [[nodiscard]] const std::string& last_refusal() const { return refusal_; }
 
  private:
   [[nodiscard]] std::optional<PoseCalibration> try_estimate(std::int64_t t_ns) const;
+  [[nodiscard]] std::string pose_problem(const PoseCalibration& c, const std::array<Vec3, kRoleCount>& device_p) const;
 
   BodyReference reference_;
   Mounting defaults_;
@@ -165,6 +175,7 @@ class PoseCalibrator {
   std::array<std::int64_t, kRoleCount> last_invalid_ns_{};      // newest invalid sample per role
   std::array<bool, kRoleCount> any_invalid_{};
   bool done_ = false;
+  mutable std::string refusal_;
 };
 
 }  // namespace bodyd

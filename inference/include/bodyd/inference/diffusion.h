@@ -108,6 +108,7 @@ class DiffusionReconstructor final : public Reconstructor {
 
   // Hand easing after a tracking loss: offset (model scale) decaying to zero.
   std::array<bool, 2> hand_was_valid_{};
+  std::array<bool, 2> hand_ever_valid_{};  // a valid sample of the hand since reset()
   std::array<Vec3, 2> hand_offset_{Vec3::Zero(), Vec3::Zero()};
   std::array<Quat, 2> hand_rot_offset_{Quat::Identity(), Quat::Identity()};
   // Hand easing after a loss: offset (model scale) from the model's hand, decaying to zero.

@@ -1,0 +1,33 @@
+// The device mountings a calibration pose learned, kept across restarts (docs/daemon.md,
+// "Device mounting"; config key mounting_file). A small JSON file:
+//
+//   {"format": "bodyd-mounting v1", "calibrated": "2026-12-02T10:00:00Z", "head_height_m": 1.52,
+//    "roles": {"head": {"measured": true, "position_m": [0, -0.1, 0.08], "rotation_xyzw": [...]},
+//              "left_hand": {...}, "right_hand": {...}}}
+//
+// Written atomically (a temporary file renamed over it, mode 0600); read at start.
+#pragma once
+
+#include "bodyd/motion/mounting.h"
+
+#include <array>
+#include <filesystem>
+#include <optional>
+#include <string>
+
+namespace bodyd::daemon {
+
+struct MountingState {
+  Mounting mounting;
+  std::array<bool, kRoleCount> measured{};  // roles whose mounting the calibration measured
+  double head_height_m = 0.0;               // 0: none stored
+  std::string calibrated;                   // when (UTC, ISO 8601)
+};
+
+// Reads `path`. nullopt with `error` empty when the file does not exist; nullopt with `error`
+// set (file, field, what to do) when it is unreadable or holds a bad value.
+[[nodiscard]] std::optional<MountingState> read_mounting_state(const std::filesystem::path& path, std::string& error);
+// Writes `state` to `path` (creating its folder). Empty on success, otherwise what went wrong.
+[[nodiscard]] std::string write_mounting_state(const std::filesystem::path& path, const MountingState& state);
+
+}  // namespace bodyd::daemon

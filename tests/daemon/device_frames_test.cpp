@@ -1,0 +1,254 @@
+// Device frames in the daemon (docs/daemon.md "Device mounting", issue 16): what a headset and
+// controllers send (the headset at the eyes in the XR axes, the controllers' grips) becomes the
+// skeleton's joints through the default mounting; the calibration pose learns the mounting and
+// keeps it in the mounting file across restarts.
+#include "bodyd/daemon/config.h"
+#include "bodyd/daemon/daemon.h"
+#include "bodyd/daemon/reconstructors.h"
+#include "bodyd/inference/calibration.h"
+#include "bodyd/motion/bvh.h"
+#include "bodyd/motion/mounting.h"
+#include "bodyd/motion/skeleton.h"
+#include "bodyd/motion/tracker_log.h"
+#include "bodyd/protocol/pose_message.h"
+#include "../test_paths.h"
+#include "zmq_helpers.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+#include <random>
+#include <thread>
+
+namespace bodyd {
+namespace {
+
+using daemon::Daemon;
+using daemon::DaemonConfig;
+using nlohmann::json;
+
+const bool kQuietLogs = (spdlog::set_level(spdlog::level::warn), true);
+
+double deg(double rad) { return rad * 180.0 / M_PI; }
+
+BodyReference reference() { return read_body_reference(test::source_dir() / "data" / "body-reference.json"); }
+
+// The joints of a person standing in the calibration pose as the body reference describes it
+// (Head joint at `head_y_m`, wrists at the reference's height ratio, 0.2 m to each side), facing
+// bodyd's -Z (where a headset with identity rotation looks).
+std::array<RigidTransform, kRoleCount> calibration_pose_joints(const BodyReference& ref, double head_y_m) {
+  const Quat F = quat_from_yaw(M_PI);  // facing frame -> world: +Z forward becomes -Z
+  const double wrist_y = head_y_m / ref.head_over_wrist_height;
+  std::array<RigidTransform, kRoleCount> j;
+  j[0] = {Vec3(0.0, head_y_m, 0.0), (F * ref.head_in_facing).normalized()};
+  // Facing frame: +X is the body's left; the head is head_ahead_of_wrists_m ahead of the wrists.
+  j[1] = {F * Vec3(0.2, wrist_y, -ref.head_ahead_of_wrists_m), (F * ref.hand_in_facing[0]).normalized()};
+  j[2] = {F * Vec3(-0.2, wrist_y, -ref.head_ahead_of_wrists_m), (F * ref.hand_in_facing[1]).normalized()};
+  return j;
+}
+
+// `seconds` of device samples at 90 Hz (0.5 mm noise) of a person holding `joints`, seen through
+// `mounting`.
+std::vector<TrackerSample> still_device_stream(const std::array<RigidTransform, kRoleCount>& joints, const Mounting& mounting,
+                                               double seconds) {
+  std::mt19937_64 g(11);
+  std::normal_distribution<double> n(0.0, 0.0005);
+  std::vector<TrackerSample> out;
+  const int count = static_cast<int>(seconds * 90.0);
+  for (int k = 0; k < count; ++k)
+    for (Role r : kRoles) {
+      const RigidTransform& J = joints[static_cast<size_t>(r)];
+      TrackerSample s{static_cast<std::int64_t>(std::llround(k * 1e9 / 90.0)), r, true,
+                      J.position_m + Vec3(n(g), n(g), n(g)), J.rotation, PoseFrame::Joint};
+      out.push_back(joint_to_device(s, mounting.T_device_joint[static_cast<size_t>(r)]));
+    }
+  return out;
+}
+
+void write_device_log(const std::filesystem::path& path, const std::vector<TrackerSample>& samples) {
+  write_tracker_log(path, samples, {{std::string(kTrackerLogPoseFrameKey), "device"}});
+}
+
+DaemonConfig replay_config(const std::filesystem::path& log, const std::filesystem::path& dir, const std::string& method) {
+  DaemonConfig c;
+  c.sources = {"replay:" + log.string()};
+  c.pub_endpoint = "tcp://127.0.0.1:0";
+  c.control_endpoint = "ipc://" + (dir / "control").string();
+  c.send_hwm = 1'000'000;
+  c.method = method;
+  c.auto_calibrate = false;
+  return c;
+}
+
+// A known mounting: the default with the headset pitched 7 degrees up and rolled 2 degrees on the
+// head, and each controller turned 12 degrees in the hand (about its grip point).
+Mounting known_mounting(const Mounting& defaults) {
+  Mounting m = defaults;
+  const Quat turn = Quat(Eigen::AngleAxisd(7.0 * M_PI / 180, Vec3::UnitX())) * Quat(Eigen::AngleAxisd(-2.0 * M_PI / 180, Vec3::UnitZ()));
+  m.T_device_joint[0].rotation = (turn.conjugate() * m.T_device_joint[0].rotation).normalized();
+  m.T_device_joint[0].position_m = turn.conjugate() * m.T_device_joint[0].position_m;
+  for (int h = 1; h <= 2; ++h) {
+    const Quat g = quat_from_axis_angle(Vec3(h == 1 ? 0.12 : -0.1, 0.15, 0.08).normalized() * (12.0 * M_PI / 180));
+    m.T_device_joint[static_cast<size_t>(h)].rotation = (g.conjugate() * m.T_device_joint[static_cast<size_t>(h)].rotation).normalized();
+    m.T_device_joint[static_cast<size_t>(h)].position_m = g.conjugate() * m.T_device_joint[static_cast<size_t>(h)].position_m;
+  }
+  return m;
+}
+
+RigidTransform transform_from_status(const json& role) {
+  const auto& p = role["position_m"];
+  const auto& q = role["rotation_xyzw"];
+  return {Vec3(p[0], p[1], p[2]), Quat(q[3].get<double>(), q[0].get<double>(), q[1].get<double>(), q[2].get<double>())};
+}
+
+TEST(CalibrationPose, RecoversAKnownMountingAndKeepsItAcrossARestart) {
+  test::TempDir dir;
+  const BodyReference ref = reference();
+  const Mounting defaults = default_mounting(ref);
+  const Mounting truth = known_mounting(defaults);
+  const double head_y_m = 1.52;
+  write_device_log(dir.path / "still.csv", still_device_stream(calibration_pose_joints(ref, head_y_m), truth, 4.0));
+  DaemonConfig c = replay_config(dir.path / "still.csv", dir.path, "ik");
+  c.mounting_file = (dir.path / "state" / "mounting.json").string();
+  {
+    Daemon d(c, daemon::make_default_factory(test::source_dir() / "data" / "demo" / "skeleton.bvh"));
+    ASSERT_EQ(d.start(), "");
+    EXPECT_EQ(d.status()["mounting"]["roles"]["head"]["origin"], "default");
+    std::thread runner([&] { d.run(); });
+    zmq::context_t ctx;
+    // Wait for the stream to start, then ask for the calibration pose.
+    for (int i = 0; i < 200 && d.status()["samples_in"].get<std::uint64_t>() < 30; ++i)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    const auto reply =
+        test::control_request(ctx, d.control_endpoint(), R"({"cmd":"calibrate","from":"pose","timeout_s":3})", 6000);
+    d.request_stop();
+    runner.join();
+    ASSERT_TRUE(reply);
+    ASSERT_EQ((*reply)["ok"], true) << reply->dump();
+    EXPECT_EQ((*reply)["device_frames"], true);
+    const json status = d.status();
+    for (Role r : kRoles) {
+      const json& role = status["mounting"]["roles"][std::string(role_name(r))];
+      EXPECT_EQ(role["origin"], "pose") << role_name(r);
+      const MountingDifference e = mounting_difference(transform_from_status(role), truth.T_device_joint[static_cast<size_t>(r)]);
+      EXPECT_LT(e.angle_deg, 2.0) << role_name(r);
+      EXPECT_LT(e.position_cm, 1.0) << role_name(r);
+      // And it learned something: the default was further off.
+      EXPECT_GT(mounting_difference(defaults.T_device_joint[static_cast<size_t>(r)], truth.T_device_joint[static_cast<size_t>(r)]).angle_deg,
+                5.0);
+    }
+    // The height from the still second: the Head joint's height with the stance correction.
+    EXPECT_NEAR(status["head_height_m"].get<double>(), head_y_m / StandingHeightOptions{}.stance_ratio, 0.01);
+    EXPECT_EQ(status["calibration_source"], "control");
+    EXPECT_TRUE(std::filesystem::exists(c.mounting_file));
+  }
+  // A restart keeps it (from the mounting file), the height too.
+  Daemon again(c, daemon::make_default_factory(test::source_dir() / "data" / "demo" / "skeleton.bvh"));
+  ASSERT_EQ(again.start(), "");
+  const json status = again.status();
+  for (Role r : kRoles) {
+    const json& role = status["mounting"]["roles"][std::string(role_name(r))];
+    EXPECT_EQ(role["origin"], "file") << role_name(r);
+    EXPECT_LT(mounting_difference(transform_from_status(role), truth.T_device_joint[static_cast<size_t>(r)]).angle_deg, 2.0);
+  }
+  EXPECT_EQ(status["calibration_source"], "file");
+  EXPECT_NEAR(status["head_height_m"].get<double>(), head_y_m / StandingHeightOptions{}.stance_ratio, 0.01);
+  again.stop();
+}
+
+TEST(CalibrationPose, RefusesRaisedArmsAndSaysWhy) {
+  test::TempDir dir;
+  const BodyReference ref = reference();
+  const Mounting defaults = default_mounting(ref);
+  auto joints = calibration_pose_joints(ref, 1.5);
+  joints[1].position_m.y() = 1.6;  // the left hand up at the head
+  write_device_log(dir.path / "raised.csv", still_device_stream(joints, defaults, 4.0));
+  DaemonConfig c = replay_config(dir.path / "raised.csv", dir.path, "ik");
+  Daemon d(c, daemon::make_default_factory(test::source_dir() / "data" / "demo" / "skeleton.bvh"));
+  ASSERT_EQ(d.start(), "");
+  std::thread runner([&] { d.run(); });
+  zmq::context_t ctx;
+  for (int i = 0; i < 200 && d.status()["samples_in"].get<std::uint64_t>() < 30; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  const auto reply = test::control_request(ctx, d.control_endpoint(), R"({"cmd":"calibrate","from":"pose","timeout_s":1.5})", 6000);
+  d.request_stop();
+  runner.join();
+  ASSERT_TRUE(reply);
+  EXPECT_EQ((*reply)["ok"], false) << reply->dump();
+  EXPECT_NE((*reply)["error"].get<std::string>().find("left_hand is not hanging at your side"), std::string::npos)
+      << reply->dump();
+  EXPECT_EQ(d.status()["mounting"]["roles"]["left_hand"]["origin"], "default");
+}
+
+// Issue 16 item 5: a headset with identity rotation (looking ahead, as VRChat's converted pose and
+// an OpenXR runtime send it) at 1.6 m and controllers at 0.9 m beside the hips: an upright body
+// facing the headset's heading, feet on their own sides and on the floor, hands on their trackers
+// from the first pose.
+TEST(DeviceFrames, AnIdentityHeadsetLookingAheadGivesAnUprightBodyFacingIt) {
+  test::TempDir dir;
+  std::vector<TrackerSample> samples;
+  for (int k = 0; k < 180; ++k)
+    for (Role r : kRoles) {
+      const Vec3 p = r == Role::Head ? Vec3(0.0, 1.6, 0.0) : Vec3(r == Role::LeftHand ? -0.2 : 0.2, 0.9, 0.0);
+      samples.push_back({static_cast<std::int64_t>(std::llround(k * 1e9 / 90.0)), r, true, p, Quat::Identity(), PoseFrame::Device});
+    }
+  write_device_log(dir.path / "standing.csv", samples);
+  DaemonConfig c = replay_config(dir.path / "standing.csv", dir.path, "diffusion");
+  c.auto_calibrate = true;  // as a new user runs it
+  c.fast = true;
+  c.wait_for_subscriber = true;
+  Daemon d(c, daemon::make_default_factory(test::source_dir() / "data" / "demo" / "skeleton.bvh"));
+  ASSERT_EQ(d.start(), "");
+  zmq::context_t ctx;
+  auto sub = test::sub_socket(ctx, d.pub_endpoint(), "pose");
+  std::thread runner([&] { d.run(); });
+  std::vector<protocol::PoseMessage> poses;
+  while (auto p = test::recv_pose(sub, poses.empty() ? 10000 : 1500)) poses.push_back(*p);
+  const auto sk = test::control_request(ctx, d.control_endpoint(), R"({"cmd":"skeleton"})");
+  d.request_stop();
+  runner.join();
+  ASSERT_GE(poses.size(), 170u);
+  ASSERT_TRUE(sk);
+  const std::vector<std::string> names = (*sk)["names"];
+  const auto index = [&](const char* n) { return static_cast<size_t>(std::find(names.begin(), names.end(), n) - names.begin()); };
+  const Mounting m = default_mounting(reference());
+  // Every pose once the controllers have sent their first sample (the first pose is made at the
+  // first head sample, before the hands' samples of the same instant arrive), and the last pose
+  // for the body.
+  for (std::size_t i = 1; i < poses.size(); ++i) {
+    const protocol::PoseMessage& p = poses[i];
+    const auto P = [&](const char* n) {
+      const auto& j = p.joints[index(n)];
+      return Vec3(j.position_m[0], j.position_m[1], j.position_m[2]);
+    };
+    SCOPED_TRACE("pose " + std::to_string(i));
+    // Hands on their trackers (the controllers' grips mapped to the wrists) from the first pose.
+    const Vec3 left_target = Vec3(-0.2, 0.9, 0.0) + m.T_device_joint[1].position_m;
+    const Vec3 right_target = Vec3(0.2, 0.9, 0.0) + m.T_device_joint[2].position_m;
+    EXPECT_LT((P("Hand_L") - left_target).norm(), 0.01) << P("Hand_L").transpose();
+    EXPECT_LT((P("Hand_R") - right_target).norm(), 0.01) << P("Hand_R").transpose();
+    if (i + 1 < poses.size()) continue;
+    // Facing the headset's heading (-Z) within 10 degrees: the body's left (hips and shoulders)
+    // is then -X.
+    Vec3 left = (P("UpperLeg_L") - P("UpperLeg_R")) + (P("UpperArm_L") - P("UpperArm_R"));
+    left.y() = 0.0;
+    const Vec3 forward = left.normalized().cross(Vec3::UnitY());
+    EXPECT_LT(deg(std::acos(std::clamp(forward.dot(Vec3(0, 0, -1)), -1.0, 1.0))), 10.0) << forward.transpose();
+    // Upright: the neck above the hips.
+    const Vec3 spine = (P("Neck") - P("Hips")).normalized();
+    EXPECT_GT(spine.y(), std::cos(15.0 * M_PI / 180.0));
+    // Feet on their own sides (left is -X here) and on the floor: the toes at most 3 cm above
+    // where a planted foot's Toes joint is (the joint is inside the foot: 4.2 cm up in the motion
+    // capture's standing frames, measured on the bow fixture's first frame).
+    EXPECT_LT(P("Foot_L").x(), P("Foot_R").x());
+    const Motion bow = read_bvh(test::fixtures() / "bow_30.bvh");
+    const double planted_toes_y = forward_kinematics(bow.skeleton, bow.frames[0]).positions[static_cast<size_t>(bow.skeleton.find("Toes_L"))].y();
+    EXPECT_LT(P("Toes_L").y(), planted_toes_y + 0.03);
+    EXPECT_LT(P("Toes_R").y(), planted_toes_y + 0.03);
+  }
+}
+
+}  // namespace
+}  // namespace bodyd
