@@ -249,5 +249,5 @@ connect();
 if (holdLoad) {
   await Promise.race([Promise.all([firstPose, firstStatus]), new Promise((resolve) => setTimeout(resolve, 10000))]);
   render();
-  await fetch('/api/page-ready', { method: 'POST' });
+  await fetch('/api/page-ready', { method: 'POST', headers: { 'Content-Type': 'application/json' }, body: '{}' });
 }

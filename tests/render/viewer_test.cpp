@@ -88,6 +88,11 @@ class Process {
     }
     return std::nullopt;
   }
+  // SIGTERM, then the exit code within `timeout` (nullopt: still running).
+  std::optional<int> terminate(std::chrono::milliseconds timeout) {
+    if (pid_ > 0) kill(pid_, SIGTERM);
+    return wait(timeout);
+  }
   void stop() {
     if (pid_ <= 0) return;
     kill(pid_, SIGTERM);
@@ -132,6 +137,7 @@ class Socket {
       s.remove_prefix(static_cast<size_t>(n));
     }
   }
+  [[nodiscard]] int fd() const { return fd_; }
   // Appends what arrives to buf_; false on close/timeout.
   bool receive_more() {
     char tmp[65536];
@@ -182,12 +188,13 @@ struct Stack {
   std::string control;
   std::string error;
 
-  Stack() {
+  // recording: the file bodyd replays (default: the bundled one).
+  explicit Stack(std::vector<std::string> bridge_flags = {}, fs::path recording = {}) {
     const fs::path bin = bodyd::test::bin_dir();
     const fs::path endpoints = dir.path() / "endpoints.json";
+    if (recording.empty()) recording = bodyd::test::source_dir() / "data/demo/walk.csv";
     daemon = std::make_unique<Process>(
-        std::vector<std::string>{(bin / "bodyd").string(), "--replay",
-                                 (bodyd::test::source_dir() / "data/demo/walk.csv").string(), "--method", "ik", "--loop",
+        std::vector<std::string>{(bin / "bodyd").string(), "--replay", recording.string(), "--method", "ik", "--loop",
                                  "--pub", "tcp://127.0.0.1:*", "--control", "tcp://127.0.0.1:*", "--endpoints-file",
                                  endpoints.string(),
                                  "--log-level", "warn"},
@@ -208,10 +215,10 @@ struct Stack {
       error = "bodyd did not write its endpoints: " + daemon->err();
       return;
     }
-    bridge = std::make_unique<Process>(std::vector<std::string>{(bin / "bodyd-viewer-bridge").string(), "--endpoint", pub,
-                                                                "--control", control, "--http", "127.0.0.1:0",
-                                                                "--log-level", "warn"},
-                                       dir.path(), "bridge");
+    std::vector<std::string> bridge_args{(bin / "bodyd-viewer-bridge").string(), "--endpoint", pub, "--control", control,
+                                         "--http", "127.0.0.1:0", "--log-level", "warn"};
+    bridge_args.insert(bridge_args.end(), bridge_flags.begin(), bridge_flags.end());
+    bridge = std::make_unique<Process>(bridge_args, dir.path(), "bridge");
     for (int i = 0; i < 250 && http_port == 0; ++i) {
       std::this_thread::sleep_for(20ms);
       const std::string out = bridge->out();
@@ -237,6 +244,51 @@ struct Stack {
     return false;
   }
 };
+
+bool have_curl() { return std::system("curl --version > /dev/null 2>&1") == 0; }
+
+// curl's output for `args` (shell words): -s, at most 10 s.
+std::string curl(const std::string& args) {
+  std::string out;
+  FILE* p = ::popen(("curl -s --max-time 10 " + args + " 2>&1").c_str(), "r");
+  if (!p) return out;
+  char buffer[4096];
+  size_t n;
+  while ((n = std::fread(buffer, 1, sizeof buffer, p)) > 0) out.append(buffer, n);
+  ::pclose(p);
+  return out;
+}
+
+// The status code curl got ("000": no answer within 10 s).
+std::string status_of(const std::string& args) { return curl("-o /dev/null -w '%{http_code}' " + args); }
+
+// A WebSocket handshake on `s` (to 127.0.0.1:port) with `headers` added; the response's head.
+std::string ws_handshake(Socket& s, int port, const std::string& headers = "") {
+  s.send_all("GET /ws HTTP/1.1\r\nHost: 127.0.0.1:" + std::to_string(port) + "\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+             "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n" +
+             headers + "\r\n");
+  std::string& buf = s.buffer();
+  while (buf.find("\r\n\r\n") == std::string::npos && s.receive_more()) {
+  }
+  const size_t end = buf.find("\r\n\r\n");
+  if (end == std::string::npos) return buf;
+  std::string head = buf.substr(0, end);
+  buf.erase(0, end + 4);
+  return head;
+}
+
+// True once the server has closed `fd`'s connection, within timeout_ms.
+bool closed_by_server(int fd, int timeout_ms) {
+  const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  char tmp[4096];
+  while (std::chrono::steady_clock::now() < until) {
+    pollfd p{fd, POLLIN, 0};
+    if (::poll(&p, 1, 100) <= 0) continue;
+    const ssize_t n = ::recv(fd, tmp, sizeof tmp, MSG_DONTWAIT);
+    if (n <= 0) return true;
+  }
+  return false;
+}
 
 std::optional<std::string> find_chromium() {
   for (const char* name : {"chromium", "chromium-browser", "google-chrome"}) {
@@ -388,6 +440,171 @@ TEST(ViewerBridge, RefusesNonLoopbackAndBadSpecs) {
   }
 }
 
+// Issue 20 item 1: another site's page can neither press the buttons (CSRF) nor read the stream,
+// and a DNS-rebinding name is refused. The probe's own commands, with curl.
+TEST(ViewerBridge, RefusesOtherOriginsForeignHostsAndNonJsonBodies) {
+  if (!have_curl()) GTEST_SKIP() << "curl is not installed";
+  Stack stack;
+  ASSERT_EQ(stack.error, "");
+  ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
+  const std::string port = std::to_string(stack.http_port);
+  const std::string url = "http://127.0.0.1:" + port;
+  const std::string own = "-H 'Origin: http://127.0.0.1:" + port + "' ";
+  const std::string evil = "-H 'Origin: http://evil.example' ";
+  const std::string json = "-H 'Content-Type: application/json' ";
+  EXPECT_EQ(status_of("-X POST " + evil + "-H 'Content-Type: text/plain' --data '{\"head_height_m\":2.5}' " + url +
+                      "/api/calibrate"),
+            "403");
+  EXPECT_EQ(status_of("-X POST " + evil + json + "--data '{\"head_height_m\":2.5}' " + url + "/api/calibrate"), "403");
+  EXPECT_EQ(status_of("-X POST " + evil + json + "--data '{}' " + url + "/api/reset"), "403");
+  EXPECT_EQ(status_of("-X POST -H 'Origin: null' " + json + "--data '{\"head_height_m\":2.5}' " + url + "/api/calibrate"),
+            "403");
+  // A form's or a no-cors fetch's content types, even without an Origin.
+  for (const char* type : {"text/plain", "application/x-www-form-urlencoded", "multipart/form-data; boundary=x"}) {
+    EXPECT_EQ(status_of("-X POST -H 'Content-Type: " + std::string(type) + "' --data '{\"head_height_m\":2.5}' " + url +
+                        "/api/calibrate"),
+              "415")
+        << type;
+  }
+  EXPECT_EQ(status_of("-X POST --data-binary '{}' -H 'Content-Type:' " + url + "/api/reset"), "415");
+  // DNS rebinding: the page's own name resolved to 127.0.0.1.
+  EXPECT_EQ(status_of("-H 'Host: evil.example:" + port + "' " + url + "/status"), "403");
+  EXPECT_EQ(status_of("-X POST -H 'Host: evil.example:" + port + "' " + json + "--data '{\"head_height_m\":2.5}' " + url +
+                      "/api/calibrate"),
+            "403");
+  EXPECT_EQ(status_of("-H 'Host: 127.0.0.1:1' " + url + "/status"), "403");  // not our port
+  EXPECT_EQ(status_of("-H 'Host: localhost:" + port + "' " + url + "/status"), "200");
+  // No CORS: a preflight from another origin is refused, and nothing says Access-Control-*.
+  const std::string preflight =
+      curl("-D - -o /dev/null -X OPTIONS " + evil + "-H 'Access-Control-Request-Method: POST' " + url + "/api/calibrate");
+  EXPECT_EQ(preflight.rfind("HTTP/1.1 403", 0), 0u) << preflight;
+  EXPECT_EQ(preflight.find("Access-Control"), std::string::npos) << preflight;
+  const std::string own_preflight =
+      curl("-D - -o /dev/null -X OPTIONS " + own + "-H 'Access-Control-Request-Method: POST' " + url + "/api/calibrate");
+  EXPECT_EQ(own_preflight.rfind("HTTP/1.1 405", 0), 0u) << own_preflight;
+  EXPECT_EQ(own_preflight.find("Access-Control"), std::string::npos) << own_preflight;
+  EXPECT_EQ(status_of(evil + url + "/status"), "403");
+  const std::string page = curl("-D - -o /dev/null " + own + url + "/");
+  EXPECT_EQ(page.rfind("HTTP/1.1 200", 0), 0u) << page;
+  EXPECT_EQ(page.find("Access-Control"), std::string::npos) << page;
+  // The page's own origin works.
+  EXPECT_EQ(status_of("-X POST " + own + json + "--data '{\"head_height_m\": 1.6}' " + url + "/api/calibrate"), "200");
+  // A WebSocket from another origin gets no stream; the page's own origin does.
+  {
+    Socket ws(stack.http_port);
+    ASSERT_TRUE(ws.ok());
+    const std::string head = ws_handshake(ws, stack.http_port, "Origin: http://evil.example\r\n");
+    EXPECT_EQ(head.rfind("HTTP/1.1 403", 0), 0u) << head;
+  }
+  {
+    Socket ws(stack.http_port);
+    ASSERT_TRUE(ws.ok());
+    const std::string head = ws_handshake(ws, stack.http_port, "Origin: http://127.0.0.1:" + port + "\r\n");
+    EXPECT_EQ(head.rfind("HTTP/1.1 101", 0), 0u) << head;
+  }
+  // The daemon took the same-origin head height and none of the refused ones.
+  double head_height = 0;
+  for (int i = 0; i < 60 && std::abs(head_height - 1.6) > 1e-6; ++i) {
+    std::this_thread::sleep_for(50ms);
+    const auto status = nlohmann::json::parse(body_of(http_get(stack.http_port, "/status")), nullptr, false);
+    if (status.is_object() && status["daemon"].contains("status"))
+      head_height = status["daemon"]["status"].value("head_height_m", 0.0);
+  }
+  EXPECT_NEAR(head_height, 1.6, 1e-6);
+}
+
+// Issue 20 item 4: the page, /status and the buttons answer while 16 WebSockets and 20 slowloris
+// connections are open (each held one of CivetWeb's 16 workers before), and /hold is not served
+// by a normal bridge.
+TEST(ViewerBridge, IdleConnectionsDoNotBlockThePage) {
+  if (!have_curl()) GTEST_SKIP() << "curl is not installed";
+  Stack stack;
+  ASSERT_EQ(stack.error, "");
+  ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
+  const std::string url = "http://127.0.0.1:" + std::to_string(stack.http_port);
+  EXPECT_EQ(status_of(url + "/hold"), "404");
+  EXPECT_EQ(status_of("-X POST -H 'Content-Type: application/json' --data '{}' " + url + "/api/page-ready"), "405");
+  std::vector<std::unique_ptr<Socket>> sockets;
+  for (int i = 0; i < 16; ++i) {
+    sockets.push_back(std::make_unique<Socket>(stack.http_port));
+    ASSERT_TRUE(sockets.back()->ok());
+    const std::string head = ws_handshake(*sockets.back(), stack.http_port);
+    ASSERT_EQ(head.rfind("HTTP/1.1 101", 0), 0u) << i << ": " << head;
+  }
+  {
+    Socket extra(stack.http_port);
+    const std::string head = ws_handshake(extra, stack.http_port);
+    EXPECT_EQ(head.rfind("HTTP/1.1 503", 0), 0u) << head;  // the most WebSockets: refused, not queued
+  }
+  EXPECT_EQ(status_of(url + "/status"), "200");
+  std::vector<std::unique_ptr<Socket>> slow;
+  for (int i = 0; i < 20; ++i) {
+    slow.push_back(std::make_unique<Socket>(stack.http_port));
+    ASSERT_TRUE(slow.back()->ok());
+    slow.back()->send_all("GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n");  // never the blank line
+  }
+  EXPECT_EQ(status_of(url + "/status"), "200");
+  EXPECT_EQ(status_of(url + "/"), "200");
+  EXPECT_NE(status_of("-X POST -H 'Content-Type: application/json' --data '{}' " + url + "/api/reset"), "000")
+      << "the reset button is answered";
+  // Headers not finished within the request timeout: the bridge closes the connection.
+  int closed = 0;
+  for (auto& s : slow) closed += closed_by_server(s->fd(), 8000) ? 1 : 0;
+  EXPECT_EQ(closed, 20);
+}
+
+// Issue 20 item 7: a ping from the page is answered with a pong carrying its payload (RFC 6455
+// section 5.5.2), and the bridge stops cleanly with a WebSocket open.
+TEST(ViewerBridge, AnswersWebSocketPings) {
+  Stack stack;
+  ASSERT_EQ(stack.error, "");
+  ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
+  Socket ws(stack.http_port);
+  ASSERT_TRUE(ws.ok());
+  ASSERT_EQ(ws_handshake(ws, stack.http_port).rfind("HTTP/1.1 101", 0), 0u);
+  // A masked ping with payload "bodyd" (client frames are masked, RFC 6455 section 5.3).
+  const std::string payload = "bodyd";
+  const char mask[4] = {0x11, 0x22, 0x33, 0x44};
+  std::string frame = {static_cast<char>(0x89), static_cast<char>(0x80 | payload.size())};
+  frame.append(mask, 4);
+  for (size_t i = 0; i < payload.size(); ++i) frame += static_cast<char>(payload[i] ^ mask[i % 4]);
+  ws.send_all(frame);
+  std::string& buf = ws.buffer();
+  std::optional<std::string> pong;
+  // Server frames (unmasked): skip the skeleton, poses and status until the pong.
+  for (int reads = 0; reads < 200 && !pong;) {
+    const auto b = reinterpret_cast<const std::uint8_t*>(buf.data());
+    const size_t len7 = buf.size() >= 2 ? (b[1] & 0x7F) : 0;
+    ASSERT_NE(len7, 127u);
+    const size_t at = len7 == 126 ? 4 : 2;
+    const bool have_length = buf.size() >= at;
+    const size_t len = !have_length ? 0 : len7 == 126 ? (size_t{b[2]} << 8) | b[3] : len7;
+    if (have_length && buf.size() >= at + len) {
+      if ((b[0] & 0x0F) == 0x0A) pong = buf.substr(at, len);
+      buf.erase(0, at + len);
+      continue;
+    }
+    ++reads;
+    if (!ws.receive_more()) break;
+  }
+  ASSERT_TRUE(pong.has_value()) << "no pong";
+  EXPECT_EQ(*pong, payload);
+  EXPECT_EQ(stack.bridge->terminate(5000ms), 0) << stack.bridge->err();
+}
+
+// Issue 20 item 6: out of descriptors, CivetWeb's accept thread spins; the bridge refuses to
+// start with a limit too low for its workers instead (saying what to do).
+TEST(ViewerBridge, RefusesADescriptorLimitTooLowForItsWorkers) {
+  if (::access("/usr/bin/prlimit", X_OK) != 0) GTEST_SKIP() << "prlimit (util-linux) is not installed";
+  TempDir dir;
+  Process p({"/usr/bin/prlimit", "--nofile=40:40", (bodyd::test::bin_dir() / "bodyd-viewer-bridge").string(), "--endpoint",
+             "tcp://127.0.0.1:1", "--control", "none", "--http", "127.0.0.1:0"},
+            dir.path(), "b");
+  ASSERT_TRUE(p.started());
+  EXPECT_EQ(p.wait(5000ms), 2) << p.err();
+  EXPECT_NE(p.err().find("ulimit -n"), std::string::npos) << p.err();
+}
+
 TEST(ViewerBrowser, HeadlessChromiumShowsTheSkeleton) {
   const auto chromium = find_chromium();
   if (!chromium) GTEST_SKIP() << "chromium is not installed (apt-get install chromium); the viewer's browser test is skipped";
@@ -397,7 +614,7 @@ TEST(ViewerBrowser, HeadlessChromiumShowsTheSkeleton) {
     GTEST_SKIP() << "three.js is missing (apt-get install libjs-three, or npm ci --prefix viewer); the viewer's browser "
                     "test is skipped";
   }
-  Stack stack;
+  Stack stack({"--enable-hold-load"});
   ASSERT_EQ(stack.error, "");
   ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
   const fs::path shot = stack.dir.path() / "shot.png";
@@ -450,7 +667,7 @@ TEST(ViewerBrowser, HeadlessChromiumShowsTheSkeleton) {
 TEST(ViewerBrowser, HeadlessChromiumShowsTheDaemonsStatus) {
   const auto chromium = find_chromium();
   if (!chromium) GTEST_SKIP() << "chromium is not installed (apt-get install chromium); the viewer's browser test is skipped";
-  Stack stack;
+  Stack stack({"--enable-hold-load"});
   ASSERT_EQ(stack.error, "");
   ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
   // ?hold-load also waits for the first status message, so the DOM Chromium dumps at the load

@@ -9,6 +9,13 @@
 // every open WebSocket at most every 10 ms; CivetWeb's worker threads serve files and forward the
 // buttons. A browser that falls behind loses poses (only the newest is ever sent), never delays
 // the others' by more than CivetWeb's write timeout.
+//
+// Who may use it (issue 20 items 1, 4): every request must name localhost or an IP address in
+// Host, so a DNS-rebinding page (which reaches us under its own name) cannot use it; a request carrying an Origin other
+// than the bridge's own is refused, so another site's page can neither press the buttons nor read
+// the pose stream over a WebSocket; POSTs take only application/json (a cross-site form or a
+// no-cors fetch cannot send it); no CORS headers. Workers are never all held: WebSockets are capped
+// below the worker count, each client address has its own cap, headers and bodies have deadlines.
 #include "bodyd/client/client.h"
 #include "bodyd/paths/data_files.h"
 
@@ -18,7 +25,11 @@
 #include <spdlog/spdlog.h>
 
 #include <arpa/inet.h>
+#include <netinet/in.h>
 #include <signal.h>
+#include <sys/resource.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -27,6 +38,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <mutex>
 #include <optional>
 #include <set>
@@ -44,6 +56,74 @@ extern "C" void on_signal(int) { g_stop.store(true); }
 
 // Requests from the page larger than this are refused (the buttons send a few bytes).
 constexpr long long kMaxRequestBody = 4096;
+// CivetWeb serves each connection, a WebSocket included, on a worker thread of its own until it
+// closes. WebSockets are capped well below the worker count, and so is each client address, so
+// pages, files and buttons always find a free worker (docs/viewer.md, docs/reliability.md).
+constexpr int kWorkerThreads = 64;
+constexpr std::size_t kMaxWebSockets = 16;
+constexpr int kMaxConnectionsPerClient = 24;
+// Accepted connections waiting for a worker (CivetWeb's connection_queue); beyond it the kernel's
+// listen backlog holds them, using no descriptor of ours.
+constexpr int kConnectionQueue = 16;
+// Whole request headers, and a button's body, must arrive within this.
+constexpr int kRequestTimeoutMs = 2000;
+// ?hold-load's held requests (test-only, --enable-hold-load) at once; more are answered at once.
+constexpr int kMaxHeldRequests = 4;
+// Descriptors the bridge needs at most: a connection and a file per worker, the queue, and
+// ZeroMQ's (two contexts, their sockets and reconnects) with room to spare.
+constexpr rlim_t kDescriptorsNeeded = 2 * kWorkerThreads + kConnectionQueue + 48;
+
+// Who may talk to the bridge. Host must be "localhost" or an IP address, with our port or none:
+// a DNS-rebinding page reaches us under its own name, which is refused. An Origin, when sent,
+// must be the bridge's own, http:// and the request's Host: a browser sends Origin on every
+// WebSocket handshake and POST, and on cross-origin requests; curl and scripts send none (they
+// are local programs that could use the control socket directly).
+struct AccessPolicy {
+  int port = 0;
+
+  [[nodiscard]] bool host_ok(std::string_view host) const {
+    std::string name(host), port_text;
+    if (!host.empty() && host.front() == '[') {  // [v6] or [v6]:port
+      const size_t close = host.find(']');
+      if (close == std::string_view::npos) return false;
+      name = std::string(host.substr(1, close - 1));
+      if (close + 1 < host.size()) {
+        if (host[close + 1] != ':') return false;
+        port_text = host.substr(close + 2);
+        if (port_text.empty()) return false;
+      }
+      in6_addr a6{};
+      if (::inet_pton(AF_INET6, name.c_str(), &a6) != 1) return false;
+    } else {
+      if (const size_t colon = host.rfind(':'); colon != std::string_view::npos) {
+        name = std::string(host.substr(0, colon));
+        port_text = host.substr(colon + 1);
+        if (port_text.empty()) return false;
+      }
+      in_addr a4{};
+      const bool localhost = name.size() == 9 && mg_strncasecmp(name.c_str(), "localhost", 9) == 0;
+      if (!localhost && ::inet_pton(AF_INET, name.c_str(), &a4) != 1) return false;
+    }
+    return port_text.empty() || port_text == std::to_string(port);
+  }
+  // Same origin: exactly "http://" + the (checked) Host, letter case aside.
+  [[nodiscard]] static bool origin_ok(std::string_view origin, std::string_view host) {
+    const std::string own = "http://" + std::string(host);
+    return origin.size() == own.size() && mg_strncasecmp(origin.data(), own.c_str(), own.size()) == 0;
+  }
+};
+
+// The media type of a Content-Type value, without parameters, is application/json.
+bool is_json_content_type(const char* value) {
+  if (!value) return false;
+  std::string_view v = value;
+  v = v.substr(0, v.find(';'));
+  while (!v.empty() && (v.back() == ' ' || v.back() == '\t')) v.remove_suffix(1);
+  while (!v.empty() && (v.front() == ' ' || v.front() == '\t')) v.remove_prefix(1);
+  constexpr std::string_view json = "application/json";
+  return v.size() == json.size() &&
+         std::equal(v.begin(), v.end(), json.begin(), [](char a, char b) { return std::tolower(a) == b; });
+}
 
 std::optional<std::string> read_file(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
@@ -99,21 +179,75 @@ struct WsClient {
 
 class Bridge {
  public:
-  Bridge(Paths paths, std::string endpoint, client::Client& poses, client::Client* control, std::string control_endpoint)
-      : paths_(std::move(paths)), endpoint_(std::move(endpoint)), poses_(poses), control_(control) {
+  Bridge(Paths paths, std::string endpoint, client::Client& poses, client::Client* control, std::string control_endpoint,
+         bool hold_load)
+      : paths_(std::move(paths)), endpoint_(std::move(endpoint)), poses_(poses), control_(control), hold_load_(hold_load) {
     daemon_.control_endpoint = std::move(control_endpoint);
   }
 
   Shared& shared() { return shared_; }
+  // Set once the server listens (the port is known then), before any request is served.
+  void set_access_policy(AccessPolicy policy) {
+    policy_ = policy;
+    policy_ready_.store(true, std::memory_order_release);
+  }
 
   // ---- CivetWeb callbacks (worker threads) ----------------------------------------------
+
+  // Every request, the WebSocket handshake included, before it is routed: who may ask
+  // (AccessPolicy), and a client over its connection cap. Non-zero: answered here.
+  int on_begin_request(mg_connection* conn) {
+    const mg_request_info* ri = mg_get_request_info(conn);
+    if (!policy_ready_.load(std::memory_order_acquire)) return reply(conn, 503, "text/plain", "starting\n");
+    const char* host = mg_get_header(conn, "Host");
+    if (!host) return reply(conn, 400, "text/plain", "a Host header is required\n");
+    if (!policy_.host_ok(host)) {
+      // A page on another name that resolves here (DNS rebinding), or a mistyped address.
+      return reply(conn, 403, "text/plain",
+                   fmt::format("Host '{}' is not this bridge's; open http://127.0.0.1:{}/\n", sanitize(host), policy_.port));
+    }
+    if (const char* origin = mg_get_header(conn, "Origin"); origin && !AccessPolicy::origin_ok(origin, host)) {
+      return reply(conn, 403, "text/plain",
+                   fmt::format("requests from pages of another origin ('{}') are refused\n", sanitize(origin)));
+    }
+    if (count_connection(conn, ri->remote_addr) > kMaxConnectionsPerClient) {
+      return reply(conn, 503, "text/plain",
+                   fmt::format("more than {} connections from {} at once\n", kMaxConnectionsPerClient, ri->remote_addr));
+    }
+    const std::string_view method = ri->request_method ? ri->request_method : "";
+    if (method == "POST" && !is_json_content_type(mg_get_header(conn, "Content-Type"))) {
+      return reply(conn, 415, "text/plain", "POST bodies must be JSON, with Content-Type: application/json\n");
+    }
+    const char* upgrade = mg_get_header(conn, "Upgrade");
+    if (upgrade && mg_strcasecmp(upgrade, "websocket") == 0) {
+      std::lock_guard lock(clients_mutex_);
+      if (clients_.size() >= kMaxWebSockets) {
+        return reply(conn, 503, "text/plain", fmt::format("already {} viewers connected (the most)\n", kMaxWebSockets));
+      }
+    }
+    return 0;
+  }
+
+  // Per client address, the connections that have sent a request and are still open (one
+  // request per connection: keep-alive is off). The address rides along as the connection's
+  // user data until CivetWeb closes it (the request info is gone by then for some connections).
+  void on_connection_close(const mg_connection* conn) {
+    auto* address = static_cast<std::string*>(mg_get_user_connection_data(conn));
+    if (!address) return;
+    {
+      std::lock_guard lock(connections_mutex_);
+      auto it = connections_.find(*address);
+      if (it != connections_.end() && --it->second <= 0) connections_.erase(it);
+    }
+    delete address;
+  }
 
   int on_request(mg_connection* conn) {
     const mg_request_info* ri = mg_get_request_info(conn);
     const std::string method = ri->request_method ? ri->request_method : "";
     const std::string uri = ri->local_uri ? ri->local_uri : "";
     if (uri == "/api/calibrate" || uri == "/api/reset") return on_button(conn, method, uri);
-    if (uri == "/api/page-ready" && method == "POST") {
+    if (hold_load_ && uri == "/api/page-ready" && method == "POST") {
       {
         std::lock_guard lock(hold_mutex_);
         ++pages_ready_;
@@ -121,12 +255,19 @@ class Bridge {
       hold_changed_.notify_all();
       return reply(conn, 200, "text/plain", "ok\n");
     }
-    if (uri == "/hold" && method == "GET") {
-      // ?hold-load: the page's hidden image; answered once a page has shown its first pose and
-      // status (POST /api/page-ready), at most 10 s later, so the load event waits for both.
+    if (hold_load_ && uri == "/hold" && method == "GET") {
+      // ?hold-load (--enable-hold-load, tests only): the page's hidden image; answered once a page
+      // has shown its first pose and status (POST /api/page-ready), at most 10 s later, so the load
+      // event waits for both. At most kMaxHeldRequests are held at once.
       std::unique_lock lock(hold_mutex_);
+      if (held_ >= kMaxHeldRequests) {
+        lock.unlock();
+        return reply(conn, 204, "text/plain", "");
+      }
+      ++held_;
       const std::uint64_t seen = pages_ready_;
       hold_changed_.wait_for(lock, 10s, [&] { return pages_ready_ > seen || g_stop.load(); });
+      --held_;
       lock.unlock();
       return reply(conn, 204, "text/plain", "");
     }
@@ -153,8 +294,9 @@ class Bridge {
   }
 
   int on_ws_connect(const mg_connection*) {
+    // on_begin_request refuses the handshake with a 503 when full; two at once can both pass it.
     std::lock_guard lock(clients_mutex_);
-    return clients_.size() >= 64 ? 1 : 0;  // non-zero refuses
+    return clients_.size() >= kMaxWebSockets ? 1 : 0;  // non-zero refuses
   }
 
   void on_ws_ready(mg_connection* conn) {
@@ -296,19 +438,44 @@ class Bridge {
     return shared_.poses;
   }
 
+  // At shutdown: a close frame (1001, going away; RFC 6455 section 7.4.1) to every page, whose
+  // answering close ends its worker's read at once instead of at CivetWeb's next 2 s poll step.
+  void close_websockets() {
+    static const char going_away[2] = {'\x03', '\xe9'};
+    std::lock_guard lock(clients_mutex_);
+    for (WsClient& c : clients_) (void)mg_websocket_write(c.conn, MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE, going_away, 2);
+  }
+
  private:
   static void send(mg_connection* conn, const std::string& text) {
     // A failed write closes the connection on CivetWeb's side; the close handler removes it.
     (void)mg_websocket_write(conn, MG_WEBSOCKET_OPCODE_TEXT, text.data(), text.size());
   }
 
+  // A header value for an error message: printable ASCII only, at most 100 characters.
+  static std::string sanitize(std::string_view text) {
+    std::string out;
+    for (char c : text.substr(0, 100)) out += (c >= 0x20 && c < 0x7f) ? c : '?';
+    return out;
+  }
+
+  // Counts this connection for its address (once); the count now.
+  int count_connection(mg_connection* conn, const char* address) {
+    std::lock_guard lock(connections_mutex_);
+    if (!mg_get_user_connection_data(conn)) {
+      mg_set_user_connection_data(conn, new std::string(address));
+      return ++connections_[address];
+    }
+    return connections_[address];
+  }
+
+  // Written out by hand: CivetWeb's mg_response_header_* send nothing on a WebSocket handshake
+  // request, which on_begin_request may have to refuse.
   static int reply(mg_connection* conn, int code, std::string_view type, std::string_view body, bool head_only = false) {
-    mg_response_header_start(conn, code);
-    mg_response_header_add(conn, "Content-Type", type.data(), static_cast<int>(type.size()));
-    const std::string length = std::to_string(body.size());
-    mg_response_header_add(conn, "Content-Length", length.c_str(), -1);
-    mg_response_header_add(conn, "Cache-Control", "no-store", -1);
-    mg_response_header_send(conn);
+    const std::string head = fmt::format(
+        "HTTP/1.1 {} {}\r\nContent-Type: {}\r\nContent-Length: {}\r\nCache-Control: no-store\r\nConnection: close\r\n\r\n",
+        code, mg_get_response_code_text(conn, code), type, body.size());
+    mg_write(conn, head.data(), head.size());
     if (!head_only) mg_write(conn, body.data(), body.size());
     return code;
   }
@@ -354,8 +521,14 @@ class Bridge {
     std::string body;
     char buf[1024];
     int n = 0;
-    while (body.size() <= kMaxRequestBody && (n = mg_read(conn, buf, sizeof buf)) > 0) body.append(buf, n);
+    // The whole body within kRequestTimeoutMs (each mg_read alone may wait that long per byte).
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(kRequestTimeoutMs);
+    while (body.size() <= kMaxRequestBody && std::chrono::steady_clock::now() < deadline &&
+           (n = mg_read(conn, buf, sizeof buf)) > 0)
+      body.append(buf, n);
     if (body.size() > kMaxRequestBody) return reply(conn, 413, "text/plain", "request body too large\n");
+    if (ri->content_length > 0 && static_cast<long long>(body.size()) < ri->content_length)
+      return reply(conn, 408, "text/plain", "the request body did not arrive in time\n");
     nlohmann::json request;
     if (uri == "/api/reset") {
       request = {{"cmd", "reset"}};
@@ -390,16 +563,29 @@ class Bridge {
   std::vector<WsClient> clients_;
   std::mutex daemon_mutex_;
   DaemonView daemon_;
+  bool hold_load_ = false;
   std::mutex hold_mutex_;
   std::condition_variable hold_changed_;
   std::uint64_t pages_ready_ = 0;
+  int held_ = 0;
+  AccessPolicy policy_;
+  std::atomic<bool> policy_ready_{false};
+  std::mutex connections_mutex_;
+  std::map<std::string, int, std::less<>> connections_;
 };
 
 extern "C" int request_handler(mg_connection* conn, void* self) { return static_cast<Bridge*>(self)->on_request(conn); }
+extern "C" int begin_request(mg_connection* conn) {
+  return static_cast<Bridge*>(mg_get_user_data(mg_get_context(conn)))->on_begin_request(conn);
+}
+extern "C" void connection_close(const mg_connection* conn) {
+  static_cast<Bridge*>(mg_get_user_data(mg_get_context(conn)))->on_connection_close(conn);
+}
 extern "C" int ws_connect(const mg_connection* conn, void* self) { return static_cast<Bridge*>(self)->on_ws_connect(conn); }
 extern "C" void ws_ready(mg_connection* conn, void* self) { static_cast<Bridge*>(self)->on_ws_ready(conn); }
 // The page sends nothing the bridge uses; a close frame is answered with a close frame (RFC 6455
-// section 5.5.1) carrying the same status code, and ends the connection.
+// section 5.5.1) carrying the same status code, and ends the connection. CivetWeb answers pings
+// with pongs itself (enable_websocket_ping_pong, below).
 extern "C" int ws_data(mg_connection* conn, int bits, char* data, size_t len, void*) {
   if ((bits & 0x0F) != MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE) return 1;
   (void)mg_websocket_write(conn, MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE, data, std::min<size_t>(len, 2));
@@ -442,6 +628,47 @@ fs::path default_three_dir(const fs::path& web_root) {
 // installed bridge, $XDG_DATA_HOME/bodyd/viewer, or viewer/ of the source tree of the build.
 fs::path default_web_root() { return paths::find_data_file("viewer/index.html").path.parent_path(); }
 
+// Out of descriptors, CivetWeb's accept thread retries accept() at once, forever (a busy loop,
+// issue 20 item 6), so the bridge makes sure it cannot run out: the soft limit is raised to what
+// it needs when the hard limit allows, else it refuses to start. Empty or the error.
+std::string ensure_descriptors(rlim_t needed) {
+  rlimit limit{};
+  if (::getrlimit(RLIMIT_NOFILE, &limit) != 0) return {};
+  if (limit.rlim_cur != RLIM_INFINITY && limit.rlim_cur < needed) {
+    if (limit.rlim_max != RLIM_INFINITY && limit.rlim_max < needed) {
+      return fmt::format("the open-file limit is {} (ulimit -n) but the bridge needs {} descriptors ({} workers); "
+                         "raise it (ulimit -n 1024)",
+                         limit.rlim_max, needed, kWorkerThreads);
+    }
+    limit.rlim_cur = needed;
+    if (::setrlimit(RLIMIT_NOFILE, &limit) != 0) return fmt::format("cannot raise the open-file limit to {}", needed);
+  }
+  return {};
+}
+
+// mg_stop, promptly: CivetWeb's accept thread polls its listening socket in 2 s steps and sees
+// the stop flag only when that poll returns, so connections of our own wake it.
+void stop_server(mg_context* ctx, const std::string& host, int port) {
+  std::atomic<bool> stopped{false};
+  std::thread stopper([&] {
+    mg_stop(ctx);
+    stopped.store(true);
+  });
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_port = htons(static_cast<std::uint16_t>(port));
+  if (::inet_pton(AF_INET, host.c_str(), &addr.sin_addr) != 1) addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  for (int i = 0; i < 100 && !stopped.load(); ++i) {
+    const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    if (fd >= 0) {
+      (void)::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr);
+      ::close(fd);
+    }
+    std::this_thread::sleep_for(20ms);
+  }
+  stopper.join();
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -453,6 +680,7 @@ int main(int argc, char** argv) {
   bool allow_remote = false;
   Paths paths{default_web_root(), {}};
   std::string log_level = "info";
+  bool hold_load = false;
   app.add_option("--endpoint", endpoint, "the daemon's pose stream (PUB) endpoint")->capture_default_str();
   app.add_option("--control", control,
                  "the daemon's control endpoint: its status for the page, the skeleton at start, the calibrate and "
@@ -463,6 +691,8 @@ int main(int argc, char** argv) {
   app.add_option("--web-root", paths.web_root, "folder with index.html and viewer.js")->capture_default_str();
   app.add_option("--three-dir", paths.three_dir, "three.js build folder (three.module.js, three.core.js)");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error, off")->capture_default_str();
+  app.add_flag("--enable-hold-load", hold_load,
+               "serve /hold and /api/page-ready for the page's ?hold-load (tests and screenshots only, docs/viewer.md)");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -480,6 +710,10 @@ int main(int argc, char** argv) {
                  (paths.three_dir / "three.module.js").string());
   }
   if (std::string e = check_http_spec(http, allow_remote); !e.empty()) {
+    fmt::print(stderr, "bodyd-viewer-bridge: {}\n", e);
+    return 2;
+  }
+  if (std::string e = ensure_descriptors(kDescriptorsNeeded); !e.empty()) {
     fmt::print(stderr, "bodyd-viewer-bridge: {}\n", e);
     return 2;
   }
@@ -513,15 +747,25 @@ int main(int argc, char** argv) {
   sigaction(SIGTERM, &sa, nullptr);
   signal(SIGPIPE, SIG_IGN);
 
-  Bridge bridge(paths, endpoint, *poses, control_client.get(), options.control_endpoint);
+  Bridge bridge(paths, endpoint, *poses, control_client.get(), options.control_endpoint, hold_load);
   mg_init_library(0);
-  const std::string threads = "16";  // each WebSocket holds one; browsers also open idle spare connections
+  const std::string threads = std::to_string(kWorkerThreads);
+  const std::string queue = std::to_string(kConnectionQueue);
+  const std::string request_timeout = std::to_string(kRequestTimeoutMs);
+  // websocket_timeout_ms with ping/pong: a page that sends nothing for 10 s is pinged (browsers
+  // answer by themselves) and closed after CivetWeb's few unanswered pings; pings from the page
+  // are answered with pongs. Empty access_control_* options: no CORS headers and no automatic
+  // answer to a preflight (OPTIONS is then 405 like any other method).
   const char* mg_options[] = {"listening_ports", http.c_str(), "num_threads", threads.c_str(),
-                              "request_timeout_ms", "5000", "websocket_timeout_ms", "3600000",
-                              "enable_keep_alive", "no", nullptr};
+                              "connection_queue", queue.c_str(), "request_timeout_ms", request_timeout.c_str(),
+                              "websocket_timeout_ms", "10000", "enable_websocket_ping_pong", "yes",
+                              "enable_keep_alive", "no", "access_control_allow_origin", "",
+                              "access_control_allow_methods", "", "access_control_allow_headers", "", nullptr};
   mg_callbacks callbacks{};
   callbacks.log_message = log_message;
-  mg_context* ctx = mg_start(&callbacks, nullptr, mg_options);
+  callbacks.begin_request = begin_request;
+  callbacks.connection_close = connection_close;
+  mg_context* ctx = mg_start(&callbacks, &bridge, mg_options);
   if (!ctx) {
     fmt::print(stderr, "bodyd-viewer-bridge: --http {}: cannot listen (another program on that port? pick another, or port 0)\n",
                http);
@@ -533,8 +777,10 @@ int main(int argc, char** argv) {
   mg_server_port ports[4];
   const int port_count = mg_get_server_ports(ctx, 4, ports);
   const int port = port_count > 0 ? ports[0].port : 0;
+  const std::string http_host = http.substr(0, http.rfind(':'));
+  bridge.set_access_policy(AccessPolicy{port});
 
-  const std::string url = fmt::format("http://{}:{}/", http.substr(0, http.rfind(':')), port);
+  const std::string url = fmt::format("http://{}:{}/", http_host, port);
   fmt::print("bodyd-viewer-bridge: serving {} (poses from {}, status from {})\n", url, endpoint, control);
   std::fflush(stdout);
   std::thread pose_thread([&] { bridge.pose_thread(); });
@@ -542,7 +788,8 @@ int main(int argc, char** argv) {
   std::thread push_thread([&] { bridge.push_thread(); });
   while (!g_stop.load()) std::this_thread::sleep_for(50ms);
   bridge.shared().changed.notify_all();
-  mg_stop(ctx);  // closes the WebSockets first: the push thread then writes to no one
+  bridge.close_websockets();
+  stop_server(ctx, http_host, port);  // closes the WebSockets first: the push thread then writes to no one
   pose_thread.join();
   status_thread.join();
   push_thread.join();
