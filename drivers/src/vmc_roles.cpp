@@ -52,6 +52,16 @@ std::optional<Role> VmcRoles::role_of(const VmcPose& pose, std::int64_t now_ns) 
     assign(pose.serial, Role::Head, now_ns,
            before.empty() ? std::string("the first HMD") : "the next HMD after " + quoted(before) + " went silent");
     head_ = pose;
+    // Sides decided relative to another head (a forged first packet, say) are decided again.
+    if (!hands_head_.empty() && hands_head_ != pose.serial) {
+      for (Role r : {Role::LeftHand, Role::RightHand}) {
+        if (!holder_[index(r)]) continue;
+        spdlog::info("{}: serial {} is no longer {}: the hands are decided again relative to the new head {}", name_,
+                     quoted(holder_[index(r)]->serial), role_name(r), quoted(pose.serial));
+        holder_[index(r)].reset();
+      }
+      hands_head_.clear();
+    }
     return Role::Head;
   }
   if (pose.device != VmcDevice::Controller) return std::nullopt;  // trackers: configured only
@@ -85,6 +95,7 @@ std::optional<Role> VmcRoles::role_of(const VmcPose& pose, std::int64_t now_ns) 
     const std::string left = a_left ? a->first : b->first, right = a_left ? b->first : a->first;
     assign(left, Role::LeftHand, now_ns, "the controller on the head's left");
     assign(right, Role::RightHand, now_ns, "the controller on the head's right");
+    hands_head_ = holder(Role::Head);
   } else {
     const Role role = left_free ? Role::LeftHand : Role::RightHand;
     const std::string& before = released_[index(role)];

@@ -11,6 +11,9 @@
 //     within kStaleNs, another serial's poses are unassigned (a second HMD, a spoofed packet).
 //   - A role whose holder has sent nothing for kStaleNs is released: the next serial of that
 //     kind to send takes it (both logged).
+//   - When the head passes to another serial, hands whose sides were decided relative to the
+//     old head are decided again relative to the new one (one forged first packet must not
+//     swap the hands for good).
 //   - At most kMaxCandidates controllers without a role are remembered; one silent for kStaleNs
 //     is forgotten, and a new serial beyond the limit is unassigned (logged at a limited rate).
 //
@@ -65,6 +68,7 @@ class VmcRoles {
   std::array<std::optional<Holder>, kRoleCount> holder_;  // automatic assignments
   std::map<std::string, Candidate> seen_;                 // controllers without a role yet
   std::optional<VmcPose> head_;                           // the head device's last pose
+  std::string hands_head_;                                // the head serial the hands' sides were decided against
   std::array<std::string, kRoleCount> released_;          // who last lost each role (for the log)
   std::array<std::uint64_t, kRoleCount> refused_{};       // per role since its holder got it (rate-limited log)
   std::uint64_t over_limit_ = 0;                          // candidates beyond kMaxCandidates (rate-limited log)

@@ -544,7 +544,9 @@ TEST(VmcRoles, AStreamingHolderKeepsItsRoleAndASilentOneLosesIt) {
     t += kFrameNs;
     EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Controller, "A", 0.3), t), Role::RightHand);
     EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Hmd, "REAL", 0, 1.6), t), Role::Head);
-    if (i < 80) EXPECT_FALSE(roles.role_of(vmc_pose(VmcDevice::Controller, "C", 0.4), t)) << i;  // B is recent
+    if (i < 80) {  // B is recent
+      EXPECT_FALSE(roles.role_of(vmc_pose(VmcDevice::Controller, "C", 0.4), t)) << i;
+    }
   }
   // B has been silent for 100 frames (1.1 s): C takes the left hand; A keeps the right.
   EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Controller, "C", -0.4), t + kFrameNs), Role::LeftHand);
@@ -558,6 +560,22 @@ TEST(VmcRoles, AStreamingHolderKeepsItsRoleAndASilentOneLosesIt) {
   for (std::size_t at = text.find("\"FORGED-2\" ignored"); at != std::string::npos; at = text.find("\"FORGED-2\" ignored", at + 1))
     ++lines;
   EXPECT_EQ(lines, 9u) << text;
+}
+
+// A forged first head facing backwards decides the hands' sides wrongly; when the real head
+// takes over, the sides are decided again relative to it.
+TEST(VmcRoles, HandsAreDecidedAgainForANewHead) {
+  detail::VmcRoles roles("vmc:test", {});
+  VmcPose forged = vmc_pose(VmcDevice::Hmd, "FORGED", 0, 1.6);
+  forged.rotation = Quat(Eigen::AngleAxisd(M_PI, Vec3::UnitY()));
+  ASSERT_EQ(roles.role_of(forged, 0), Role::Head);
+  EXPECT_FALSE(roles.role_of(vmc_pose(VmcDevice::Controller, "A", 0.3), 1));
+  EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Controller, "B", -0.3), 2), Role::RightHand);  // relative to FORGED
+  std::int64_t t = detail::VmcRoles::kStaleNs;
+  ASSERT_EQ(roles.role_of(vmc_pose(VmcDevice::Hmd, "REAL", 0, 1.6), t), Role::Head);  // facing +z
+  EXPECT_FALSE(roles.role_of(vmc_pose(VmcDevice::Controller, "A", 0.3), t + 1));  // waiting for both again
+  EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Controller, "B", -0.3), t + 2), Role::LeftHand);
+  EXPECT_EQ(roles.role_of(vmc_pose(VmcDevice::Controller, "A", 0.3), t + 3), Role::RightHand);
 }
 
 TEST(VmcRoles, ConfiguredSerialsAreNeverTakenOrReleased) {
