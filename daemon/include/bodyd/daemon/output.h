@@ -100,6 +100,9 @@ class Output {
   virtual void close() {}
 };
 
+// A factory checks the spec's target and options and makes the output without any I/O (no
+// socket, no file): the command line calls every factory once just to check the specs, so that a
+// malformed one exits 2 (check_specs, config.h); open() does the rest.
 using OutputFactory = std::unique_ptr<Output> (*)(const OutputSpec& spec, const OutputEnv& env, std::string& error);
 
 struct OutputKind {
