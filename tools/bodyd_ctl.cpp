@@ -1,7 +1,7 @@
 // bodyd-ctl: the command-line client of bodyd's control socket (docs/ctl.md, docs/control.md).
 //
 //   bodyd-ctl status [--json]
-//   bodyd-ctl calibrate --head-height-m 1.62 | --height-m 1.80 | --from-head
+//   bodyd-ctl calibrate --head-height-m 1.62 | --height-m 1.80 | --from-head | --pose
 //   bodyd-ctl reset
 //   bodyd-ctl reload-model [PATH]
 //   bodyd-ctl shutdown
@@ -189,10 +189,33 @@ std::string calibration_text(const json& r) {
   if (source == "auto") s += fmt::format(" automatically ({})", automatic == "fallback" ? "never still: from the head's 90th percentile height" : "from a still half second");
   else if (source == "control") s += " by bodyd-ctl calibrate";
   else if (source == "config") s += " by the configuration";
+  else if (source == "file") s += " by the calibration pose kept in the mounting file";
   if (automatic == "waiting") s += "; auto calibration waiting for the head to hold still";
   if (r.contains("offsets_configured"))
     s += r["offsets_configured"].get<bool>() ? "; device offsets configured" : "; no device offsets";
   if (r.contains("recentred")) s += r["recentred"].get<bool>() ? "; re-centred" : "; not re-centred";
+  return s;
+}
+
+// The device mounting (docs/control.md, "mounting"): per role where it came from and how far it
+// is from the default.
+std::string mounting_text(const json& m) {
+  if (!m.is_object() || !m.contains("roles")) return "none";
+  std::string s;
+  for (const char* role : {"head", "left_hand", "right_hand"}) {
+    if (!m["roles"].contains(role)) continue;
+    const json& r = m["roles"][role];
+    const std::string origin = r.value("origin", std::string("?"));
+    s += fmt::format("{}{} {}", s.empty() ? "" : "; ", role,
+                     origin == "default" ? std::string("default")
+                     : origin == "pose"  ? std::string("calibration pose")
+                     : origin == "file"  ? std::string("calibration pose (mounting file)")
+                     : origin == "auto"  ? std::string("auto (a still second)")
+                                         : origin);
+    if (origin != "default")
+      s += fmt::format(" ({:.1f} deg, {:.1f} cm from the default)", r.value("from_default_deg", 0.0), r.value("from_default_cm", 0.0));
+    if (!r.value("device_frames", false)) s += ", no device poses yet";
+  }
   return s;
 }
 
@@ -263,6 +286,7 @@ void print_status(const json& r) {
   std::cout << "reconstruction: " << percentiles(r.value("reconstruct_us", json())) << "\n";
   std::cout << "latency (sample arrival -> pose sent): " << percentiles(r.value("latency_us", json())) << "\n";
   std::cout << "calibration: " << calibration_text(r) << "\n";
+  if (r.contains("mounting")) std::cout << "device mounting: " << mounting_text(r["mounting"]) << "\n";
   if (r.contains("outputs") && r["outputs"].is_array() && !r["outputs"].empty()) {
     std::cout << "outputs:\n";
     for (const auto& o : r["outputs"]) std::cout << "  " << output_text(o) << "\n";
@@ -273,7 +297,20 @@ void print_status(const json& r) {
 
 void print_reply(const std::string& cmd, const json& r) {
   if (cmd == "status") return print_status(r);
-  if (cmd == "calibrate") std::cout << "calibrated: " << calibration_text(r) << "\n";
+  if (cmd == "calibrate") {
+    std::cout << "calibrated: " << calibration_text(r) << "\n";
+    if (r.contains("mounting")) {
+      std::cout << "device mounting: " << mounting_text(r["mounting"]) << "\n";
+      if (r.contains("roles"))
+        for (const auto& [role, e] : r["roles"].items())
+          std::cout << fmt::format("  {}: {:.1f} deg from the default (a person's pose varies by about {:.0f} deg), "
+                                   "held still within {:.1f} deg\n",
+                                   role, e.value("from_default_deg", 0.0), e.value("sd_deg", 0.0), e.value("motion_deg", 0.0));
+      if (r.contains("note")) std::cout << "  " << r["note"].get<std::string>() << "\n";
+      if (r.contains("mounting_file")) std::cout << "  kept in " << r["mounting_file"].get<std::string>() << "\n";
+      if (r.contains("mounting_file_error")) std::cout << "  not kept: " << r["mounting_file_error"].get<std::string>() << "\n";
+    }
+  }
   else if (cmd == "reset") {
     std::cout << "re-centred: the current facing is forward";
     if (r.contains("heading_deg")) std::cout << fmt::format(" (turned by {:.1f} degrees)", r["heading_deg"].get<double>());
@@ -310,10 +347,13 @@ int main(int argc, char** argv) {
 
   auto* calibrate = app.add_subcommand("calibrate", "set the user's size (exactly one option)");
   double head_height_m = 0.0, height_m = 0.0;
-  bool from_head = false;
+  bool from_head = false, pose = false;
   auto* o_head = calibrate->add_option("--head-height-m", head_height_m, "standing head height, metres (exact)");
   auto* o_height = calibrate->add_option("--height-m", height_m, "body height, metres (head height = 0.90 x this)");
   auto* o_from = calibrate->add_flag("--from-head", from_head, "take the current head tracker height (stand up straight)");
+  calibrate->add_flag("--pose", pose,
+                      "the calibration pose: stand straight, look ahead, arms relaxed at the sides, hold still for one "
+                      "second; learns how the headset and controllers sit on you, and your height (docs/vr-apps.md)");
   o_head->excludes(o_height)->excludes(o_from);
   o_height->excludes(o_from);
 
@@ -334,12 +374,17 @@ int main(int argc, char** argv) {
   const std::string cmd = app.get_subcommands().front()->get_name();
   json req{{"cmd", cmd}};
   if (cmd == "calibrate") {
-    const int given = int(o_head->count() > 0) + int(o_height->count() > 0) + int(from_head);
+    const int given = int(o_head->count() > 0) + int(o_height->count() > 0) + int(from_head) + int(pose);
     if (given != 1) {
-      std::cerr << "bodyd-ctl calibrate: give exactly one of --head-height-m H, --height-m H or --from-head\n";
+      std::cerr << "bodyd-ctl calibrate: give exactly one of --head-height-m H, --height-m H, --from-head or --pose\n";
       return kExitUsage;
     }
-    if (from_head) req["from"] = "head";
+    if (pose) {
+      req["from"] = "pose";
+      req["timeout_s"] = 5;
+      timeout_s = std::max(timeout_s, 8.0);  // bodyd waits up to 5 s for the still second
+      std::cerr << "bodyd-ctl: stand straight, look ahead, let your arms hang relaxed at your sides, and hold still...\n";
+    } else if (from_head) req["from"] = "head";
     else if (o_head->count() > 0) req["head_height_m"] = head_height_m;
     else req["user_height_m"] = height_m;
   } else if (cmd == "reload-model" && !model_path.empty()) {

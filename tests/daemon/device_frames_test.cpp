@@ -19,6 +19,7 @@
 #include <spdlog/spdlog.h>
 
 #include <cmath>
+#include <cstdio>
 #include <random>
 #include <thread>
 
@@ -121,11 +122,22 @@ TEST(CalibrationPose, RecoversAKnownMountingAndKeepsItAcrossARestart) {
     // Wait for the stream to start, then ask for the calibration pose.
     for (int i = 0; i < 200 && d.status()["samples_in"].get<std::uint64_t>() < 30; ++i)
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    const auto reply =
-        test::control_request(ctx, d.control_endpoint(), R"({"cmd":"calibrate","from":"pose","timeout_s":3})", 6000);
+    // What a user types: bodyd-ctl calibrate --pose (--json: the reply as bodyd sent it).
+    const std::string command = (test::bin_dir() / "bodyd-ctl").string() + " --control " + d.control_endpoint() +
+                                " --json calibrate --pose 2>/dev/null";
+    std::string out;
+    if (FILE* p = popen(command.c_str(), "r")) {
+      char buf[4096];
+      std::size_t n;
+      while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
+      EXPECT_EQ(pclose(p), 0) << out;
+    }
     d.request_stop();
     runner.join();
-    ASSERT_TRUE(reply);
+    const auto brace = out.find('{');
+    ASSERT_NE(brace, std::string::npos) << out;
+    const json parsed = json::parse(out.substr(brace, out.rfind('}') - brace + 1));
+    const std::optional<json> reply = parsed;
     ASSERT_EQ((*reply)["ok"], true) << reply->dump();
     EXPECT_EQ((*reply)["device_frames"], true);
     const json status = d.status();
