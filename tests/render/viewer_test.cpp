@@ -667,7 +667,12 @@ TEST(ViewerBrowser, HeadlessChromiumShowsTheSkeleton) {
 TEST(ViewerBrowser, HeadlessChromiumShowsTheDaemonsStatus) {
   const auto chromium = find_chromium();
   if (!chromium) GTEST_SKIP() << "chromium is not installed (apt-get install chromium); the viewer's browser test is skipped";
-  Stack stack({"--enable-hold-load"});
+  // A source name as long as an installed bodyd's and longer (replay:/usr/share/bodyd/...).
+  TempDir long_dir;
+  const fs::path deep = long_dir.path() / "usr/share/bodyd/data/demo/a-recording-directory-with-a-long-name";
+  fs::create_directories(deep);
+  fs::copy_file(bodyd::test::source_dir() / "data/demo/walk.csv", deep / "walk.csv");
+  Stack stack({"--enable-hold-load"}, deep / "walk.csv");
   ASSERT_EQ(stack.error, "");
   ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
   // ?hold-load also waits for the first status message, so the DOM Chromium dumps at the load
@@ -698,4 +703,13 @@ TEST(ViewerBrowser, HeadlessChromiumShowsTheDaemonsStatus) {
   EXPECT_NE(dom.find("id=\"calibrate\""), std::string::npos);
   EXPECT_NE(dom.find("id=\"reset\""), std::string::npos);
   EXPECT_NE(dom.find("walk.csv"), std::string::npos) << "the source's name is not shown";
+  // Issue 20 item 8: a long source line wraps inside the panel instead of running off the
+  // window's right edge, and the status line shows no unexplained tracker-clock time.
+  EXPECT_EQ(attribute("data-overflow"), "false") << "the daemon panel's content is wider than the panel";
+  const size_t status_at = dom.find("id=\"status\"");
+  ASSERT_NE(status_at, std::string::npos);
+  const size_t text_at = dom.find('>', status_at) + 1;
+  const std::string status_text = dom.substr(text_at, dom.find('<', text_at) - text_at);
+  EXPECT_NE(status_text.find("received"), std::string::npos) << status_text;
+  EXPECT_EQ(status_text.find(" t "), std::string::npos) << "status line: " << status_text;
 }
