@@ -83,7 +83,11 @@ class FrameStampSource final : public TrackerSource {
 }  // namespace
 
 std::optional<SourceSpec> parse_source_spec(std::string_view text, std::string& error) {
-  if (text == "steamvr" || text == "monado") return SourceSpec{text == "steamvr" ? SourceKind::Steamvr : SourceKind::Monado, ""};
+  if (text == "steamvr" || text == "monado") {  // the socket's default
+    SourceSpec spec;
+    spec.kind = text == "steamvr" ? SourceKind::Steamvr : SourceKind::Monado;
+    return spec;
+  }
   struct Prefix {
     std::string_view text;
     SourceKind kind;

@@ -274,3 +274,73 @@ TEST(SteamvrBridge, BadInputIsCountedAndDroppedWhileTheGoodDriverKeepsItsTracker
 
 }  // namespace
 }  // namespace bodyd
+
+namespace bodyd {
+namespace {
+
+// The trackers stay in the driver's space after `reset` (bodyd-ctl reset re-centres bodyd's
+// world; SteamVR's is unchanged): after the reset, each Position is the ZeroMQ pose's joint
+// taken back through the re-centring that `status` reports (docs/control.md):
+// p_driver = R^-1 p + origin, q_driver = R^-1 q, R the turn by -heading_deg about +Y.
+TEST(SteamvrBridge, AfterResetTheTrackersStayInTheDriversSpace) {
+  Loop loop;
+  if (std::string why = python_skip_reason(loop.python); !why.empty()) GTEST_SKIP() << why;
+  ASSERT_TRUE(loop.start("tcp://127.0.0.1:*"));
+  const auto endpoints = test::wait_endpoints(loop.dir.path / "endpoints.json", 5000);
+  ASSERT_TRUE(endpoints && endpoints->contains("control"));
+  write_poses(loop.dir.path / "poses.txt");
+  test::Child driver({loop.python, client_script("driver_client.py").string(), pb_dir().string(), "play",
+                      loop.socket.string(), (loop.dir.path / "poses.txt").string(),
+                      (loop.dir.path / "received.jsonl").string(), "--repeat", "3"},
+                     loop.dir.path / "client.err");
+  // Collect for a second, reset, collect the rest.
+  const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(1500);
+  collect(*loop.sub, loop.skeleton, loop.poses, [&] { return std::chrono::steady_clock::now() > until; });
+  const std::size_t before = loop.poses.size();
+  ASSERT_GT(before, 20u) << loop.daemon->log();
+  const auto reset = test::control_request(loop.ctx, (*endpoints)["control"], R"({"cmd":"reset"})");
+  ASSERT_TRUE(reset && (*reset)["ok"] == true) << (reset ? reset->dump() : "no reply");
+  const auto status = test::control_request(loop.ctx, (*endpoints)["control"], R"({"cmd":"status"})");
+  ASSERT_TRUE(status && (*status)["recentred"] == true) << (status ? status->dump() : "");
+  const double heading = (*status)["recentre"]["heading_deg"].get<double>() * M_PI / 180.0;
+  const Vec3 origin((*status)["recentre"]["origin_m"][0].get<double>(), 0.0, (*status)["recentre"]["origin_m"][1].get<double>());
+  collect(*loop.sub, loop.skeleton, loop.poses, [&] { return driver.wait(0).has_value(); });
+  ASSERT_EQ(driver.wait(0), 0) << driver.log();
+  loop.daemon->signal(SIGINT);
+  ASSERT_EQ(loop.daemon->wait(10000), 0) << loop.daemon->log();
+  ASSERT_GT(loop.poses.size(), before + 100) << loop.daemon->log();
+
+  // R's forward is (sin -heading, 0, cos -heading) (docs/control.md: heading_deg = -atan2(f.x, f.z)).
+  const Quat r(Eigen::AngleAxisd(-heading, Vec3::UnitY()));
+  EXPECT_GT(std::abs(heading) + origin.norm(), 0.05) << "the clip should have moved the head off the origin";
+  // The first poses from `before` on may have been made before the reset took effect (on their
+  // way while it was asked for): those 30 are offered as they are, then taken back through the
+  // re-centring; every later one only taken back (an output that did not undo the re-centring
+  // matches none of them).
+  std::vector<protocol::PoseMessage> driver_space(loop.poses.begin(), loop.poses.begin() + static_cast<std::ptrdiff_t>(before));
+  for (std::size_t i = before; i < loop.poses.size(); ++i) {
+    if (i < before + 30) driver_space.push_back(loop.poses[i]);
+    driver_space.push_back(loop.poses[i]);
+    for (auto& j : driver_space.back().joints) {
+      const Vec3 p = r.conjugate() * vec3(j.position_m) + origin;
+      const Quat q = (r.conjugate() * quat_xyzw(j.rotation_xyzw)).normalized();
+      j.position_m = {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z())};
+      j.rotation_xyzw = {static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()),
+                         static_cast<float>(q.w())};
+    }
+  }
+  Loop& l = loop;
+  l.poses = driver_space;
+  const Received rec = parse(read_jsonl(loop.dir.path / "received.jsonl"));
+  double mm = 0, deg = 0;
+  std::size_t matched = 0;
+  compare(l, rec, mm, deg, matched);
+  EXPECT_EQ(matched, rec.groups.size());
+  EXPECT_LE(mm, 1.0);
+  EXPECT_LE(deg, 0.1);
+  std::cout << matched << " groups; after the reset (heading " << heading * 180.0 / M_PI << " deg, origin " << origin.x()
+            << ", " << origin.z() << " m) worst " << mm << " mm, " << deg << " deg\n";
+}
+
+}  // namespace
+}  // namespace bodyd

@@ -89,10 +89,12 @@ inline Vec3 vec3(const std::array<float, 3>& a) { return Vec3(a[0], a[1], a[2]);
 inline Quat quat_xyzw(const std::array<float, 4>& a) { return Quat(a[3], a[0], a[1], a[2]).normalized(); }
 inline double angle_deg(const Quat& a, const Quat& b) { return a.angularDistance(b) * 180.0 / M_PI; }
 
-// Receives skeleton and poses until `done` says so (checked when nothing arrives for 100 ms).
+// Receives skeleton and poses until `done` says so (checked after each message and when
+// nothing arrives for 100 ms).
 template <typename Done>
 void collect(zmq::socket_t& sub, protocol::SkeletonMessage& skeleton, std::vector<protocol::PoseMessage>& poses, Done done) {
-  for (;;) {
+  for (bool first = true;; first = false) {
+    if (!first && done()) return;
     zmq::pollitem_t item{sub.handle(), 0, ZMQ_POLLIN, 0};
     if (zmq::poll(&item, 1, std::chrono::milliseconds(100)) == 0) {
       if (done()) return;
