@@ -85,6 +85,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   std::string device_frames = "joint", calibration_pose = "first-still", reference_path;
   double tracker_rate_hz = 0.0, jitter_ms = 0.0;
+  bool method_pose_eye = false;
   app.add_option("--device-frames", device_frames,
                  "joint: the trackers are the skeleton's joints (default); xr: what a headset and controllers send "
                  "(the headset at the eyes in the XR axes, the controllers' grip poses, a random mounting per clip), "
@@ -93,9 +94,13 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--calibration-pose", calibration_pose,
                  "with --device-frames xr: first-still (the clip's first still second, default), none (the default "
-                 "mounting only), a frame number N (that frame's pose held for 1.2 s before the clip starts), or truth (analysis: "
-                 "the true mounting, what a perfect calibration gives)")
+                 "mounting only), a frame number N (that frame's pose held for 1.2 s before the clip starts), reference (the "
+                 "user stands in the calibration pose as the body reference describes it for 1.05 s before the clip, at its "
+                 "first head position and heading), or truth (analysis: the true mounting, what a perfect calibration "
+                 "gives)")
       ->capture_default_str();
+  app.add_flag("--estimate-eye-offset", method_pose_eye,
+               "with a calibration pose: also estimate the eye offset from the wrists (docs/evaluation.md)");
   app.add_option("--reference", reference_path, "body reference of the default mounting (default: data/body-reference.json)");
   app.add_option("--tracker-rate-hz", tracker_rate_hz, "tracker sample rate (default: the clip's frame rate)")
       ->check(CLI::Range(1.0, 2000.0));
@@ -137,9 +142,11 @@ int main(int argc, char** argv) {
     if (device_frames == "xr") {
       options.device_frames = true;
       options.body_reference = bodyd::read_body_reference(bodyd::find_body_reference(reference_path));
+      options.pose_calibration.estimate_eye_offset = method_pose_eye;
       if (calibration_pose == "truth") options.oracle_mounting = true;
       else if (calibration_pose != "none") options.calibrate_pose = true;
-      if (calibration_pose != "none" && calibration_pose != "first-still" && calibration_pose != "truth") {
+      if (calibration_pose != "none" && calibration_pose != "first-still" && calibration_pose != "truth" &&
+          calibration_pose != "reference") {
         try {
           std::size_t used = 0;
           hold_frame = std::stoi(calibration_pose, &used);
@@ -163,7 +170,9 @@ int main(int argc, char** argv) {
       o.seed = mix_seed(seed, static_cast<std::uint64_t>(index));
       if (options.device_frames) o.device_mounting = session_mounting(index);
       std::vector<bodyd::TrackerSample> samples = bodyd::simulate_trackers(clip, o);
-      if (hold_frame) {
+      if (calibration_pose == "reference") {
+        samples = bodyd::with_calibration_pose(samples, options.body_reference, *o.device_mounting, o.rate_hz, 1.05);
+      } else if (hold_frame) {
         // The calibration pose: frame N's device poses held still for 1.2 s before the clip.
         if (*hold_frame >= clip.frame_count())
           throw std::runtime_error(fmt::format("--calibration-pose {}: the clip has {} frames", *hold_frame, clip.frame_count()));

@@ -272,10 +272,11 @@ std::optional<PoseCalibration> PoseCalibrator::try_estimate(std::int64_t t_ns) c
       c.rotation_sd_deg[static_cast<size_t>(h + 1)] = reference_.hand_sd_deg[static_cast<size_t>(h)];
     }
     if (options_.estimate_eye_offset && c.measured[1] && c.measured[2]) {
-      // The Head joint straight below/behind the eyes at the reference's height and depth.
+      // The Head joint above the wrists' midpoint at the reference's height and depth.
       const Vec3 mid = 0.5 * (wrist[0] + wrist[1]);
       const Quat Fi = F.conjugate();
       Vec3 h = Fi * head.mean_p;  // in facing axes (a turn about +Y keeps heights)
+      h.x() = (Fi * mid).x();  // centred between the wrists of a symmetric stance
       h.y() = reference_.head_over_wrist_height * mid.y();
       h.z() = (Fi * mid).z() + reference_.head_ahead_of_wrists_m;
       Th.position_m = head.mean_q.conjugate() * (F * h - head.mean_p);

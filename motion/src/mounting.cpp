@@ -351,6 +351,19 @@ Mounting default_mounting(const BodyReference& r) {
   return m;
 }
 
+std::array<RigidTransform, kRoleCount> calibration_pose_joints(const BodyReference& ref, const Vec3& head_position_m,
+                                                               double heading_rad, double half_width_m) {
+  const Quat F = quat_from_yaw(heading_rad);
+  const double wrist_y = head_position_m.y() / ref.head_over_wrist_height;
+  const Vec3 floor_head(head_position_m.x(), 0.0, head_position_m.z());
+  std::array<RigidTransform, kRoleCount> j;
+  j[0] = {head_position_m, (F * ref.head_in_facing).normalized()};
+  // Facing frame: +X is the body's left; the head is head_ahead_of_wrists_m ahead of the wrists.
+  j[1] = {floor_head + F * Vec3(half_width_m, wrist_y, -ref.head_ahead_of_wrists_m), (F * ref.hand_in_facing[0]).normalized()};
+  j[2] = {floor_head + F * Vec3(-half_width_m, wrist_y, -ref.head_ahead_of_wrists_m), (F * ref.hand_in_facing[1]).normalized()};
+  return j;
+}
+
 MountingDifference mounting_difference(const RigidTransform& a, const RigidTransform& b) {
   return {deg(geodesic_angle(a.rotation, b.rotation)), 100.0 * (a.position_m - b.position_m).norm()};
 }

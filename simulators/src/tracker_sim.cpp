@@ -192,6 +192,35 @@ Mounting draw_session_mounting(const Mounting& base, const MountingSpread& sprea
   return m;
 }
 
+std::vector<TrackerSample> with_calibration_pose(const std::vector<TrackerSample>& samples, const BodyReference& reference,
+                                                 const Mounting& mounting, double rate_hz, double seconds) {
+  const TrackerSample* head0 = nullptr;
+  for (const TrackerSample& s : samples)
+    if (s.role == Role::Head && s.valid) {
+      head0 = &s;
+      break;
+    }
+  if (head0 == nullptr) throw SimError("no valid head sample to stand the calibration pose at");
+  const TrackerSample joint0 = device_to_joint(*head0, mounting.T_device_joint[0]);
+  const double heading = yaw_of((joint0.rotation * reference.head_in_facing.conjugate()).normalized(), Vec3::UnitZ());
+  const auto joints = calibration_pose_joints(reference, joint0.position_m, heading);
+  const double period_ns = 1e9 / rate_hz;
+  const auto n = static_cast<std::int64_t>(seconds * 1e9 / period_ns);
+  std::vector<TrackerSample> out;
+  out.reserve(samples.size() + static_cast<std::size_t>(n) * kRoleCount);
+  // Each instant's hands before its head, so the last head sample (which completes the still
+  // second) follows every sample of the pose: nothing of the pose is left after the calibration.
+  for (std::int64_t k = n; k >= 1; --k)
+    for (Role r : {Role::LeftHand, Role::RightHand, Role::Head}) {
+      const RigidTransform& J = joints[static_cast<std::size_t>(r)];
+      const TrackerSample j{samples.front().t_ns - std::llround(static_cast<double>(k) * period_ns), r, true, J.position_m,
+                            J.rotation, PoseFrame::Joint};
+      out.push_back(joint_to_device(j, mounting.T_device_joint[static_cast<std::size_t>(r)]));
+    }
+  out.insert(out.end(), samples.begin(), samples.end());
+  return out;
+}
+
 std::vector<TrackerSample> simulate_trackers(const Motion& motion, const SimOptions& options) {
   if (std::string err = options.validate(); !err.empty()) throw SimError("bad simulator options: " + err);
   return simulate_trackers(TrackerTrajectory(motion), options);

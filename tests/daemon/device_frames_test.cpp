@@ -36,18 +36,10 @@ double deg(double rad) { return rad * 180.0 / M_PI; }
 
 BodyReference reference() { return read_body_reference(test::source_dir() / "data" / "body-reference.json"); }
 
-// The joints of a person standing in the calibration pose as the body reference describes it
-// (Head joint at `head_y_m`, wrists at the reference's height ratio, 0.2 m to each side), facing
-// bodyd's -Z (where a headset with identity rotation looks).
+// A person standing in the calibration pose as the body reference describes it, Head joint at
+// `head_y_m`, facing bodyd's -Z (where a headset with identity rotation looks).
 std::array<RigidTransform, kRoleCount> calibration_pose_joints(const BodyReference& ref, double head_y_m) {
-  const Quat F = quat_from_yaw(M_PI);  // facing frame -> world: +Z forward becomes -Z
-  const double wrist_y = head_y_m / ref.head_over_wrist_height;
-  std::array<RigidTransform, kRoleCount> j;
-  j[0] = {Vec3(0.0, head_y_m, 0.0), (F * ref.head_in_facing).normalized()};
-  // Facing frame: +X is the body's left; the head is head_ahead_of_wrists_m ahead of the wrists.
-  j[1] = {F * Vec3(0.2, wrist_y, -ref.head_ahead_of_wrists_m), (F * ref.hand_in_facing[0]).normalized()};
-  j[2] = {F * Vec3(-0.2, wrist_y, -ref.head_ahead_of_wrists_m), (F * ref.hand_in_facing[1]).normalized()};
-  return j;
+  return bodyd::calibration_pose_joints(ref, Vec3(0.0, head_y_m, 0.0), M_PI);
 }
 
 // `seconds` of device samples at 90 Hz (0.5 mm noise) of a person holding `joints`, seen through

@@ -115,6 +115,14 @@ inline constexpr std::string_view kBodyReferenceFile = "data/body-reference.json
 // normalised); identity for none.
 [[nodiscard]] Quat mean_rotation(std::span<const Quat> rotations);
 
+// The joints (Head, Hand_L, Hand_R) of a person standing in the calibration pose exactly as the
+// reference describes it: the Head joint at `head_position_m`, the body facing `heading_rad`
+// (a turn about +Y from bodyd's +Z), the wrists at the reference's height ratio and depth,
+// `half_width_m` to each side. Indexed by Role.
+[[nodiscard]] std::array<RigidTransform, kRoleCount> calibration_pose_joints(const BodyReference& reference,
+                                                                             const Vec3& head_position_m, double heading_rad,
+                                                                             double half_width_m = 0.2);
+
 // The body-facing rotation (facing frame -> world) of a headset pose: a turn about +Y that takes
 // +Z to the horizontal part of the headset's line of sight (its -Z).
 [[nodiscard]] Quat facing_from_device(const Quat& R_world_device);

@@ -86,6 +86,14 @@ struct MountingSpread {
 // with its eye offset moved, each controller turned about its grip point.
 [[nodiscard]] Mounting draw_session_mounting(const Mounting& base, const MountingSpread& spread, std::uint64_t seed);
 
+// `samples` (device poses through `mounting`, sorted by time) preceded by `seconds` of the
+// calibration pose a user is asked for (motion/mounting.h calibration_pose_joints: the
+// reference's pose at the first head sample's joint position and heading), sampled at rate_hz,
+// seen through the same mounting. Throws SimError when there is no valid head sample.
+[[nodiscard]] std::vector<TrackerSample> with_calibration_pose(const std::vector<TrackerSample>& samples,
+                                                               const BodyReference& reference, const Mounting& mounting,
+                                                               double rate_hz, double seconds);
+
 // The true (noise-free, undelayed) trajectories of the three tracked joints of a clip.
 // Immutable after construction; pose_at() is thread-safe and does not allocate.
 class TrackerTrajectory {
