@@ -9,6 +9,13 @@
 #include <cerrno>
 #include <mutex>
 #include <set>
+#include <cstring>
+#include <string_view>
+
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <unistd.h>
 
 namespace bodyd::daemon {
 
@@ -25,12 +32,52 @@ std::string ZmqSocket::open(int type, const char* type_name) {
   return {};
 }
 
+namespace {
+
+// The socket file of an ipc:// endpoint ("" for other transports and for Linux's abstract
+// namespace, ipc://@NAME).
+std::string ipc_socket_path(std::string_view endpoint) {
+  constexpr std::string_view kIpc = "ipc://";
+  if (endpoint.rfind(kIpc, 0) != 0 || endpoint.size() == kIpc.size() || endpoint[kIpc.size()] == '@') return {};
+  return std::string(endpoint.substr(kIpc.size()));
+}
+
+// Removes a socket file nobody listens on (connect is refused): the one our closed socket left.
+// A file that another process has bound since (it replaces the file and listens) is kept.
+void remove_stale_socket_file(const std::string& path) {
+  struct stat st{};
+  if (::lstat(path.c_str(), &st) != 0 || !S_ISSOCK(st.st_mode)) return;
+  sockaddr_un address{};
+  if (path.size() >= sizeof(address.sun_path)) return;
+  address.sun_family = AF_UNIX;
+  std::memcpy(address.sun_path, path.c_str(), path.size() + 1);
+  const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) return;
+  const bool refused = ::connect(fd, reinterpret_cast<const sockaddr*>(&address), sizeof(address)) != 0 &&
+                       errno == ECONNREFUSED;
+  ::close(fd);
+  if (refused && ::unlink(path.c_str()) != 0)
+    spdlog::debug("cannot remove the socket file {}: {}", path, std::strerror(errno));
+}
+
+}  // namespace
+
+// Closes the socket and the context, then removes the socket file of the ipc:// endpoint it
+// was bound to (libzmq 4.3 unlinks only the files of ipc://* wildcards; docs/reliability.md),
+// unless another socket listens there by then.
 void ZmqSocket::close() {
-  if (socket_) zmq_close(socket_);
+  std::string ipc_path;
+  if (socket_) {
+    char last[512] = {};
+    size_t size = sizeof(last);
+    if (zmq_getsockopt(socket_, ZMQ_LAST_ENDPOINT, last, &size) == 0) ipc_path = ipc_socket_path(last);
+    zmq_close(socket_);
+  }
   socket_ = nullptr;
   zap_.reset();
-  if (context_) zmq_ctx_term(context_);
+  if (context_) zmq_ctx_term(context_);  // the listener is closed once this returns
   context_ = nullptr;
+  if (!ipc_path.empty()) remove_stale_socket_file(ipc_path);
 }
 
 std::string ZmqSocket::allow_only_keys_in(const std::string& dir) {

@@ -116,6 +116,10 @@ TEST(BodydProcess, StopsCleanlyOnSigtermSigintAndShutdownRequest) {
     EXPECT_EQ(child.wait(3000), 0) << child.log();
     EXPECT_NE(child.log().find("stopped:"), std::string::npos) << child.log();
     EXPECT_NE(child.log().find("in a loop"), std::string::npos) << child.log();
+    // Issue 20 item 8: a clean stop removes the ipc:// socket files it bound (libzmq leaves them).
+    for (const char* file : {"pose", "control"})
+      EXPECT_FALSE(std::filesystem::exists(std::filesystem::symlink_status(dir.path / file)))
+          << file << " is still there after a clean stop";
   }
 }
 
