@@ -5,6 +5,14 @@
 #include <spdlog/spdlog.h>
 #include <zmq.h>
 
+#include <dirent.h>
+#include <sys/resource.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <string>
 #include <vector>
 
@@ -18,15 +26,36 @@ constexpr std::int64_t kMaxFrameBytes = 64 * 1024;
 // frame per hop. A message with more frames than this is no request and is dropped unanswered.
 constexpr std::size_t kMaxFrames = 32;
 
+// Connections (issue 20 item 6). A peer that has not finished ZeroMQ's handshake within this is
+// dropped by libzmq (a raw connection that sends nothing, or garbage).
+constexpr int kHandshakeMs = 2000;
+// At most this many connections, and at most a quarter of the descriptors still free when the
+// socket is bound: beyond, the one idle the longest is closed, so a newcomer always gets in.
+constexpr std::size_t kMaxPeers = 64;
+constexpr std::size_t kMinPeers = 4;
+constexpr const char* kMonitorEndpoint = "inproc://bodyd-control-monitor";
+
 struct Frame {
   std::string data;
 };
 
+// Descriptors open in this process now (/proc/self/fd), or 0 when unknown.
+std::size_t open_descriptors() {
+  DIR* dir = ::opendir("/proc/self/fd");
+  if (!dir) return 0;
+  std::size_t n = 0;
+  while (const dirent* e = ::readdir(dir))
+    if (e->d_name[0] != '.') ++n;
+  ::closedir(dir);
+  return n > 0 ? n - 1 : 0;  // not the directory's own
+}
+
 // Reads the rest of one message (every part is there once the first is: ZeroMQ delivers whole
 // messages). Keeps at most kMaxFrames frames; returns false when there were more (the message
-// is drained all the same).
-bool read_message(void* socket, zmq_msg_t& first, std::vector<Frame>& out) {
+// is drained all the same). out_fd: the connection it came on (libzmq's SRCFD), or -1.
+bool read_message(void* socket, zmq_msg_t& first, std::vector<Frame>& out, int& out_fd) {
   out.clear();
+  out_fd = -1;
   bool within_limit = true;
   zmq_msg_t msg;
   zmq_msg_init(&msg);
@@ -36,6 +65,7 @@ bool read_message(void* socket, zmq_msg_t& first, std::vector<Frame>& out) {
       out.push_back({std::string(static_cast<const char*>(zmq_msg_data(&msg)), zmq_msg_size(&msg))});
     else
       within_limit = false;
+    if (const int fd = zmq_msg_get(&msg, ZMQ_SRCFD); fd >= 0) out_fd = fd;
     const bool more = zmq_msg_more(&msg);
     zmq_msg_close(&msg);
     if (!more) return within_limit;
@@ -67,6 +97,26 @@ std::string ControlServer::open(const DaemonConfig& config) {
   // A reply to a peer that has gone, or that never reads its replies (its queue full), fails at
   // once (EHOSTUNREACH/EAGAIN) and is dropped; it never blocks or reaches another peer.
   zmq_setsockopt(router, ZMQ_ROUTER_MANDATORY, &one, sizeof(one));
+  zmq_setsockopt(router, ZMQ_HANDSHAKE_IVL, &kHandshakeMs, sizeof(kHandshakeMs));
+  // Every connection's coming and going, for the cap and for running out of descriptors: libzmq
+  // retries a failed accept() at once, forever (libzmq 4.3 tcp/ipc_listener in_event: "TODO:
+  // Handle specific errors like ENFILE/EMFILE"), which was a busy loop; only closing a connection
+  // or the listener ends it. The receiving end takes any number of events (RCVHWM 0), so the
+  // I/O thread never blocks on them.
+  if (zmq_socket_monitor(router, kMonitorEndpoint,
+                         ZMQ_EVENT_ACCEPTED | ZMQ_EVENT_ACCEPT_FAILED | ZMQ_EVENT_DISCONNECTED) != 0)
+    return "--control: cannot monitor the control socket: " + zmq_error_text();
+  monitor_ = zmq_socket(socket_.context(), ZMQ_PAIR);
+  const int unlimited = 0;
+  if (!monitor_ || zmq_setsockopt(monitor_, ZMQ_RCVHWM, &unlimited, sizeof unlimited) != 0 ||
+      zmq_setsockopt(monitor_, ZMQ_LINGER, &zero, sizeof zero) != 0 || zmq_connect(monitor_, kMonitorEndpoint) != 0)
+    return "--control: cannot monitor the control socket: " + zmq_error_text();
+  rlimit limit{};
+  if (::getrlimit(RLIMIT_NOFILE, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY) {
+    const std::size_t open = open_descriptors();
+    const std::size_t free = limit.rlim_cur > open ? static_cast<std::size_t>(limit.rlim_cur) - open : 0;
+    max_peers_ = std::clamp(free / 4, kMinPeers, kMaxPeers);
+  }
   if (std::string e = set_curve_server(router, config.curve_secret_key_file, curve_public_); !e.empty()) return e;
   if (!config.curve_allow_dir.empty() && !curve_public_.empty())
     if (std::string e = socket_.allow_only_keys_in(config.curve_allow_dir); !e.empty()) return e;
@@ -88,7 +138,95 @@ void ControlServer::start(ControlTarget& target) {
 void ControlServer::stop() {
   stop_.store(true);
   if (thread_.joinable()) thread_.join();
+  if (monitor_) {
+    if (socket_.get()) zmq_socket_monitor(socket_.get(), nullptr, 0);
+    zmq_close(monitor_);
+    monitor_ = nullptr;
+  }
   socket_.close();
+}
+
+void ControlServer::on_monitor_event(std::uint16_t event, std::uint32_t value) {
+  const int fd = static_cast<int>(value);
+  if (event == ZMQ_EVENT_ACCEPTED) {
+    peers_[fd] = {Clock::now(), next_order_++};
+    backoff_ = std::chrono::milliseconds(100);
+    if (peers_.size() > max_peers_) {
+      if (!cap_logged_) {
+        cap_logged_ = true;
+        spdlog::warn("control: {} connections open, the most (a quarter of the free file descriptors, at most {}); "
+                     "each new one closes the one idle the longest (logged once)",
+                     max_peers_, kMaxPeers);
+      }
+      evict_idlest();
+    }
+  } else if (event == ZMQ_EVENT_DISCONNECTED) {
+    peers_.erase(fd);
+    if (fd == evicting_fd_) evicting_fd_ = -1;
+  } else if (event == ZMQ_EVENT_ACCEPT_FAILED && (value == EMFILE || value == ENFILE)) {
+    if (!exhaustion_logged_) {
+      exhaustion_logged_ = true;
+      rlimit limit{};
+      ::getrlimit(RLIMIT_NOFILE, &limit);
+      spdlog::warn("control: out of file descriptors ({}; the limit is {}, ulimit -n, {} control connections open): "
+                   "the idlest control connection is closed to let a new one in, or new connections wait; raise the "
+                   "limit if this is not an attack (logged once)",
+                   std::strerror(static_cast<int>(value)), static_cast<long long>(limit.rlim_cur), peers_.size());
+    }
+    if (evicting_fd_ >= 0) return;  // one closing already: its descriptor is the one coming free
+    if (!peers_.empty()) {
+      evict_idlest();
+    } else {
+      drop_listener();
+    }
+  }
+}
+
+// Shuts the idlest connection down (libzmq then closes it and reports DISCONNECTED). Only a
+// descriptor that is still a socket bound to our endpoint's address family is touched.
+void ControlServer::evict_idlest() {
+  auto idlest = peers_.end();
+  for (auto it = peers_.begin(); it != peers_.end(); ++it) {
+    if (it->first == evicting_fd_) continue;
+    if (idlest == peers_.end() || it->second.last_active < idlest->second.last_active ||
+        (it->second.last_active == idlest->second.last_active && it->second.order < idlest->second.order))
+      idlest = it;
+  }
+  if (idlest == peers_.end()) return;
+  const int fd = idlest->first;
+  sockaddr_storage local{};
+  socklen_t len = sizeof local;
+  int type = 0;
+  socklen_t type_len = sizeof type;
+  const bool ours = ::getsockname(fd, reinterpret_cast<sockaddr*>(&local), &len) == 0 &&
+                    ::getsockopt(fd, SOL_SOCKET, SO_TYPE, &type, &type_len) == 0 && type == SOCK_STREAM &&
+                    (bound_.rfind("ipc://", 0) == 0 ? local.ss_family == AF_UNIX : local.ss_family != AF_UNIX);
+  if (!ours) {
+    peers_.erase(idlest);  // closed and reused already: its DISCONNECTED is on the way
+    return;
+  }
+  ::shutdown(fd, SHUT_RDWR);
+  evicting_fd_ = fd;
+}
+
+// Out of descriptors with no connection of ours to close: libzmq would retry accept() at once,
+// forever, so the endpoint is unbound and bound again after a back-off (100 ms doubling to 1 s).
+// Connected clients keep their connections; new ones (REQ reconnects by itself) wait.
+void ControlServer::drop_listener() {
+  if (listener_dropped_) return;
+  if (zmq_unbind(socket_.get(), bound_.c_str()) != 0) return;
+  listener_dropped_ = true;
+  rebind_at_ = Clock::now() + backoff_;
+  backoff_ = std::min(backoff_ * 2, std::chrono::milliseconds(1000));
+}
+
+void ControlServer::retry_listener() {
+  if (!listener_dropped_ || Clock::now() < rebind_at_) return;
+  if (zmq_bind(socket_.get(), bound_.c_str()) == 0) {
+    listener_dropped_ = false;
+  } else {
+    rebind_at_ = Clock::now() + backoff_;
+  }
 }
 
 void ControlServer::loop(ControlTarget& target) {
@@ -96,8 +234,36 @@ void ControlServer::loop(ControlTarget& target) {
   std::vector<Frame> frames;
   frames.reserve(kMaxFrames);
   while (!stop_.load()) {
-    zmq_pollitem_t item{router, 0, ZMQ_POLLIN, 0};
-    if (zmq_poll(&item, 1, 100) <= 0) continue;
+    zmq_pollitem_t items[2] = {{router, 0, ZMQ_POLLIN, 0}, {monitor_, 0, ZMQ_POLLIN, 0}};
+    const int ready = zmq_poll(items, monitor_ ? 2 : 1, 100);
+    retry_listener();
+    if (ready <= 0) continue;
+    if (monitor_ && (items[1].revents & ZMQ_POLLIN)) {
+      // Events are two frames: 2 bytes event, 4 bytes value (descriptor or errno); the endpoint.
+      for (int n = 0; n < 1000; ++n) {
+        zmq_msg_t event, endpoint;
+        zmq_msg_init(&event);
+        if (zmq_msg_recv(&event, monitor_, ZMQ_DONTWAIT) < 0) {
+          zmq_msg_close(&event);
+          break;
+        }
+        std::uint16_t id = 0;
+        std::uint32_t value = 0;
+        if (zmq_msg_size(&event) >= 6) {
+          std::memcpy(&id, zmq_msg_data(&event), 2);
+          std::memcpy(&value, static_cast<const char*>(zmq_msg_data(&event)) + 2, 4);
+        }
+        const bool more = zmq_msg_more(&event);
+        zmq_msg_close(&event);
+        if (more) {
+          zmq_msg_init(&endpoint);
+          (void)zmq_msg_recv(&endpoint, monitor_, 0);
+          zmq_msg_close(&endpoint);
+        }
+        on_monitor_event(id, value);
+      }
+    }
+    if (!(items[0].revents & ZMQ_POLLIN)) continue;
     zmq_msg_t first;
     zmq_msg_init(&first);
     if (zmq_msg_recv(&first, router, ZMQ_DONTWAIT) < 0) {
@@ -105,7 +271,10 @@ void ControlServer::loop(ControlTarget& target) {
       continue;
     }
     // frames: [peer routing id (ROUTER adds it)] [envelope...] [empty delimiter] [request...]
-    if (!read_message(router, first, frames)) {
+    int source_fd = -1;
+    const bool whole = read_message(router, first, frames, source_fd);
+    if (auto peer = peers_.find(source_fd); peer != peers_.end()) peer->second.last_active = Clock::now();
+    if (!whole) {
       spdlog::debug("control: dropped a message of more than {} frames", kMaxFrames);
       continue;
     }

@@ -7,6 +7,9 @@
 #include "zmq_util.h"
 
 #include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <map>
 #include <string>
 #include <thread>
 
@@ -29,8 +32,28 @@ class ControlServer {
 
  private:
   void loop(ControlTarget& target);
+  // Connection accounting from the socket monitor (docs/reliability.md, "Control socket").
+  void on_monitor_event(std::uint16_t event, std::uint32_t value);
+  void evict_idlest();
+  void drop_listener();
+  void retry_listener();
+
+  using Clock = std::chrono::steady_clock;
+  struct Peer {
+    Clock::time_point last_active;  // accepted, or last request
+    std::uint64_t order = 0;        // accept order, for ties
+  };
 
   ZmqSocket socket_;
+  void* monitor_ = nullptr;  // PAIR receiving the ROUTER's monitor events (control thread)
+  std::map<int, Peer> peers_;  // by descriptor: the connections open now
+  std::uint64_t next_order_ = 0;
+  int evicting_fd_ = -1;       // shut down, its DISCONNECTED event not seen yet
+  std::size_t max_peers_ = 64;
+  bool listener_dropped_ = false;
+  Clock::time_point rebind_at_{};
+  std::chrono::milliseconds backoff_{100};
+  bool cap_logged_ = false, exhaustion_logged_ = false;
   std::string bound_, curve_public_;
   std::atomic<bool> stop_{false};
   std::thread thread_;

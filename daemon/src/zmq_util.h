@@ -23,6 +23,7 @@ class ZmqSocket {
   [[nodiscard]] std::string open(int type, const char* type_name);
   void close();
   [[nodiscard]] void* get() const { return socket_; }
+  [[nodiscard]] void* context() const { return context_; }
 
   // --curve-allow DIR: a ZAP handler in this socket's context accepts only the CURVE client
   // keys of DIR (curve_allow.h). Call after open(), before binding. Empty or the error.

@@ -98,6 +98,7 @@ class Child {
     }
   }
   bool running() const { return pid_ > 0 && !exit_code_; }
+  pid_t pid() const { return pid_; }
   void signal(int sig) const {
     if (pid_ > 0 && !exit_code_) kill(pid_, sig);
   }
