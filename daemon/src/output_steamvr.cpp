@@ -126,7 +126,8 @@ class SteamvrOutput final : public Output {
             {"poses_without_client", b.publishes_without_client},
             {"dropped", b.dropped},
             {"rejected", b.rejected},
-            {"rejected_by_reason", b.rejected_by_reason}};
+            {"rejected_by_reason", b.rejected_by_reason},
+            {"devices_in", b.roles_in}};
   }
 
   void close() override {
