@@ -221,8 +221,8 @@ class UdpRecording {
     return ntohs(a.sin_port);
   }
 
-  // Sends the bundled recording's first `n` samples, one line per datagram, as fast as bodyd
-  // takes them (the head times increase; loopback UDP with a 1 MiB buffer loses none here).
+  // Sends the bundled recording's first `n` samples, one line per datagram, 8 at a time (the
+  // head times increase; a burst stays well within the socket's receive buffer).
   void send(std::size_t n) {
     const int fd = socket(AF_INET, SOCK_DGRAM, 0);
     sockaddr_in to{};
@@ -233,7 +233,7 @@ class UdpRecording {
       std::string line;
       append_tracker_sample(line, samples_[i]);
       sendto(fd, line.data(), line.size(), 0, reinterpret_cast<sockaddr*>(&to), sizeof(to));
-      if (i % 64 == 63) std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      if (i % 8 == 7) std::this_thread::sleep_for(std::chrono::milliseconds(1));  // within the socket buffer
     }
     close(fd);
   }
