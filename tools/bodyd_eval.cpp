@@ -96,7 +96,8 @@ int main(int argc, char** argv) {
                  "with --device-frames xr: first-still (the clip's first still second, default), none (the default "
                  "mounting only), a frame number N (that frame's pose held for 1.2 s before the clip starts), reference (the "
                  "user stands in the calibration pose as the body reference describes it for 1.05 s before the clip, at its "
-                 "first head position and heading), or truth (analysis: the true mounting, what a perfect calibration "
+                 "first head position and heading), person (the same pose as one person stands it: the head and wrists off "
+                 "the reference by normal draws of the reference's spreads over the training takes), or truth (analysis: the true mounting, what a perfect calibration "
                  "gives)")
       ->capture_default_str();
   app.add_flag("--estimate-eye-offset", method_pose_eye,
@@ -146,7 +147,7 @@ int main(int argc, char** argv) {
       if (calibration_pose == "truth") options.oracle_mounting = true;
       else if (calibration_pose != "none") options.calibrate_pose = true;
       if (calibration_pose != "none" && calibration_pose != "first-still" && calibration_pose != "truth" &&
-          calibration_pose != "reference") {
+          calibration_pose != "reference" && calibration_pose != "person") {
         try {
           std::size_t used = 0;
           hold_frame = std::stoi(calibration_pose, &used);
@@ -170,8 +171,10 @@ int main(int argc, char** argv) {
       o.seed = mix_seed(seed, static_cast<std::uint64_t>(index));
       if (options.device_frames) o.device_mounting = session_mounting(index);
       std::vector<bodyd::TrackerSample> samples = bodyd::simulate_trackers(clip, o);
-      if (calibration_pose == "reference") {
-        samples = bodyd::with_calibration_pose(samples, options.body_reference, *o.device_mounting, o.rate_hz, 1.05);
+      if (calibration_pose == "reference" || calibration_pose == "person") {
+        std::optional<std::uint64_t> vary;
+        if (calibration_pose == "person") vary = o.seed;
+        samples = bodyd::with_calibration_pose(samples, options.body_reference, *o.device_mounting, o.rate_hz, 1.05, vary);
       } else if (hold_frame) {
         // The calibration pose: frame N's device poses held still for 1.2 s before the clip.
         if (*hold_frame >= clip.frame_count())

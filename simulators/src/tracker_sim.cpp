@@ -192,8 +192,29 @@ Mounting draw_session_mounting(const Mounting& base, const MountingSpread& sprea
   return m;
 }
 
-std::vector<TrackerSample> with_calibration_pose(const std::vector<TrackerSample>& samples, const BodyReference& reference,
-                                                 const Mounting& mounting, double rate_hz, double seconds) {
+std::vector<TrackerSample> with_calibration_pose(const std::vector<TrackerSample>& samples, const BodyReference& reference_in,
+                                                 const Mounting& mounting, double rate_hz, double seconds,
+                                                 std::optional<std::uint64_t> vary_seed) {
+  BodyReference reference = reference_in;
+  if (vary_seed) {
+    // One person's calibration pose: the reference with normal deviations of its own spreads.
+    std::mt19937_64 gen(*vary_seed ^ 0x706f7365ULL);  // "pose"
+    std::normal_distribution<double> n(0.0, 1.0);
+    const double d2r = M_PI / 180.0;
+    reference.head_in_facing = (Quat(Eigen::AngleAxisd(n(gen) * reference.head_pitch_sd_deg * d2r, Vec3::UnitX())) *
+                                Quat(Eigen::AngleAxisd(n(gen) * reference.head_roll_sd_deg * d2r, Vec3::UnitZ())) *
+                                reference.head_in_facing)
+                                   .normalized();
+    for (int h = 0; h < 2; ++h) {
+      // A rotation whose angle has RMS hand_sd_deg: each axis component sd / sqrt(3).
+      const double sd = reference.hand_sd_deg[static_cast<std::size_t>(h)] * d2r / std::sqrt(3.0);
+      reference.hand_in_facing[static_cast<std::size_t>(h)] =
+          (quat_from_axis_angle(Vec3(n(gen), n(gen), n(gen)) * sd) * reference.hand_in_facing[static_cast<std::size_t>(h)])
+              .normalized();
+    }
+    reference.head_over_wrist_height += n(gen) * reference.head_over_wrist_height_sd;
+    reference.head_ahead_of_wrists_m += n(gen) * reference.head_ahead_sd_m;
+  }
   const TrackerSample* head0 = nullptr;
   for (const TrackerSample& s : samples)
     if (s.role == Role::Head && s.valid) {

@@ -90,9 +90,13 @@ struct MountingSpread {
 // calibration pose a user is asked for (motion/mounting.h calibration_pose_joints: the
 // reference's pose at the first head sample's joint position and heading), sampled at rate_hz,
 // seen through the same mounting. Throws SimError when there is no valid head sample.
+// With `vary_seed`, the pose is a person's, not the reference's exactly: the head pitched and
+// rolled and each wrist turned by normal draws with the reference's spreads (head_pitch_sd_deg,
+// head_roll_sd_deg, hand_sd_deg), the wrists' height ratio and depth likewise.
 [[nodiscard]] std::vector<TrackerSample> with_calibration_pose(const std::vector<TrackerSample>& samples,
                                                                const BodyReference& reference, const Mounting& mounting,
-                                                               double rate_hz, double seconds);
+                                                               double rate_hz, double seconds,
+                                                               std::optional<std::uint64_t> vary_seed = std::nullopt);
 
 // The true (noise-free, undelayed) trajectories of the three tracked joints of a clip.
 // Immutable after construction; pose_at() is thread-safe and does not allocate.
