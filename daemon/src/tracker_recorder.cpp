@@ -36,6 +36,7 @@ std::string TrackerRecorder::open(const std::string& path, const TrackerLogMetad
   close();
   path_ = path;
   error_.clear();
+  error_what_.clear();
   last_skip_reason_.clear();
   const std::string where = "--record-trackers " + path;
   std::string preamble;
@@ -163,8 +164,9 @@ void TrackerRecorder::flush() {
       if (keep < done && ::ftruncate(fd_, static_cast<off_t>(file_bytes_ + keep)) == 0) done = keep;
       const auto in_file = static_cast<std::uint64_t>(
           std::upper_bound(sample_ends_.begin(), sample_ends_.end(), done) - sample_ends_.begin());
+      error_what_ = std::strerror(e);
       error_ = "--record-trackers " + path_ + ": write failed after " + std::to_string(written_ + in_file) +
-               " samples: " + std::strerror(e);
+               " samples: " + error_what_;
       spdlog::error("{} (nothing more is recorded; the file holds the samples before the error)", error_);
       break;
     }
@@ -182,7 +184,8 @@ void TrackerRecorder::close() {
   if (fd_ < 0) return;
   flush();
   if (::close(fd_) != 0 && error_.empty()) {
-    error_ = "--record-trackers " + path_ + ": " + std::strerror(errno);
+    error_what_ = std::strerror(errno);
+    error_ = "--record-trackers " + path_ + ": " + error_what_;
     spdlog::error("{} (the recording may be incomplete)", error_);
   }
   fd_ = -1;
@@ -191,7 +194,7 @@ void TrackerRecorder::close() {
     spdlog::info("--record-trackers {}: {} samples recorded{}", path_, written_, skipped);
   else
     spdlog::error("--record-trackers {}: incomplete: {} samples recorded, {} not recorded after the write error{} ({})",
-                  path_, written_, lost_, skipped, error_);
+                  path_, written_, lost_, skipped, error_what_);
 }
 
 }  // namespace bodyd::daemon

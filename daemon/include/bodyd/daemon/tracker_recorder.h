@@ -71,7 +71,7 @@ class TrackerRecorder {
   void flush();
 
   int fd_ = -1;
-  std::string path_, buffer_, error_, last_skip_reason_;
+  std::string path_, buffer_, error_, error_what_, last_skip_reason_;  // error_what_: strerror of error_
   std::vector<std::size_t> sample_ends_;  // end offset in buffer_ of each sample line buffered
   std::uint64_t file_bytes_ = 0;          // bytes in the file (all complete lines)
   std::int64_t last_flush_ns_ = 0;
