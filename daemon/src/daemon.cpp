@@ -164,6 +164,7 @@ struct Daemon::Impl final : ControlTarget {
   bool recentred = false;                  // recon thread
   json recentre_status = json{{"recentred", false}};  // shared_mutex
   TrackerSample last_valid_head;           // as the reconstructor got it
+  double head_speed_m_s = 0.0;             // its speed, smoothed over about 0.2 s
   std::int64_t last_valid_head_arrival_ns = 0;
 
   TrackerRecorder recorder;  // --record-trackers (reconstruction thread once started)
@@ -293,6 +294,13 @@ struct Daemon::Impl final : ControlTarget {
       for (auto& slot : outputs) slot->gate = RateGate(slot->gate.rate_hz());
     }
     if (s.role == Role::Head && s.valid) {
+      // The head's speed, smoothed over about 0.2 s (calibrate --from-head refuses a walking head).
+      const double dt_s = static_cast<double>(s.t_ns - last_valid_head.t_ns) * 1e-9;
+      if (last_valid_head_arrival_ns != 0 && dt_s > 0.0 && dt_s < 0.5) {
+        const double speed = (s.position_m - last_valid_head.position_m).norm() / dt_s;
+        const double a = std::min(1.0, dt_s / 0.2);
+        head_speed_m_s += a * (speed - head_speed_m_s);
+      }
       last_valid_head = s;
       last_valid_head_arrival_ns = in.arrival_ns;
     }
@@ -409,6 +417,8 @@ struct Daemon::Impl final : ControlTarget {
   // second, kept only when plausible: within kMaxAutoHeadChangeDeg of the default (a user who
   // stands still looking down at a menu must not get a bent body).
   static constexpr double kMaxAutoHeadChangeDeg = 15.0;
+  // calibrate --from-head: a standing head sways at a few cm/s; a slow walk moves at 0.5 m/s.
+  static constexpr double kMaxStandingHeadSpeedMS = 0.2;
   void refine_head_mounting(const PoseCalibration& c) {
     if (!c.device_frames || mounting_origin[0] != "default") return;
     const RigidTransform& T = c.mounting.T_device_joint[0];
@@ -576,6 +586,11 @@ struct Daemon::Impl final : ControlTarget {
           return control_error("no valid head sample in the last 2 s: wear the headset, stand up straight, and retry");
         // The Head joint's height now, as a standing height: the same correction and checks as
         // the auto calibration and bodyd-eval (inference/calibration.h).
+        // Walking or swaying: the height would be a step's, not the standing height (issue 16).
+        if (head_speed_m_s > kMaxStandingHeadSpeedMS)
+          return control_error(fmt::format(
+              "calibrate from head: the head is moving at {:.2f} m/s: stand still (up straight, looking ahead) and retry",
+              head_speed_m_s));
         const double measured_m = stats.last_head_y_m.load();
         if (std::string e = calibrate_from_head_height(*recon, standing_height_from_head(measured_m, StandingHeightOptions{}));
             !e.empty())

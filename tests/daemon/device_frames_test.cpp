@@ -11,6 +11,7 @@
 #include "bodyd/motion/skeleton.h"
 #include "bodyd/motion/tracker_log.h"
 #include "bodyd/protocol/pose_message.h"
+#include "bodyd/simulators/tracker_sim.h"
 #include "../test_paths.h"
 #include "zmq_helpers.h"
 
@@ -252,6 +253,56 @@ TEST(DeviceFrames, AnIdentityHeadsetLookingAheadGivesAnUprightBodyFacingIt) {
     EXPECT_LT(P("Toes_L").y(), planted_toes_y + 0.03);
     EXPECT_LT(P("Toes_R").y(), planted_toes_y + 0.03);
   }
+}
+
+}  // namespace
+}  // namespace bodyd
+
+namespace bodyd {
+namespace {
+
+// Issue 16 item 5: calibrate --from-head takes the head's height as the standing height, so it
+// must refuse a head that is walking (a step's height is not the standing height), saying so.
+TEST(CalibrateFromHead, RefusesAWalkingHeadWithAMessage) {
+  test::TempDir dir;
+  SimOptions o;
+  o.rate_hz = 90.0;
+  write_tracker_log(dir.path / "walk.csv", simulate_trackers(read_bvh(test::fixtures() / "walk_60.bvh"), o));
+  DaemonConfig c = replay_config(dir.path / "walk.csv", dir.path, "ik");
+  Daemon d(c, daemon::make_default_factory(test::source_dir() / "data" / "demo" / "skeleton.bvh"));
+  ASSERT_EQ(d.start(), "");
+  std::thread runner([&] { d.run(); });
+  zmq::context_t ctx;
+  for (int i = 0; i < 300 && d.status()["samples_in"].get<std::uint64_t>() < 90; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  const auto reply = test::control_request(ctx, d.control_endpoint(), R"({"cmd":"calibrate","from":"head"})");
+  d.request_stop();
+  runner.join();
+  ASSERT_TRUE(reply);
+  EXPECT_EQ((*reply)["ok"], false) << reply->dump();
+  EXPECT_NE((*reply)["error"].get<std::string>().find("the head is moving"), std::string::npos) << reply->dump();
+  EXPECT_EQ(d.status()["height_calibrated"], false);
+}
+
+TEST(CalibrateFromHead, TakesAStillHead) {
+  test::TempDir dir;
+  const BodyReference ref = reference();
+  write_device_log(dir.path / "still.csv",
+                   still_device_stream(calibration_pose_joints(ref, 1.5), default_mounting(ref), 3.0));
+  DaemonConfig c = replay_config(dir.path / "still.csv", dir.path, "ik");
+  Daemon d(c, daemon::make_default_factory(test::source_dir() / "data" / "demo" / "skeleton.bvh"));
+  ASSERT_EQ(d.start(), "");
+  std::thread runner([&] { d.run(); });
+  zmq::context_t ctx;
+  for (int i = 0; i < 300 && d.status()["samples_in"].get<std::uint64_t>() < 90; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  const auto reply = test::control_request(ctx, d.control_endpoint(), R"({"cmd":"calibrate","from":"head"})");
+  d.request_stop();
+  runner.join();
+  ASSERT_TRUE(reply);
+  ASSERT_EQ((*reply)["ok"], true) << reply->dump();
+  // The Head joint (through the default mounting) at 1.5 m, with the stance correction.
+  EXPECT_NEAR((*reply)["head_height_m"].get<double>(), 1.5 / StandingHeightOptions{}.stance_ratio, 0.005);
 }
 
 }  // namespace
