@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <random>
 #include <sstream>
@@ -69,6 +70,14 @@ TEST(Mounting, DefaultHeadMountingAgreesWithTheRigsHeadAxes) {
   const Mounting m = default_mounting(shipped_reference());
   const RigidTransform& head = m.T_device_joint[static_cast<int>(Role::Head)];
   EXPECT_LT((head.position_m - Vec3(0.0, -0.10, 0.08)).norm(), 1e-12);
+  // The rig's head axes turned to a device that looks along -Z: local X -> +Y, local Y -> -Z.
+  Mat3 rig;
+  rig.col(0) = Vec3::UnitY();
+  rig.col(1) = -Vec3::UnitZ();
+  rig.col(2) = -Vec3::UnitX();
+  const double to_rig_deg = deg(geodesic_angle(Quat(rig), head.rotation));
+  std::printf("default head mounting: %.2f deg from the rig's head axes\n", to_rig_deg);
+  EXPECT_LT(to_rig_deg, 10.0);
   // The joint's +X (up along the neck) is the device's +Y within the measured head pitch.
   const Vec3 up = head.rotation * Vec3::UnitX();
   EXPECT_GT(up.y(), std::cos(30.0 * M_PI / 180.0)) << up.transpose();
