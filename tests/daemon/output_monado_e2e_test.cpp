@@ -167,3 +167,59 @@ TEST(MonadoBridge, HandshakeThenBonesFollowTheZmqPoseFedByTheFeeder) {
 
 }  // namespace
 }  // namespace bodyd
+
+namespace bodyd {
+namespace {
+
+// Bad input on SlimeVRRpc (issue 17 item 4): a length above 16 KiB or below 4 and a flood drop
+// the connection, a bundle that fails FlatBuffers verification is skipped; each is counted by
+// reason in the monado output's status, and a fresh connection's poll is still answered.
+TEST(MonadoBridge, BadRequestsAreCountedAndANewClientIsStillServed) {
+  std::string python;
+  if (std::string why = python_skip_reason(python, true); !why.empty()) GTEST_SKIP() << why;
+  if (!fs::exists(pb_dir() / "solarxr_protocol" / "MessageBundle.py")) GTEST_SKIP() << "flatc --python did not run";
+  test::TempDir dir;
+  const fs::path run = dir.path / "run";
+  test::Child daemon({(test::bin_dir() / "bodyd").string(), "--method", "ik", "--source", "monado:" + run.string(),
+                      "--output", "monado:" + run.string(), "--pub", "tcp://127.0.0.1:*", "--control",
+                      "tcp://127.0.0.1:*", "--endpoints-file", (dir.path / "endpoints.json").string()},
+                     dir.path / "bodyd.err");
+  const auto endpoints = test::wait_endpoints(dir.path / "endpoints.json", 20000);
+  ASSERT_TRUE(endpoints && endpoints->contains("control")) << daemon.log();
+  struct Case {
+    const char* kind;
+    const char* reason;
+    bool closes;
+  };
+  const Case cases[] = {{"too_long", "frame_too_long", true},
+                        {"too_short", "frame_too_short", true},
+                        {"malformed", "malformed", false},
+                        {"flood", "flood", true}};
+  for (const Case& c : cases) {
+    const fs::path out = dir.path / (std::string(c.kind) + ".json");
+    test::Child bad({python, client_script("solarxr_client.py").string(), pb_dir().string(), "bad", run.string(), c.kind,
+                     out.string()},
+                    dir.path / (std::string(c.kind) + ".err"));
+    ASSERT_EQ(bad.wait(30000), 0) << c.kind << ": " << bad.log();
+    const auto result = read_jsonl(out);
+    ASSERT_EQ(result.size(), 1u);
+    if (c.closes) {
+      EXPECT_TRUE(result[0]["closed"].get<bool>()) << c.kind;
+    }
+    EXPECT_TRUE(result[0]["served_after"].get<bool>()) << c.kind;
+  }
+  zmq::context_t ctx;
+  const auto status = test::control_request(ctx, (*endpoints)["control"], R"({"cmd":"status"})");
+  ASSERT_TRUE(status);
+  nlohmann::json out_status;
+  for (const auto& o : (*status)["outputs"])
+    if (o["name"].get<std::string>().rfind("monado:", 0) == 0) out_status = o;
+  ASSERT_FALSE(out_status.is_null()) << status->dump();
+  for (const Case& c : cases) EXPECT_GE(out_status["rejected_by_reason"].value(c.reason, 0), 1) << c.reason << " " << out_status.dump();
+  EXPECT_GE(out_status["polls_answered"].get<int>(), 4);
+  daemon.signal(SIGINT);
+  EXPECT_EQ(daemon.wait(10000), 0) << daemon.log();
+}
+
+}  // namespace
+}  // namespace bodyd

@@ -7,6 +7,7 @@ files (solarxr_test.fbs through flatc --python, driver_messages.proto through pr
 generated into PB_DIR at build time).
 
   solarxr_client.py PB_DIR DIR POSES OUT [--rate HZ]
+  solarxr_client.py PB_DIR bad DIR KIND OUT     (one kind of bad input: see bad())
 
 As Monado does at session start: connects to DIR/SlimeVRRpc, sends one MessageBundle with a
 SettingsRequest and a PollDataFeed, and waits at most 4 s for exactly one DataFeedUpdate (it
@@ -202,5 +203,48 @@ def main():
         s.close()
 
 
+def bad():
+    """solarxr_client.py PB_DIR bad DIR KIND OUT: one kind of bad input on SlimeVRRpc, then
+    whether bodyd closed that connection and whether a fresh one still gets its poll answered."""
+    d, kind, out_path = sys.argv[3], sys.argv[4], sys.argv[5]
+    s = feeder.connect(d + "/SlimeVRRpc")
+    if kind == "too_long":
+        s.sendall(struct.pack("<I", 100000) + b"\0" * 64)
+    elif kind == "too_short":
+        s.sendall(struct.pack("<I", 3) + b"\0" * 8)
+    elif kind == "malformed":
+        s.sendall(struct.pack("<I", 4 + 12) + b"\x0c\x00\x00\x00\xff\xff\xff\x7f\x01\x02\x03\x04")
+    elif kind == "flood":
+        one = bundle(DataFeedMessage.StartDataFeed, start_msg, False)
+        try:
+            s.sendall(one * 3000)
+        except OSError:
+            pass
+    else:
+        raise SystemExit("unknown bad kind " + kind)
+    closed = False
+    end = time.monotonic() + 2.0
+    while time.monotonic() < end and not closed:
+        r, _, _ = select.select([s], [], [], 0.05)
+        if r:
+            try:
+                closed = not s.recv(1 << 20)
+            except OSError:
+                closed = True
+    s.close()
+    s2 = feeder.connect(d + "/SlimeVRRpc", 5.0)
+    rpc = Rpc(s2, open(out_path + ".updates", "w"))
+    s2.sendall(bundle(DataFeedMessage.PollDataFeed, poll_msg, False))
+    t0 = time.monotonic()
+    while rpc.updates == 0 and time.monotonic() - t0 < 4.0:
+        rpc.poll(0.05)
+    s2.close()
+    with open(out_path, "w") as out:
+        out.write(json.dumps({"kind": kind, "closed": closed, "served_after": rpc.updates > 0}) + "\n")
+
+
 if __name__ == "__main__":
-    main()
+    if sys.argv[2] == "bad":
+        bad()
+    else:
+        main()
