@@ -53,6 +53,9 @@ def parse_args():
     p.add_argument("--self-prefix-steps", type=int, default=2, help="DDIM steps of the --self-prefix reconstruction")
     p.add_argument("--tracker-noise", type=float, default=0.01, help="noise (normalised units) on observed tracker entries")
     p.add_argument("--holdout-every", type=int, default=20, help="every Nth training clip is held out for monitoring")
+    p.add_argument("--exclude-split", action="append", default=[], metavar="FILE",
+                   help="never train on (nor monitor with) the clips this file lists: '#' comments, then one path per "
+                        "line relative to the dataset root, as training/style-heldout.txt (repeatable)")
     p.add_argument("--ema", type=float, default=0.999)
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--threads", type=int, default=0, help="CPU threads for torch (0 = torch default)")
@@ -74,6 +77,39 @@ def parse_args():
     p.add_argument("--export-only", action="store_true",
                    help="write --out from the run's latest checkpoint (EMA weights) and exit, without training")
     return p.parse_args()
+
+
+def read_clip_list(path):
+    """The clip paths of a list file like training/heldout.txt: blank and '#' lines skipped, one path per line
+    relative to the dataset root (dataset-1/....bvh). Exits with the file and line on a bad line."""
+    out = []
+    try:
+        lines = open(path).read().splitlines()
+    except OSError as e:
+        sys.exit(f"--exclude-split {path}: cannot read: {e.strerror}")
+    for n, line in enumerate(lines, 1):
+        line = line.rstrip(" \r")
+        if not line or line.startswith("#"):
+            continue
+        if os.path.isabs(line) or ".." in line.split("/"):
+            sys.exit(f"{path}:{n}: '{line}' must be relative to the dataset root (e.g. dataset-1/NAME.bvh)")
+        out.append(os.path.normpath(line))
+    return out
+
+
+def excluded_clips(meta, files):
+    """Boolean per meta["clips"]: its path ends with a path that one of files lists. Exits if a listed clip
+    is not in the data (a list for another dataset would otherwise exclude nothing, silently)."""
+    paths = [os.path.normpath(c["path"]) for c in meta["clips"]]
+    out = np.zeros(len(paths), dtype=bool)
+    for f in files:
+        for rel in read_clip_list(f):
+            hit = [i for i, q in enumerate(paths) if q == rel or q.endswith(os.sep + rel)]
+            if not hit:
+                sys.exit(f"--exclude-split {f}: clip '{rel}' is not in the dataset (export it from "
+                         "splits/train.txt with bodyd-dataset, or fix the list)")
+            out[hit] = True
+    return out
 
 
 def git_commit():
@@ -201,7 +237,13 @@ def main():
     # Hold out every Nth clip (by clip order) for monitoring; the validation split is never touched here.
     clip_of_window = np.repeat(np.arange(len(meta["clips"])), [c["windows"] for c in meta["clips"]])
     hold = (clip_of_window % a.holdout_every) == (a.holdout_every - 1)
-    train_idx, hold_idx = np.nonzero(~hold)[0], np.nonzero(hold)[0]
+    # --exclude-split clips (training/style-heldout.txt) are neither trained on nor part of the monitor.
+    excl_clip = excluded_clips(meta, a.exclude_split)
+    excl = excl_clip[clip_of_window]
+    train_idx, hold_idx = np.nonzero(~hold & ~excl)[0], np.nonzero(hold & ~excl)[0]
+    if a.exclude_split:
+        print(f"excluded: {int(excl_clip.sum())} clips ({int(excl.sum())} windows) listed in "
+              f"{', '.join(a.exclude_split)}", flush=True)
     # Raw features stay in memory (augmentations act on them); each batch is normalised when drawn.
     x_raw = torch.from_numpy(np.ascontiguousarray(data)).to(dev)
     init = None
@@ -436,6 +478,7 @@ def main():
     provenance = {
         "data": "Bandai Namco Research Motion Dataset (CC BY-NC 4.0), " + os.path.basename(a.data),
         "windows_total": int(N), "windows_train": int(len(train_idx)), "holdout_every_clip": a.holdout_every,
+        "excluded_clips": int(excl_clip.sum()), "exclude_split": a.exclude_split,
         "steps": step, "batch": a.batch, "wall_time_s": round(wall_s, 1), "hardware": hw,
         "git_commit": git_commit(), "command": " ".join(sys.argv), "args": vars(a),
         "torch": torch.__version__,
