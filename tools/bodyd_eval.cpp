@@ -179,24 +179,12 @@ int main(int argc, char** argv) {
         // The calibration pose: frame N's device poses held still for 1.2 s before the clip.
         if (*hold_frame >= clip.frame_count())
           throw std::runtime_error(fmt::format("--calibration-pose {}: the clip has {} frames", *hold_frame, clip.frame_count()));
-        bodyd::SimOptions still = o;
-        still.position_noise_mm = still.rotation_noise_deg = still.jitter_ms = still.dropout_rate_hz = 0.0;
-        bodyd::Motion frame = clip;
-        frame.frames.assign(2, clip.frames[static_cast<std::size_t>(*hold_frame)]);
-        const std::vector<bodyd::TrackerSample> pose = bodyd::simulate_trackers(frame, still);
-        const double period_ns = 1e9 / o.rate_hz;
-        const auto n = static_cast<std::int64_t>(1.2e9 / period_ns);
-        std::vector<bodyd::TrackerSample> held;
-        for (std::int64_t k = n; k >= 1; --k)
-          for (bodyd::Role r : bodyd::kRoles)
-            for (const bodyd::TrackerSample& p : pose)
-              if (p.role == r) {
-                bodyd::TrackerSample h = p;
-                h.t_ns = samples.front().t_ns - std::llround(static_cast<double>(k) * period_ns);
-                held.push_back(h);
-                break;
-              }
-        samples.insert(samples.begin(), held.begin(), held.end());
+        // The clip's joints at frame N (its truth), held still, seen through the session mounting.
+        const bodyd::TrackerTrajectory trajectory(clip);
+        const std::int64_t t_frame = std::llround(*hold_frame * clip.frame_time_s * 1e9);
+        std::array<bodyd::RigidTransform, bodyd::kRoleCount> joints;
+        for (bodyd::Role r : bodyd::kRoles) joints[static_cast<std::size_t>(r)] = bodyd::pose_of(trajectory.pose_at(r, t_frame));
+        samples = bodyd::with_held_pose(samples, joints, *o.device_mounting, o.rate_hz, 1.2);
       }
       return samples;
     };

@@ -224,7 +224,13 @@ std::vector<TrackerSample> with_calibration_pose(const std::vector<TrackerSample
   if (head0 == nullptr) throw SimError("no valid head sample to stand the calibration pose at");
   const TrackerSample joint0 = device_to_joint(*head0, mounting.T_device_joint[0]);
   const double heading = yaw_of((joint0.rotation * reference.head_in_facing.conjugate()).normalized(), Vec3::UnitZ());
-  const auto joints = calibration_pose_joints(reference, joint0.position_m, heading);
+  return with_held_pose(samples, calibration_pose_joints(reference, joint0.position_m, heading), mounting, rate_hz, seconds);
+}
+
+std::vector<TrackerSample> with_held_pose(const std::vector<TrackerSample>& samples,
+                                          const std::array<RigidTransform, kRoleCount>& joints, const Mounting& mounting,
+                                          double rate_hz, double seconds) {
+  if (samples.empty()) throw SimError("no samples to hold a pose before");
   const double period_ns = 1e9 / rate_hz;
   const auto n = static_cast<std::int64_t>(seconds * 1e9 / period_ns);
   std::vector<TrackerSample> out;

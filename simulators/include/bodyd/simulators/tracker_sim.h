@@ -98,6 +98,13 @@ struct MountingSpread {
                                                                double rate_hz, double seconds,
                                                                std::optional<std::uint64_t> vary_seed = std::nullopt);
 
+// `samples` preceded by `seconds` of the joints `joints` (indexed by Role) held still, sampled at
+// rate_hz and seen through `mounting` as device poses (with_calibration_pose's workhorse; a
+// standing frame of a clip as the calibration pose).
+[[nodiscard]] std::vector<TrackerSample> with_held_pose(const std::vector<TrackerSample>& samples,
+                                                        const std::array<RigidTransform, kRoleCount>& joints,
+                                                        const Mounting& mounting, double rate_hz, double seconds);
+
 // The true (noise-free, undelayed) trajectories of the three tracked joints of a clip.
 // Immutable after construction; pose_at() is thread-safe and does not allocate.
 class TrackerTrajectory {
