@@ -76,6 +76,31 @@ DaemonConfig replay_config(const std::filesystem::path& log, const std::filesyst
   return c;
 }
 
+// Runs a daemon replaying `log` (paced), waits until `min_samples` samples are in, sends one
+// control request and stops. The reply (nullopt: none) and the daemon's status at the end.
+struct OneRequest {
+  std::optional<json> reply;
+  json status;
+};
+OneRequest replay_and_request(const DaemonConfig& c, const std::string& request, std::uint64_t min_samples = 30,
+                              int timeout_ms = 6000) {
+  Daemon d(c, daemon::make_default_factory(test::source_dir() / "data" / "demo" / "skeleton.bvh"));
+  OneRequest out;
+  if (const std::string e = d.start(); !e.empty()) {
+    ADD_FAILURE() << e;
+    return out;
+  }
+  std::thread runner([&] { d.run(); });
+  zmq::context_t ctx;
+  for (int i = 0; i < 300 && d.status()["samples_in"].get<std::uint64_t>() < min_samples; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  out.reply = test::control_request(ctx, d.control_endpoint(), request, timeout_ms);
+  d.request_stop();
+  runner.join();
+  out.status = d.status();
+  return out;
+}
+
 // A known mounting: the default with the headset pitched 7 degrees up and rolled 2 degrees on the
 // head, and each controller turned 12 degrees in the hand (about its grip point).
 Mounting known_mounting(const Mounting& defaults) {
@@ -170,21 +195,14 @@ TEST(CalibrationPose, RefusesRaisedArmsAndSaysWhy) {
   auto joints = calibration_pose_joints(ref, 1.5);
   joints[1].position_m.y() = 1.6;  // the left hand up at the head
   write_device_log(dir.path / "raised.csv", still_device_stream(joints, defaults, 4.0));
-  DaemonConfig c = replay_config(dir.path / "raised.csv", dir.path, "ik");
-  Daemon d(c, daemon::make_default_factory(test::source_dir() / "data" / "demo" / "skeleton.bvh"));
-  ASSERT_EQ(d.start(), "");
-  std::thread runner([&] { d.run(); });
-  zmq::context_t ctx;
-  for (int i = 0; i < 200 && d.status()["samples_in"].get<std::uint64_t>() < 30; ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  const auto reply = test::control_request(ctx, d.control_endpoint(), R"({"cmd":"calibrate","from":"pose","timeout_s":1.5})", 6000);
-  d.request_stop();
-  runner.join();
+  const OneRequest r = replay_and_request(replay_config(dir.path / "raised.csv", dir.path, "ik"),
+                                          R"({"cmd":"calibrate","from":"pose","timeout_s":1.5})");
+  const auto& reply = r.reply;
   ASSERT_TRUE(reply);
   EXPECT_EQ((*reply)["ok"], false) << reply->dump();
   EXPECT_NE((*reply)["error"].get<std::string>().find("left_hand is not hanging at your side"), std::string::npos)
       << reply->dump();
-  EXPECT_EQ(d.status()["mounting"]["roles"]["left_hand"]["origin"], "default");
+  EXPECT_EQ(r.status["mounting"]["roles"]["left_hand"]["origin"], "default");
 }
 
 // Issue 16 item 5: a headset with identity rotation (looking ahead, as VRChat's converted pose and
@@ -255,12 +273,6 @@ TEST(DeviceFrames, AnIdentityHeadsetLookingAheadGivesAnUprightBodyFacingIt) {
   }
 }
 
-}  // namespace
-}  // namespace bodyd
-
-namespace bodyd {
-namespace {
-
 // Issue 16 item 5: calibrate --from-head takes the head's height as the standing height, so it
 // must refuse a head that is walking (a step's height is not the standing height), saying so.
 TEST(CalibrateFromHead, RefusesAWalkingHeadWithAMessage) {
@@ -268,20 +280,13 @@ TEST(CalibrateFromHead, RefusesAWalkingHeadWithAMessage) {
   SimOptions o;
   o.rate_hz = 90.0;
   write_tracker_log(dir.path / "walk.csv", simulate_trackers(read_bvh(test::fixtures() / "walk_60.bvh"), o));
-  DaemonConfig c = replay_config(dir.path / "walk.csv", dir.path, "ik");
-  Daemon d(c, daemon::make_default_factory(test::source_dir() / "data" / "demo" / "skeleton.bvh"));
-  ASSERT_EQ(d.start(), "");
-  std::thread runner([&] { d.run(); });
-  zmq::context_t ctx;
-  for (int i = 0; i < 300 && d.status()["samples_in"].get<std::uint64_t>() < 90; ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  const auto reply = test::control_request(ctx, d.control_endpoint(), R"({"cmd":"calibrate","from":"head"})");
-  d.request_stop();
-  runner.join();
+  const OneRequest r =
+      replay_and_request(replay_config(dir.path / "walk.csv", dir.path, "ik"), R"({"cmd":"calibrate","from":"head"})", 90);
+  const auto& reply = r.reply;
   ASSERT_TRUE(reply);
   EXPECT_EQ((*reply)["ok"], false) << reply->dump();
   EXPECT_NE((*reply)["error"].get<std::string>().find("the head is moving"), std::string::npos) << reply->dump();
-  EXPECT_EQ(d.status()["height_calibrated"], false);
+  EXPECT_EQ(r.status["height_calibrated"], false);
 }
 
 TEST(CalibrateFromHead, TakesAStillHead) {
@@ -289,16 +294,9 @@ TEST(CalibrateFromHead, TakesAStillHead) {
   const BodyReference ref = reference();
   write_device_log(dir.path / "still.csv",
                    still_device_stream(calibration_pose_joints(ref, 1.5), default_mounting(ref), 3.0));
-  DaemonConfig c = replay_config(dir.path / "still.csv", dir.path, "ik");
-  Daemon d(c, daemon::make_default_factory(test::source_dir() / "data" / "demo" / "skeleton.bvh"));
-  ASSERT_EQ(d.start(), "");
-  std::thread runner([&] { d.run(); });
-  zmq::context_t ctx;
-  for (int i = 0; i < 300 && d.status()["samples_in"].get<std::uint64_t>() < 90; ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  const auto reply = test::control_request(ctx, d.control_endpoint(), R"({"cmd":"calibrate","from":"head"})");
-  d.request_stop();
-  runner.join();
+  const OneRequest r =
+      replay_and_request(replay_config(dir.path / "still.csv", dir.path, "ik"), R"({"cmd":"calibrate","from":"head"})", 90);
+  const auto& reply = r.reply;
   ASSERT_TRUE(reply);
   ASSERT_EQ((*reply)["ok"], true) << reply->dump();
   // The Head joint (through the default mounting) at 1.5 m, with the stance correction.
