@@ -190,8 +190,11 @@ struct Daemon::Impl final : ControlTarget {
   std::optional<PoseCalibrator> pose_calibrator;
   std::int64_t pose_deadline_ns = 0;
   std::optional<json> pose_result;
-  // The auto calibration's head refinement: a calibrator fed raw samples while it waits.
+  // The auto calibration's head refinement: a calibrator fed raw samples while it waits, for the
+  // first kAutoHeadRefineWindowNs of head samples.
   std::optional<PoseCalibrator> auto_pose;
+  std::int64_t auto_pose_first_ns = INT64_MIN;  // arrival of its first head sample
+  static constexpr std::int64_t kAutoHeadRefineWindowNs = 10'000'000'000;
 
   Impl(DaemonConfig c, ReconstructorFactory f)
       : config(std::move(c)),
@@ -268,7 +271,7 @@ struct Daemon::Impl final : ControlTarget {
   void handle_sample(drivers::SourceSample& in) {
     TrackerSample& s = in.sample;
     if (s.role == Role::Head) head_as_received = s;
-    feed_pose_calibrators(s);
+    feed_pose_calibrators(s, in.arrival_ns);
     if (s.frame == PoseFrame::Device) {
       device_frames_seen[static_cast<int>(s.role)] = true;
       s = device_to_joint(s, mounting.T_device_joint[static_cast<int>(s.role)]);
@@ -386,7 +389,7 @@ struct Daemon::Impl final : ControlTarget {
   // ---------------------------------------------------------------- device mounting
   // Reconstruction thread: the raw sample (before mounting, offsets, re-centring) to the
   // calibration pose in progress and to the auto calibration's head refinement.
-  void feed_pose_calibrators(const TrackerSample& raw) {
+  void feed_pose_calibrators(const TrackerSample& raw, std::int64_t arrival_ns) {
     if (pose_calibrator) {
       if (std::optional<PoseCalibration> c = pose_calibrator->push(raw)) {
         json reply = apply_pose_calibration(*c, "pose");
@@ -409,6 +412,16 @@ struct Daemon::Impl final : ControlTarget {
       if (std::optional<PoseCalibration> c = auto_pose->push(raw)) {
         auto_pose.reset();
         refine_head_mounting(*c);
+      } else if (raw.role == Role::Head && raw.valid) {
+        // Only at the start of a session (host time: a replay's time base may loop): a still second
+        // later may be a user looking at a menu.
+        if (auto_pose_first_ns == INT64_MIN) auto_pose_first_ns = arrival_ns;
+        else if (arrival_ns - auto_pose_first_ns > kAutoHeadRefineWindowNs) {
+          auto_pose.reset();
+          spdlog::info("auto calibration: no still second of the headset and controllers in the first {} s: the default "
+                       "head mounting stays (`bodyd-ctl calibrate --pose` measures it)",
+                       kAutoHeadRefineWindowNs / 1'000'000'000);
+        }
       }
     }
   }

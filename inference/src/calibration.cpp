@@ -207,14 +207,17 @@ WindowStats window_stats(const std::vector<TrackerSample>& w, std::int64_t t_ns,
   WindowStats st;
   if (w.size() < 3 || t_ns - w.front().t_ns < still_ns - 2'000'000 || t_ns - w.back().t_ns > 100'000'000) return st;
   st.covers = true;
-  std::vector<Quat> qs;
-  qs.reserve(w.size());
+  // Sign-aligned mean of the rotations (mean_rotation's rule), without a copy: this runs at every
+  // head sample while a calibration waits.
+  Eigen::Vector4d sum = Eigen::Vector4d::Zero();
+  const Eigen::Vector4d first = w.front().rotation.coeffs();
   for (const TrackerSample& s : w) {
     st.mean_p += s.position_m;
-    qs.push_back(s.rotation);
+    const Eigen::Vector4d v = s.rotation.coeffs();
+    sum += v.dot(first) < 0.0 ? Eigen::Vector4d(-v) : v;
   }
   st.mean_p /= static_cast<double>(w.size());
-  st.mean_q = mean_rotation(qs);
+  st.mean_q.coeffs() = sum.normalized();
   double max_d = 0.0;
   for (const TrackerSample& s : w) {
     max_d = std::max(max_d, (s.position_m - st.mean_p).norm());
@@ -229,9 +232,10 @@ WindowStats window_stats(const std::vector<TrackerSample>& w, std::int64_t t_ns,
 std::optional<PoseCalibration> PoseCalibrator::try_estimate(std::int64_t t_ns) const {
   const auto still_ns = static_cast<std::int64_t>(std::llround(options_.still_s * 1e9));
   std::array<WindowStats, kRoleCount> st;
-  for (Role r : kRoles) st[static_cast<size_t>(r)] = window_stats(window_[static_cast<size_t>(r)], t_ns, still_ns, options_);
+  st[0] = window_stats(window_[0], t_ns, still_ns, options_);
   const WindowStats& head = st[0];
-  if (!head.covers || !head.still) return std::nullopt;
+  if (!head.covers || !head.still) return std::nullopt;  // the hands are not looked at before
+  for (int h = 1; h <= 2; ++h) st[static_cast<size_t>(h)] = window_stats(window_[static_cast<size_t>(h)], t_ns, still_ns, options_);
   std::array<bool, 2> hand_used{};
   for (int h = 0; h < 2; ++h) {
     const WindowStats& hs = st[static_cast<size_t>(h + 1)];
