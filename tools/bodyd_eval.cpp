@@ -102,6 +102,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--estimate-eye-offset", method_pose_eye,
                "with a calibration pose: also estimate the eye offset from the wrists (docs/evaluation.md)");
+  bool head_roll = false;
+  app.add_flag("--head-roll", head_roll,
+               "with a calibration pose: learn the headset's roll on the head too, not only its pitch (docs/evaluation.md)");
   app.add_option("--reference", reference_path, "body reference of the default mounting (default: data/body-reference.json)");
   app.add_option("--tracker-rate-hz", tracker_rate_hz, "tracker sample rate (default: the clip's frame rate)")
       ->check(CLI::Range(1.0, 2000.0));
@@ -144,6 +147,7 @@ int main(int argc, char** argv) {
       options.device_frames = true;
       options.body_reference = bodyd::read_body_reference(bodyd::find_body_reference(reference_path));
       options.pose_calibration.estimate_eye_offset = method_pose_eye;
+      options.pose_calibration.estimate_head_roll = head_roll;
       if (calibration_pose == "truth") options.oracle_mounting = true;
       else if (calibration_pose != "none") options.calibrate_pose = true;
       if (calibration_pose != "none" && calibration_pose != "first-still" && calibration_pose != "truth" &&

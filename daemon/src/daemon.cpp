@@ -426,7 +426,7 @@ struct Daemon::Impl final : ControlTarget {
     }
   }
 
-  // The auto calibration's refinement of the headset's mounting (pitch and roll) from a still
+  // The auto calibration's refinement of the headset's mounting (its pitch) from a still
   // second, kept only when plausible: within kMaxAutoHeadChangeDeg of the default (a user who
   // stands still looking down at a menu must not get a bent body).
   static constexpr double kMaxAutoHeadChangeDeg = 15.0;

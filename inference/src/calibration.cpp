@@ -256,6 +256,14 @@ std::optional<PoseCalibration> PoseCalibrator::try_estimate(std::int64_t t_ns) c
     RigidTransform& Th = c.mounting.T_device_joint[0];
     const RigidTransform& Dh = defaults_.T_device_joint[0];
     Th.rotation = (head.mean_q.conjugate() * F * reference_.head_in_facing).normalized();
+    if (!options_.estimate_head_roll) {
+      // Keep only the pitch of the headset's turn on the head (its twist about the device's +X):
+      // T = turn^-1 * default, so turn = default * T^-1.
+      const Quat turn = (Dh.rotation * Th.rotation.conjugate()).normalized();
+      Quat pitch(turn.w(), turn.x(), 0.0, 0.0);
+      pitch = pitch.norm() > 1e-12 ? pitch.normalized() : Quat::Identity();
+      Th.rotation = (pitch.conjugate() * Dh.rotation).normalized();
+    }
     // The eye offset is the head's: it turns with the headset's turn on the head.
     Th.position_m = (Th.rotation * Dh.rotation.conjugate()) * Dh.position_m;
     c.measured[0] = true;

@@ -101,11 +101,12 @@ OneRequest replay_and_request(const DaemonConfig& c, const std::string& request,
   return out;
 }
 
-// A known mounting: the default with the headset pitched 7 degrees up and rolled 2 degrees on the
-// head, and each controller turned 12 degrees in the hand (about its grip point).
+// A known mounting: the default with the headset pitched 7 degrees on the head (its roll is not
+// learned by default: PoseCalibrationOptions::estimate_head_roll), and each controller turned 12
+// degrees in the hand (about its grip point).
 Mounting known_mounting(const Mounting& defaults) {
   Mounting m = defaults;
-  const Quat turn = Quat(Eigen::AngleAxisd(7.0 * M_PI / 180, Vec3::UnitX())) * Quat(Eigen::AngleAxisd(-2.0 * M_PI / 180, Vec3::UnitZ()));
+  const Quat turn(Eigen::AngleAxisd(7.0 * M_PI / 180, Vec3::UnitX()));
   m.T_device_joint[0].rotation = (turn.conjugate() * m.T_device_joint[0].rotation).normalized();
   m.T_device_joint[0].position_m = turn.conjugate() * m.T_device_joint[0].position_m;
   for (int h = 1; h <= 2; ++h) {

@@ -55,6 +55,7 @@ TEST(DeviceFramesEval, CalibratedHeadsetStreamsAtFiveMountingsAreWithinTenPercen
     o.true_mounting = [&](int) { return truth; };
     o.calibrate_pose = true;
     o.pose_calibration.estimate_eye_offset = true;
+    o.pose_calibration.estimate_head_roll = true;  // the ideal pose: every part of the mounting is observable
     const EvalReport calibrated = evaluate(std::vector<std::filesystem::path>{kWalk}, o, device_source);
     ASSERT_EQ(calibrated.pose_calibrated_clips, 1);
     EXPECT_LT(calibrated.calibrated_mounting_error.head_deg, 2.0);
