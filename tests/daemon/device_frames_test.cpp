@@ -304,5 +304,23 @@ TEST(CalibrateFromHead, TakesAStillHead) {
   EXPECT_NEAR((*reply)["head_height_m"].get<double>(), 1.5 / StandingHeightOptions{}.stance_ratio, 0.005);
 }
 
+// The auto calibration refines the headset's pitch on the head from the first still second
+// (docs/daemon.md, "Device mounting"), leaving the controllers to the calibration pose.
+TEST(AutoCalibration, RefinesTheHeadsetsPitchFromAStillSecond) {
+  test::TempDir dir;
+  const BodyReference ref = reference();
+  const Mounting defaults = default_mounting(ref);
+  const Mounting truth = known_mounting(defaults);
+  write_device_log(dir.path / "still.csv", still_device_stream(calibration_pose_joints(ref, 1.5), truth, 2.0));
+  DaemonConfig c = replay_config(dir.path / "still.csv", dir.path, "ik");
+  c.auto_calibrate = true;
+  const OneRequest r = replay_and_request(c, R"({"cmd":"status"})", 450);
+  const json& head = r.status["mounting"]["roles"]["head"];
+  EXPECT_EQ(head["origin"], "auto") << head.dump();
+  EXPECT_LT(mounting_difference(transform_from_status(head), truth.T_device_joint[0]).angle_deg, 2.0) << head.dump();
+  EXPECT_EQ(r.status["mounting"]["roles"]["left_hand"]["origin"], "default");
+  EXPECT_EQ(r.status["calibration_source"], "auto");
+}
+
 }  // namespace
 }  // namespace bodyd
