@@ -1,5 +1,7 @@
 #include "bodyd/daemon/endpoint.h"
 
+#include "bodyd/paths/private_dir.h"
+
 #include <zmq.h>
 
 #include <arpa/inet.h>
@@ -76,19 +78,10 @@ std::string zmq_bind_address(std::string_view endpoint, bool& out_ipv6) {
 }
 
 std::string check_private_directory(const std::filesystem::path& dir) {
-  struct stat st {};
-  if (::lstat(dir.c_str(), &st) != 0) return dir.string() + ": " + std::strerror(errno);
-  const char* why = nullptr;
-  if (S_ISLNK(st.st_mode)) why = "is a symbolic link";
-  else if (!S_ISDIR(st.st_mode)) why = "is not a directory";
-  else if (st.st_uid != ::geteuid()) why = "is owned by another user";
-  else if ((st.st_mode & 077) != 0) why = "is open to other users";
-  if (why == nullptr) return {};
-  char mode[8];
-  std::snprintf(mode, sizeof(mode), "%04o", static_cast<unsigned>(st.st_mode & 07777));
-  return dir.string() + " " + why + " (mode " + mode +
-         "); bodyd keeps its sockets in a private directory (mode 0700, owned by you, not a symlink). "
-         "Remove it (rm -r " + dir.string() + ") so bodyd can create it, or choose another endpoint";
+  const std::string problem = paths::private_directory_problem(dir);
+  if (problem.empty() || problem.find(" (mode ") == std::string::npos) return problem;
+  return problem + "; bodyd keeps its sockets in a private directory (mode 0700, owned by you, not a symlink). "
+                   "Remove it (rm -r " + dir.string() + ") so bodyd can create it, or choose another endpoint";
 }
 
 std::string prepare_ipc_endpoint(std::string_view endpoint, std::string_view what) {

@@ -1,6 +1,8 @@
 // The SlimeVR bridge server, its registry and the steamvr:/monado: sources (slimevr_bridge.h).
 #include "bodyd/drivers/slimevr_bridge.h"
 
+#include "bodyd/paths/private_dir.h"
+
 #include "bodyd/motion/limits.h"
 
 #include <spdlog/spdlog.h>
@@ -33,19 +35,10 @@ std::string env(const char* name) {
 // A directory a socket may live in: a directory (not a symlink), owned by this user, with no
 // access for others. Empty, or why not.
 std::string check_private_dir(const std::filesystem::path& dir) {
-  struct stat st {};
-  if (::lstat(dir.c_str(), &st) != 0) return dir.string() + ": " + std::strerror(errno);
-  const char* why = nullptr;
-  if (S_ISLNK(st.st_mode)) why = "is a symbolic link";
-  else if (!S_ISDIR(st.st_mode)) why = "is not a directory";
-  else if (st.st_uid != ::geteuid()) why = "is owned by another user";
-  else if ((st.st_mode & 077) != 0) why = "is open to other users";
-  if (why == nullptr) return {};
-  char mode[8];
-  std::snprintf(mode, sizeof(mode), "%04o", static_cast<unsigned>(st.st_mode & 07777));
-  return dir.string() + " " + why + " (mode " + mode +
-         "): bodyd puts the bridge socket only in a private directory (mode 0700, owned by you); fix it "
-         "(chmod 700 " + dir.string() + ") or name another socket path";
+  const std::string problem = paths::private_directory_problem(dir);
+  if (problem.empty() || problem.find(" (mode ") == std::string::npos) return problem;
+  return problem + ": bodyd puts the bridge socket only in a private directory (mode 0700, owned by you); fix it "
+                   "(chmod 700 " + dir.string() + ") or name another socket path";
 }
 
 // Makes `dir` (0700 for what it creates) and checks that it is private.
