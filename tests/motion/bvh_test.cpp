@@ -1,6 +1,7 @@
 #include "bodyd/motion/bvh.h"
 
 #include "../test_paths.h"
+#include "bodyd/test/files.h"
 
 #include <gtest/gtest.h>
 
@@ -11,12 +12,7 @@
 using namespace bodyd;
 
 namespace {
-std::string slurp(const std::filesystem::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using bodyd::test::read_file;
 
 const char* kSmall =
     "HIERARCHY\nROOT hips\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
@@ -136,14 +132,39 @@ TEST(Bvh, MessagesEscapeBytesFromTheFile) {
 }
 
 TEST(Bvh, NeverCrashesOnTruncations) {
-  // Every prefix of a valid file is either valid or a clean BvhError.
+  // Every prefix of a valid file is either the whole motion (only the final newline is
+  // missing) or a clean BvhError that names the file and says what is wrong.
   const std::string ok = kSmall;
+  const Motion full = parse_bvh(ok, "full.bvh");
+  int accepted = 0;
   for (size_t n = 0; n < ok.size(); ++n) {
+    SCOPED_TRACE(n);
     try {
-      (void)parse_bvh(ok.substr(0, n), "prefix.bvh");
-    } catch (const BvhError&) {
+      const Motion m = parse_bvh(ok.substr(0, n), "prefix.bvh");
+      ++accepted;
+      ASSERT_EQ(m.skeleton.size(), full.skeleton.size());
+      for (int j = 0; j < full.skeleton.size(); ++j) {
+        const size_t i = static_cast<size_t>(j);
+        EXPECT_EQ(m.skeleton.names[i], full.skeleton.names[i]);
+        EXPECT_EQ(m.skeleton.parents[i], full.skeleton.parents[i]);
+        EXPECT_EQ(m.skeleton.offsets[i], full.skeleton.offsets[i]);
+        EXPECT_EQ(m.skeleton.end_sites[i], full.skeleton.end_sites[i]);
+      }
+      EXPECT_EQ(m.frame_time_s, full.frame_time_s);
+      ASSERT_EQ(m.frame_count(), full.frame_count());
+      for (size_t f = 0; f < full.frames.size(); ++f) {
+        const GlobalPose a = forward_kinematics(full.skeleton, full.frames[f]);
+        const GlobalPose b = forward_kinematics(m.skeleton, m.frames[f]);
+        for (size_t j = 0; j < a.positions.size(); ++j) EXPECT_EQ(a.positions[j], b.positions[j]) << f << " " << j;
+      }
+    } catch (const BvhError& e) {
+      const std::string msg = e.what();
+      EXPECT_EQ(msg.rfind("prefix.bvh", 0), 0u) << msg;
+      EXPECT_GT(msg.size(), std::string("prefix.bvh: ").size()) << msg;
     }
   }
+  // The cut that drops only the last newline is accepted; every shorter one loses data.
+  EXPECT_EQ(accepted, 1);
 }
 
 TEST(Bvh, WriteReadRoundTrip) {
@@ -191,7 +212,7 @@ TEST(Bvh, EveryBandaiFileLoads) {
       Motion m = read_bvh(path);
       // Frame count equals the file's own "Frames:" line.
       std::smatch match;
-      std::string text = slurp(path);
+      std::string text = read_file(path);
       std::regex re("Frames:\\s*(\\d+)");
       ASSERT_TRUE(std::regex_search(text, match, re)) << rel;
       EXPECT_EQ(m.frame_count(), std::stoi(match[1])) << rel;

@@ -1,0 +1,39 @@
+// A tracker-source sink that keeps every sample it is given. Header-only: a test that
+// includes this links bodyd_drivers. (Log lines: log_capture.h.)
+#pragma once
+
+#include "bodyd/drivers/source.h"
+
+#include <chrono>
+#include <cstddef>
+#include <mutex>
+#include <vector>
+
+namespace bodyd::test {
+
+// Every sample, in arrival order; push_wait never blocks.
+class CollectingSink final : public drivers::SampleSink {
+ public:
+  void push(const drivers::SourceSample& s) override {
+    std::lock_guard lock(mutex_);
+    samples_.push_back(s);
+  }
+  bool push_wait(const drivers::SourceSample& s, std::chrono::nanoseconds) override {
+    push(s);
+    return true;
+  }
+  std::vector<drivers::SourceSample> samples() const {
+    std::lock_guard lock(mutex_);
+    return samples_;
+  }
+  std::size_t size() const {
+    std::lock_guard lock(mutex_);
+    return samples_.size();
+  }
+
+ private:
+  mutable std::mutex mutex_;
+  std::vector<drivers::SourceSample> samples_;
+};
+
+}  // namespace bodyd::test
