@@ -249,7 +249,7 @@ struct Daemon::Impl final : ControlTarget {
       std::lock_guard lock(shared_mutex);
       skeleton_msg = std::move(m);
       method_name = std::string(recon->name());
-      head_height_m = recon->user_height();
+      head_height_m = recon->head_height_m();
     }
     for (auto& slot : outputs) slot->output->set_skeleton(recon->skeleton(), bytes);
   }
@@ -474,16 +474,16 @@ struct Daemon::Impl final : ControlTarget {
     refresh_skeleton();
     pub->publish_skeleton(monotonic_ns());
     publish_mounting_status();
-    spdlog::info("calibrated from the calibration pose: standing head height {:.3f} m{}; mounting {}", recon->user_height(),
+    spdlog::info("calibrated from the calibration pose: standing head height {:.3f} m{}; mounting {}", recon->head_height_m(),
                  height_error.empty() ? "" : " (the height was refused: " + height_error + ")", mounting_text(mounting));
-    recorder.comment(fmt::format("t_ns {}: calibrate pose head_height_m {} mounting {}", c.t_ns, recon->user_height(),
+    recorder.comment(fmt::format("t_ns {}: calibrate pose head_height_m {} mounting {}", c.t_ns, recon->head_height_m(),
                                  mounting_text(mounting)));
     std::string file_error;
     if (!config.mounting_file.empty()) {
       MountingState st;
       st.mounting = mounting;
       for (Role r : kRoles) st.measured[static_cast<int>(r)] = mounting_origin[static_cast<int>(r)] != "default";
-      st.head_height_m = height_error.empty() ? recon->user_height() : 0.0;
+      st.head_height_m = height_error.empty() ? recon->head_height_m() : 0.0;
       st.calibrated = utc_now();
       file_error = write_mounting_state(config.mounting_file, st);
       if (!file_error.empty()) spdlog::warn("calibration pose: {} (the calibration holds until bodyd stops)", file_error);
@@ -561,8 +561,8 @@ struct Daemon::Impl final : ControlTarget {
                                   StandingHeightOptions{}.fallback_percentile, h->measured_m,
                                   StandingHeightOptions{}.fallback_after_s)
                     : fmt::format("the head held still at {:.3f} m", h->measured_m);
-    spdlog::info("auto calibrated: standing head height {:.3f} m ({})", recon->user_height(), how);
-    recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {} (auto: {})", s.t_ns, recon->user_height(), how));
+    spdlog::info("auto calibrated: standing head height {:.3f} m ({})", recon->head_height_m(), how);
+    recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {} (auto: {})", s.t_ns, recon->head_height_m(), how));
   }
 
   // Records where the height came from (`source`: empty keeps it) and the auto state (empty keeps it).
@@ -585,12 +585,12 @@ struct Daemon::Impl final : ControlTarget {
   json apply_command(Command& c) {
     switch (c.kind) {
       case Command::Kind::Height: {
-        recon->set_user_height(c.height_m);
+        recon->set_head_height_m(c.height_m);
         if (c.height_m > 0.0) manual_calibration_applied();
         else set_calibration("none", "");
         refresh_skeleton();
-        spdlog::info("calibrated: standing head height {:.3f} m", recon->user_height());
-        recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {}", last_valid_head.t_ns, recon->user_height()));
+        spdlog::info("calibrated: standing head height {:.3f} m", recon->head_height_m());
+        recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {}", last_valid_head.t_ns, recon->head_height_m()));
         break;
       }
       case Command::Kind::FromHead: {
@@ -610,8 +610,8 @@ struct Daemon::Impl final : ControlTarget {
           return control_error(e);
         manual_calibration_applied();
         refresh_skeleton();
-        spdlog::info("calibrated from the standing head height: {:.3f} m", recon->user_height());
-        recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {}", last_valid_head.t_ns, recon->user_height()));
+        spdlog::info("calibrated from the standing head height: {:.3f} m", recon->head_height_m());
+        recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {}", last_valid_head.t_ns, recon->head_height_m()));
         break;
       }
       case Command::Kind::Recentre: {
@@ -671,7 +671,7 @@ struct Daemon::Impl final : ControlTarget {
           calibrated = height_calibrated;
           model_path_text = c.model_path;
         }
-        if (calibrated) c.recon->set_user_height(recon->user_height());
+        if (calibrated) c.recon->set_head_height_m(recon->head_height_m());
         recon = std::move(c.recon);
         last_pose_t_ns = INT64_MIN;
         refresh_skeleton();
@@ -944,7 +944,7 @@ std::string Daemon::start() {
   d.recon = d.factory(choice, error);
   if (!d.recon) return error.empty() ? "cannot create the " + choice.method + " reconstructor" : error;
   if (const double head_height_m = configured_head_height_m(d.config); head_height_m > 0.0) {
-    d.recon->set_user_height(head_height_m);
+    d.recon->set_head_height_m(head_height_m);
     d.height_calibrated = true;
     d.calibration_source = "config";
     if (d.config.auto_calibrate) d.auto_calibration = "superseded";
@@ -975,7 +975,7 @@ std::string Daemon::start() {
       spdlog::info("device mounting from {} (calibrated {}): {}", d.config.mounting_file, st->calibrated,
                    mounting_text(d.mounting));
       if (st->head_height_m > 0.0 && !d.height_calibrated) {
-        d.recon->set_user_height(st->head_height_m);
+        d.recon->set_head_height_m(st->head_height_m);
         d.height_calibrated = true;
         d.calibration_source = "file";
         if (d.auto_calibrating) {
@@ -992,7 +992,7 @@ std::string Daemon::start() {
   d.publish_mounting_status();
   d.refresh_skeleton();
   spdlog::info("reconstruction: {}{}, standing head height {:.3f} m, skeleton {} joints (id {:#010x})", d.recon->name(),
-               d.model_path_text.empty() ? "" : " (" + d.model_path_text + ")", d.recon->user_height(),
+               d.model_path_text.empty() ? "" : " (" + d.model_path_text + ")", d.recon->head_height_m(),
                d.recon->skeleton().size(), d.skeleton_msg.skeleton_id);
 
   // The sources.
@@ -1035,7 +1035,7 @@ std::string Daemon::start() {
         {"sources", d.source_names()},
         {"offsets", offsets.empty() ? "none" : "applied to the samples below: " + offsets},
         {"recentre", "applied to the samples below after a reset (comment lines mark each)"},
-        {"calibration", fmt::format("head_height_m {} ({})", d.recon->user_height(),
+        {"calibration", fmt::format("head_height_m {} ({})", d.recon->head_height_m(),
                                     d.height_calibrated ? "calibrated" : "the model's size")},
         {"method", std::string(d.recon->name())},
         {"model", d.model_path_text.empty() ? "none" : d.model_path_text},

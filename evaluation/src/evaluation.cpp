@@ -186,8 +186,8 @@ class Calibrating final : public Reconstructor {
     inner_->reset();
     detector_.reset();
   }
-  void set_user_height(double h) override { inner_->set_user_height(h); }
-  double user_height() const override { return inner_->user_height(); }
+  void set_head_height_m(double h) override { inner_->set_head_height_m(h); }
+  double head_height_m() const override { return inner_->head_height_m(); }
   // The standing height applied, if any.
   const std::optional<StandingHeight>& found() const { return found_; }
 
@@ -225,8 +225,8 @@ class Mounted final : public Reconstructor {
     inner_->reset();
     if (calibrator_) calibrator_->reset();
   }
-  void set_user_height(double h) override { inner_->set_user_height(h); }
-  double user_height() const override { return inner_->user_height(); }
+  void set_head_height_m(double h) override { inner_->set_head_height_m(h); }
+  double head_height_m() const override { return inner_->head_height_m(); }
   std::int64_t refused_samples() const override { return inner_->refused_samples(); }
   const std::optional<PoseCalibration>& found() const { return found_; }
 

@@ -16,7 +16,7 @@ std::string calibrate_from_head_height(Reconstructor& reconstructor, double head
         "the head is at y = {:.3f} m, not a plausible standing head height ({} to {} m): stand up straight on "
         "the floor (y = 0) and retry",
         head_height_m, limits::kMinHeadHeightM, limits::kMaxHeadHeightM);
-  reconstructor.set_user_height(head_height_m);
+  reconstructor.set_head_height_m(head_height_m);
   return {};
 }
 

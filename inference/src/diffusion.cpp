@@ -102,7 +102,7 @@ void DiffusionReconstructor::reset() {
   sampler_.reseed(options_.seed);
 }
 
-void DiffusionReconstructor::set_user_height(double height_m) {
+void DiffusionReconstructor::set_head_height_m(double height_m) {
   // Each role's newest sample, back in the user's units: kept across the reset below, so a
   // tracker that was reporting still counts as tracked in the next pose (issue 20 item 9: the
   // pose after the auto calibration said neither hand was tracking, because the hands' samples

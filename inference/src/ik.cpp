@@ -136,7 +136,7 @@ IkReconstructor::IkReconstructor(const Skeleton& skeleton, const IkOptions& opti
                                   names[side][1] + " -> " + names[side][2]);
     arms_[static_cast<size_t>(side)] = *chain;
   }
-  user_height_m_ = reference_.head_height_m;
+  head_height_m_ = reference_.head_height_m;
   work_pose_ = reference_.pose;
   work_global_ = reference_.global;
 }
@@ -146,9 +146,9 @@ void IkReconstructor::reset() {
   have_head_ = false;
 }
 
-void IkReconstructor::set_user_height(double height_m) {
-  user_height_m_ = height_m > 0.0 && std::isfinite(height_m) ? height_m : reference_.head_height_m;
-  const double k = user_height_m_ / reference_.head_height_m;
+void IkReconstructor::set_head_height_m(double height_m) {
+  head_height_m_ = height_m > 0.0 && std::isfinite(height_m) ? height_m : reference_.head_height_m;
+  const double k = head_height_m_ / reference_.head_height_m;
   for (size_t j = 0; j < model_skeleton_.offsets.size(); ++j) {
     user_skeleton_.offsets[j] = model_skeleton_.offsets[j] * k;
     if (model_skeleton_.end_sites[j]) user_skeleton_.end_sites[j] = *model_skeleton_.end_sites[j] * k;
@@ -157,7 +157,7 @@ void IkReconstructor::set_user_height(double height_m) {
 
 bool IkReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
   // Tracker positions into the model's scale, and the output back to the user's.
-  const double to_model = reference_.head_height_m / user_height_m_;
+  const double to_model = reference_.head_height_m / head_height_m_;
 
   TrackerSample head;
   const bool head_valid = history_.query(Role::Head, t_ns, head);

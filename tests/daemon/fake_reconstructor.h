@@ -16,7 +16,7 @@ class FakeReconstructor final : public Reconstructor {
     model_.parents = {-1, 0, 1, 1, 1};
     model_.offsets = {Vec3::Zero(), Vec3(0, 0.9, 0), Vec3(0, 0.6, 0), Vec3(0.3, 0.4, 0), Vec3(-0.3, 0.4, 0)};
     model_.end_sites.assign(5, std::nullopt);
-    set_user_height(0.0);
+    set_head_height_m(0.0);
   }
   std::string_view name() const override { return "fake"; }
   const Skeleton& skeleton() const override { return skeleton_; }
@@ -48,13 +48,13 @@ class FakeReconstructor final : public Reconstructor {
     latest_ = {};
     last_.fill(INT64_MIN);
   }
-  void set_user_height(double height_m) override {
+  void set_head_height_m(double height_m) override {
     height_m_ = height_m > 0 ? height_m : 1.5;
     scale_ = height_m_ / 1.5;
     skeleton_ = model_;
     for (auto& o : skeleton_.offsets) o *= scale_;
   }
-  double user_height() const override { return height_m_; }
+  double head_height_m() const override { return height_m_; }
   int calls() const { return calls_; }
 
  private:

@@ -155,7 +155,7 @@ TEST(Diffusion, TrackingFlagsSurviveACalibration) {
     ASSERT_TRUE(r.reconstruct(last_t, before));
     EXPECT_TRUE(before.tracker_valid[1]);
     EXPECT_EQ(before.tracker_valid[2], !right_hand_lost);
-    r.set_user_height(r.model_height() * 1.1);
+    r.set_head_height_m(r.model_height() * 1.1);
     while (next < samples.size() && samples[next].role != Role::Head) ++next;
     ASSERT_LT(next, samples.size());
     const std::int64_t t = samples[next].t_ns;
@@ -245,7 +245,7 @@ TEST_F(DefaultModel, UserHeightScalesTheBody) {
   const auto times = frame_times(clip);
   DiffusionReconstructor r(model_);
   const double model_h = r.model_height();
-  r.set_user_height(model_h * 1.2);
+  r.set_head_height_m(model_h * 1.2);
   auto samples = trackers(clip);
   for (TrackerSample& s : samples) s.position_m *= 1.2;  // a user 20% taller
   const Outputs run = feed_and_reconstruct(r, samples, times);

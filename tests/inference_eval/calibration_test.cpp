@@ -131,14 +131,14 @@ TEST(StandingHeight, AnySampleRateWithoutAllocatingAndBadOptionsRefused) {
 TEST(StandingHeight, CalibrationAppliesPlausibleHeightsOnly) {
   const Motion walk = read_bvh(test::fixtures() / "walk_60.bvh");
   IkReconstructor ik(walk.skeleton);
-  const double before = ik.user_height();
+  const double before = ik.head_height_m();
   std::string err = calibrate_from_head_height(ik, 0.3);
   EXPECT_NE(err.find("stand up straight"), std::string::npos) << err;
   EXPECT_FALSE(calibrate_from_head_height(ik, std::nan("")).empty());
   EXPECT_FALSE(calibrate_from_head_height(ik, 3.0).empty());
-  EXPECT_DOUBLE_EQ(ik.user_height(), before);
+  EXPECT_DOUBLE_EQ(ik.head_height_m(), before);
   EXPECT_TRUE(calibrate_from_head_height(ik, 1.55).empty());
-  EXPECT_NEAR(ik.user_height(), 1.55, 1e-12);
+  EXPECT_NEAR(ik.head_height_m(), 1.55, 1e-12);
 }
 
 TEST(OneEuro, StillNoiseIsRemovedAndFastMotionFollowedClosely) {

@@ -86,8 +86,8 @@ class PeekingReconstructor final : public Reconstructor {
     return true;
   }
   void reset() override { history_.clear(); }
-  void set_user_height(double) override {}
-  double user_height() const override { return 1.0; }
+  void set_head_height_m(double) override {}
+  double head_height_m() const override { return 1.0; }
 
  private:
   Skeleton skeleton_;

@@ -207,9 +207,9 @@ TEST(IkReconstructor, UserHeightScalesInAndOut) {
   const Skeleton& s = data_skeleton();
   IkReconstructor ik(s);
   const double model_h = ik.reference().head_height_m;
-  EXPECT_DOUBLE_EQ(ik.user_height(), model_h);
-  ik.set_user_height(2.0 * model_h);
-  EXPECT_DOUBLE_EQ(ik.user_height(), 2.0 * model_h);
+  EXPECT_DOUBLE_EQ(ik.head_height_m(), model_h);
+  ik.set_head_height_m(2.0 * model_h);
+  EXPECT_DOUBLE_EQ(ik.head_height_m(), 2.0 * model_h);
   for (size_t j = 0; j < s.offsets.size(); ++j) EXPECT_LT((ik.skeleton().offsets[j] - 2.0 * s.offsets[j]).norm(), 1e-12);
   // A user twice the size standing like the reference: the reference, twice the size.
   const Placed p = place(ik.reference(), 0.4, 0.3, 1.0, 2.0);
@@ -220,8 +220,8 @@ TEST(IkReconstructor, UserHeightScalesInAndOut) {
     const auto jj = static_cast<size_t>(j);
     EXPECT_LT((out.global.positions[jj] - p.global.positions[jj]).norm(), 2e-6) << s.names[jj];
   }
-  ik.set_user_height(0.0);
-  EXPECT_DOUBLE_EQ(ik.user_height(), model_h);
+  ik.set_head_height_m(0.0);
+  EXPECT_DOUBLE_EQ(ik.head_height_m(), model_h);
   EXPECT_LT((ik.skeleton().offsets[5] - s.offsets[5]).norm(), 1e-12);
 }
 

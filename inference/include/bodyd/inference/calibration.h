@@ -1,6 +1,6 @@
 // User-height calibration from the head tracker (docs/daemon.md, "Calibration").
 //
-// The reconstructors scale by the user's standing head height (Reconstructor::set_user_height).
+// The reconstructors scale by the user's standing head height (Reconstructor::set_head_height_m).
 // Two ways to measure it, both ending in calibrate_from_head_height():
 //  - on request: the control socket's {"cmd":"calibrate","from":"head"} takes the head's
 //    current height (standing_height_from_head(), the same stance correction as below);
@@ -26,7 +26,7 @@ namespace bodyd {
 // Applies a measured standing head height (metres: the Head joint's height above the floor,
 // y = 0) to `reconstructor`. Returns an empty string on success; otherwise what is wrong and
 // what to do (a height outside limits::kMinHeadHeightM..kMaxHeadHeightM), and the reconstructor
-// is left unchanged. set_user_height() resets the reconstructor's history.
+// is left unchanged. set_head_height_m() resets the reconstructor's history.
 [[nodiscard]] std::string calibrate_from_head_height(Reconstructor& reconstructor, double head_height_m);
 
 struct StandingHeightOptions;

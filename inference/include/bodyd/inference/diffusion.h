@@ -60,8 +60,8 @@ class DiffusionReconstructor final : public Reconstructor {
   [[nodiscard]] std::int64_t refused_outputs() const { return refused_outputs_; }
   [[nodiscard]] bool reconstruct(std::int64_t t_ns, BodyPose& out) override;
   void reset() override;
-  void set_user_height(double height_m) override;
-  [[nodiscard]] double user_height() const override { return model_height_m_ / scale_; }
+  void set_head_height_m(double height_m) override;
+  [[nodiscard]] double head_height_m() const override { return model_height_m_ / scale_; }
 
   // The model's reference height (standing head height of its training data, metres).
   [[nodiscard]] double model_height() const { return model_height_m_; }

@@ -44,7 +44,7 @@ struct StandingReference {
 [[nodiscard]] StandingReference standing_reference(const Skeleton& skeleton);
 
 // The skeleton's standing head height (Head joint, metres): the "model height" of user-height
-// calibration. set_user_height() takes the user's standing head height in the same sense (the
+// calibration. set_head_height_m() takes the user's standing head height in the same sense (the
 // height of the head tracker's Head joint when the user stands straight).
 [[nodiscard]] double standing_head_height_m(const Skeleton& skeleton);
 
@@ -69,8 +69,8 @@ class IkReconstructor final : public Reconstructor {
   [[nodiscard]] std::int64_t refused_samples() const override { return history_.refused_count(); }
   [[nodiscard]] bool reconstruct(std::int64_t t_ns, BodyPose& out) override;
   void reset() override;
-  void set_user_height(double height_m) override;
-  [[nodiscard]] double user_height() const override { return user_height_m_; }
+  void set_head_height_m(double height_m) override;
+  [[nodiscard]] double head_height_m() const override { return head_height_m_; }
 
   [[nodiscard]] const StandingReference& reference() const { return reference_; }
   [[nodiscard]] const TrackerHistory& history() const { return history_; }
@@ -80,7 +80,7 @@ class IkReconstructor final : public Reconstructor {
   Skeleton user_skeleton_;  // model_skeleton_ scaled to the user's height
   StandingReference reference_;
   TrackerHistory history_;
-  double user_height_m_ = 0;
+  double head_height_m_ = 0;
   int hips_ = -1, head_ = -1;
   std::vector<int> spine_;  // joints strictly between Hips and Head, from the hips up
   std::array<TwoBoneChain, 2> arms_{};  // left, right

@@ -48,10 +48,13 @@ class Reconstructor {
   // Forgets all samples and emitted frames (a new user or a new recording).
   virtual void reset() = 0;
 
-  // User-height calibration: tracker positions are scaled by model_height / height_m on
-  // the way in and back on the way out. <= 0 restores the model's own height.
-  virtual void set_user_height(double height_m) = 0;
-  [[nodiscard]] virtual double user_height() const = 0;
+  // Size calibration by the user's standing *head* height (the Head joint's height standing
+  // straight; not the body height: the config's user_height_m is the body height, converted
+  // with the daemon's kHeadHeightPerStature, config.h). Tracker positions are scaled by
+  // model_head_height / height_m on the way in and back on the way out. <= 0 restores the
+  // model's own height.
+  virtual void set_head_height_m(double height_m) = 0;
+  [[nodiscard]] virtual double head_height_m() const = 0;
 };
 
 }  // namespace bodyd
