@@ -237,26 +237,60 @@ void DiffusionReconstructor::lock_feet(const std::array<bool, 2>& contact, doubl
   }
 }
 
+// reconstruct() in its stages: the head (the window's anchor), the window of observations, the
+// network's newest frame, the tracked joints (head and hands), the feet, the arms, then what is
+// kept for the next windows and what goes out at the user's size.
 bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
   if (have_last_ && t_ns <= last_t_ns_) return false;  // times must increase
-  Vec3 head_p;
-  Quat head_q;
-  bool head_valid = tracker_at(Role::Head, t_ns, t_ns, head_p, head_q);
-  if (!head_valid) {
-    // Head lost: keep the body where the last valid head sample put it.
-    const TrackerSample* last = history_.newest_valid_at_or_before(Role::Head, t_ns);
-    if (last == nullptr) return false;
-    head_p = last->position_m;
-    head_q = last->rotation;
-  }
-  const features::Canonical canon = features::canonical_from_head(head_p, head_q);
+  HeadNow head;
+  if (!head_now(t_ns, head)) return false;
+  const features::Canonical canon = features::canonical_from_head(head.p, head.q);
+  TrackersNow trackers;
+  build_window(t_ns, head, canon, trackers);
+  std::array<bool, 2> contact{};
+  sample_newest_frame(canon, contact);
 
-  // Build the window: observations and mask, in feature units, then normalise.
+  const double frame_dt_s = have_last_ ? static_cast<double>(t_ns - last_t_ns_) / kNsPerS : 0.0;
+  TrackedTargets targets;
+  const HandGoals hands = hand_goals(t_ns, frame_dt_s, trackers, targets);
+  fit_tracked_joints(head, targets);
+  if (options_.foot_lock) lock_feet(contact, frame_dt_s);
+  fit_arms(canon, hands);
+
+  // A non-finite pose (from inputs within limits this would be a network bug) is dropped, never
+  // remembered: fed back as an observation it would poison every later window. The per-frame
+  // state it may have touched starts over.
+  if (!finite(out_global_)) {
+    ++refused_outputs_;
+    hand_was_valid_ = {};
+    foot_locked_ = {};
+    foot_release_offset_ = {Vec3::Zero(), Vec3::Zero()};
+    return false;
+  }
+  remember_emitted(t_ns, contact);
+  last_t_ns_ = t_ns;
+  have_last_ = true;
+  write_user_pose(t_ns, contact, trackers.valid, out);
+  return true;
+}
+
+bool DiffusionReconstructor::head_now(std::int64_t t_ns, HeadNow& head) const {
+  head.valid = tracker_at(Role::Head, t_ns, t_ns, head.p, head.q);
+  if (head.valid) return true;
+  // Head lost: keep the body where the last valid head sample put it.
+  const TrackerSample* last = history_.newest_valid_at_or_before(Role::Head, t_ns);
+  if (last == nullptr) return false;
+  head.p = last->position_m;
+  head.q = last->rotation;
+  return true;
+}
+
+void DiffusionReconstructor::build_window(std::int64_t t_ns, const HeadNow& head, const features::Canonical& canon,
+                                          TrackersNow& trackers) {
+  // Observations and mask, in feature units, then normalised: the emitted frames (all but the
+  // newest) and the trackers.
   std::fill(obs_.begin(), obs_.end(), 0.0f);
   std::fill(mask_.begin(), mask_.end(), 0.0f);
-  std::array<bool, kRoleCount> valid_now{};
-  std::array<Vec3, kRoleCount> tracker_p;
-  std::array<Quat, kRoleCount> tracker_q;
   for (int w = 0; w < W_; ++w) {
     const std::int64_t tw = t_ns - static_cast<std::int64_t>(W_ - 1 - w) * frame_dt_ns_;
     features::Frame frame(obs_.data() + static_cast<size_t>(w) * features::kDim, features::kDim);
@@ -269,13 +303,12 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
     for (Role role : kRoles) {
       Vec3 p;
       Quat q;
-      const bool ok = (w == W_ - 1 && role == Role::Head)
-                          ? (p = head_p, q = head_q, head_valid)
-                          : tracker_at(role, tw, t_ns, p, q);
+      const bool ok = (w == W_ - 1 && role == Role::Head) ? (p = head.p, q = head.q, head.valid)
+                                                           : tracker_at(role, tw, t_ns, p, q);
       if (w == W_ - 1) {
-        valid_now[static_cast<size_t>(role)] = ok;
-        tracker_p[static_cast<size_t>(role)] = p;
-        tracker_q[static_cast<size_t>(role)] = q;
+        trackers.valid[static_cast<size_t>(role)] = ok;
+        trackers.p[static_cast<size_t>(role)] = p;
+        trackers.q[static_cast<size_t>(role)] = q;
       }
       if (!ok) continue;
       features::encode_joint(features::tracker_joint(role), p, q, canon, frame);
@@ -289,46 +322,48 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
       float& v = obs_[static_cast<size_t>(w * features::kDim + k)];
       v = (v - mean[static_cast<size_t>(k)]) / stdv[static_cast<size_t>(k)];
     }
+}
 
+void DiffusionReconstructor::sample_newest_frame(const features::Canonical& canon, std::array<bool, 2>& contact) {
   if (options_.fixed_noise)
     sampler_.sample_from_noise(obs_, mask_, noise_, out_);
   else
     sampler_.sample(obs_, mask_, out_);
 
-  // Decode the newest frame.
+  // Decode the newest frame (into scratch_pose_ and out_global_, model scale).
+  const auto mean = network_->norm_mean();
+  const auto stdv = network_->norm_std();
   float* newest = out_.data() + static_cast<size_t>(W_ - 1) * features::kDim;
   for (int k = 0; k < features::kDim; ++k)
     newest[k] = newest[k] * stdv[static_cast<size_t>(k)] + mean[static_cast<size_t>(k)];
-  std::array<bool, 2> contact{};
   features::decode_pose(skeleton_, features::ConstFrame(newest, features::kDim), canon, scratch_pose_, contact);
   forward_kinematics(skeleton_, scratch_pose_, out_global_);
-
-  const double frame_dt_s = have_last_ ? static_cast<double>(t_ns - last_t_ns_) / kNsPerS : 0.0;
   // Contact with hysteresis, so a value near 0.5 does not flicker between planted and free.
   for (size_t s = 0; s < 2; ++s) {
     const float v = newest[features::kContactOffset + static_cast<int>(s)];
     contact[s] = foot_locked_[s] ? v > options_.contact_off : v > options_.contact_on;
   }
+}
+
+DiffusionReconstructor::HandGoals DiffusionReconstructor::hand_goals(std::int64_t t_ns, double frame_dt_s,
+                                                                     const TrackersNow& trackers, TrackedTargets& targets) {
   // Hand goals: the (filtered) tracker where valid, the model's hand where lost. When a hand is lost or
   // comes back, its goal starts where the hand was last emitted and eases to the new source
   // (offset halving every hand_*_half_life_s, shrinking at most hand_blend_max_speed_m_s), so the
   // hand never jumps (docs/model.md, "Tracked joints").
-  std::array<bool, 2> hand_goal_valid{};
-  std::array<Vec3, 2> hand_goal_p{Vec3::Zero(), Vec3::Zero()};
-  std::array<Quat, 2> hand_goal_q{Quat::Identity(), Quat::Identity()};
-  TrackedTargets targets;
+  HandGoals goals;
   for (int side = 0; side < 2; ++side) {
     const Role role = side == 0 ? Role::LeftHand : Role::RightHand;
     const auto r = static_cast<size_t>(role);
     const auto s = static_cast<size_t>(side);
     if (!arms_[side]) continue;
     const auto hand = static_cast<size_t>(arms_[side]->end);
-    const bool valid = valid_now[r];
+    const bool valid = trackers.valid[r];
     Vec3 base_p = out_global_.positions[hand];
     Quat base_q = out_global_.rotations[hand];
     if (valid) {
-      base_p = tracker_p[r];
-      base_q = tracker_q[r];
+      base_p = trackers.p[r];
+      base_q = trackers.q[r];
     }
     if (valid && !hand_ever_valid_[s]) {
       // The hand's first sample since the start: it is where the tracker is from this pose on
@@ -360,36 +395,38 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
     }
     hand_was_valid_[s] = valid;
     hand_ever_valid_[s] = hand_ever_valid_[s] || valid;
-    hand_goal_valid[s] = valid || hand_offset_[s].squaredNorm() > 1e-10;
-    hand_goal_p[s] = base_p + hand_offset_[s];
-    hand_goal_q[s] = (hand_rot_offset_[s] * base_q).normalized();
+    goals.valid[s] = valid || hand_offset_[s].squaredNorm() > 1e-10;
+    goals.p[s] = base_p + hand_offset_[s];
+    goals.q[s] = (hand_rot_offset_[s] * base_q).normalized();
     targets.hand_valid[s] = valid && options_.exact_tracked_joints;
-    targets.hand_m[s] = hand_goal_p[s];
+    targets.hand_m[s] = goals.p[s];
   }
+  return goals;
+}
 
+void DiffusionReconstructor::fit_tracked_joints(const HeadNow& head, TrackedTargets& targets) {
   // The Head joint on the head tracker, the shoulders moved where a hand is out of reach
   // (body_solver.h). The trackers are the filtered ones: the filter passes clean samples
   // unchanged (its noise gate, one_euro.h), and on noisy ones the body and the tracked joints
   // follow one smooth signal instead of the neck and hips taking up the noise.
-  if (options_.exact_tracked_joints && upper_body_) {
-    targets.head_valid = head_valid;
-    if (targets.head_valid) {
-      targets.head_m = head_p;
-      targets.head_rotation = head_q;
-      targets.head_body_m = head_p;
-    }
-    (void)solve_tracked_body(skeleton_, *upper_body_, options_.body, targets, scratch_pose_, out_global_);
+  if (!options_.exact_tracked_joints || !upper_body_) return;
+  targets.head_valid = head.valid;
+  if (targets.head_valid) {
+    targets.head_m = head.p;
+    targets.head_rotation = head.q;
+    targets.head_body_m = head.p;
   }
+  (void)solve_tracked_body(skeleton_, *upper_body_, options_.body, targets, scratch_pose_, out_global_);
+}
 
-  if (options_.foot_lock) lock_feet(contact, frame_dt_s);
-
+void DiffusionReconstructor::fit_arms(const features::Canonical& canon, const HandGoals& hands) {
   // Arms by two-bone IK onto the hand goals.
   for (int side = 0; side < 2; ++side) {
     const auto s = static_cast<size_t>(side);
-    if (!arms_[side] || !hand_goal_valid[s]) continue;
+    if (!arms_[side] || !hands.valid[s]) continue;
     TwoBoneTarget target;
-    target.position_m = hand_goal_p[s];
-    if (options_.exact_tracked_joints) target.rotation = hand_goal_q[s];
+    target.position_m = hands.p[s];
+    if (options_.exact_tracked_joints) target.rotation = hands.q[s];
     {
       // Pole: the elbow as predicted, nudged outward, down and back in the body's frame. A bent
       // elbow keeps its plane; a nearly straight one (whose plane is undefined and would flip
@@ -401,38 +438,27 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
     }
     (void)solve_two_bone_ik(skeleton_, *arms_[side], target, scratch_pose_, out_global_);
   }
+}
 
-  // A non-finite pose (from inputs within limits this would be a network bug) is dropped, never
-  // remembered: fed back as an observation it would poison every later window. The per-frame
-  // state it may have touched starts over.
-  if (!finite(out_global_)) {
-    ++refused_outputs_;
-    hand_was_valid_ = {};
-    foot_locked_ = {};
-    foot_release_offset_ = {Vec3::Zero(), Vec3::Zero()};
-    return false;
+void DiffusionReconstructor::remember_emitted(std::int64_t t_ns, const std::array<bool, 2>& contact) {
+  // What was emitted (model scale), for the next windows.
+  if (emitted_count_ == static_cast<int>(emitted_.size())) {
+    emitted_head_ = (emitted_head_ + 1) % static_cast<int>(emitted_.size());
+    --emitted_count_;
+    emitted_dropped_ = true;
   }
-
-  // Remember what was emitted (model scale) for the next windows.
-  {
-    if (emitted_count_ == static_cast<int>(emitted_.size())) {
-      emitted_head_ = (emitted_head_ + 1) % static_cast<int>(emitted_.size());
-      --emitted_count_;
-      emitted_dropped_ = true;
-    }
-    Emitted& e = emitted_[static_cast<size_t>((emitted_head_ + emitted_count_) % static_cast<int>(emitted_.size()))];
-    ++emitted_count_;
-    e.t_ns = t_ns;
-    const GlobalPose& src = out_global_;
-    for (size_t j = 0; j < e.global.positions.size(); ++j) {
-      e.global.positions[j] = src.positions[j];
-      e.global.rotations[j] = src.rotations[j];
-    }
-    e.contact = contact;
+  Emitted& e = emitted_[static_cast<size_t>((emitted_head_ + emitted_count_) % static_cast<int>(emitted_.size()))];
+  ++emitted_count_;
+  e.t_ns = t_ns;
+  for (size_t j = 0; j < e.global.positions.size(); ++j) {
+    e.global.positions[j] = out_global_.positions[j];
+    e.global.rotations[j] = out_global_.rotations[j];
   }
-  last_t_ns_ = t_ns;
-  have_last_ = true;
+  e.contact = contact;
+}
 
+void DiffusionReconstructor::write_user_pose(std::int64_t t_ns, const std::array<bool, 2>& contact,
+                                             const std::array<bool, kRoleCount>& tracker_valid, BodyPose& out) const {
   // Back to the user's size.
   const double inv = 1.0 / scale_;
   const size_t nj = static_cast<size_t>(skeleton_.size());
@@ -446,8 +472,7 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
   }
   out.t_ns = t_ns;
   out.foot_contact = contact;
-  out.tracker_valid = valid_now;
-  return true;
+  out.tracker_valid = tracker_valid;
 }
 
 }  // namespace bodyd

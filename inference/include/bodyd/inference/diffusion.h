@@ -10,6 +10,7 @@
 // constructor; reconstruct() does not allocate.
 #pragma once
 
+#include "bodyd/inference/features.h"
 #include "bodyd/inference/model_file.h"
 #include "bodyd/inference/reconstructor.h"
 #include "bodyd/inference/sampler.h"
@@ -73,6 +74,44 @@ class DiffusionReconstructor final : public Reconstructor {
     GlobalPose global;  // model scale, world
     std::array<bool, 2> contact{};
   };
+  // The head at the requested time (model scale): its tracker, or where the last valid head
+  // sample was (valid false).
+  struct HeadNow {
+    Vec3 p = Vec3::Zero();
+    Quat q = Quat::Identity();
+    bool valid = false;
+  };
+  // Each role's tracker at the window's newest frame (model scale); p and q only where valid.
+  struct TrackersNow {
+    std::array<bool, kRoleCount> valid{};
+    std::array<Vec3, kRoleCount> p;
+    std::array<Quat, kRoleCount> q;
+  };
+  // Where each hand goes: the tracker, or the model's hand, eased after a loss or a return.
+  struct HandGoals {
+    std::array<bool, 2> valid{};
+    std::array<Vec3, 2> p{Vec3::Zero(), Vec3::Zero()};
+    std::array<Quat, 2> q{Quat::Identity(), Quat::Identity()};
+  };
+  // reconstruct()'s stages, in order (diffusion.cpp). False: no valid head sample yet.
+  bool head_now(std::int64_t t_ns, HeadNow& head) const;
+  // The window's observations and mask (obs_, mask_), normalised; the trackers at its newest frame.
+  void build_window(std::int64_t t_ns, const HeadNow& head, const features::Canonical& canon, TrackersNow& trackers);
+  // Samples the window and decodes its newest frame into scratch_pose_ / out_global_; the feet's
+  // contact with hysteresis.
+  void sample_newest_frame(const features::Canonical& canon, std::array<bool, 2>& contact);
+  // The hands' goals (and the easing state), and the hands in `targets`.
+  HandGoals hand_goals(std::int64_t t_ns, double frame_dt_s, const TrackersNow& trackers, TrackedTargets& targets);
+  // The Head joint on the head tracker, the shoulders toward out-of-reach hands (body_solver.h).
+  void fit_tracked_joints(const HeadNow& head, TrackedTargets& targets);
+  // The arms by two-bone IK onto the hand goals.
+  void fit_arms(const features::Canonical& canon, const HandGoals& hands);
+  // Keeps the emitted frame (model scale) for the next windows.
+  void remember_emitted(std::int64_t t_ns, const std::array<bool, 2>& contact);
+  // The emitted frame at the user's size into `out`.
+  void write_user_pose(std::int64_t t_ns, const std::array<bool, 2>& contact,
+                       const std::array<bool, kRoleCount>& tracker_valid, BodyPose& out) const;
+
   // The emitted pose at t_ns (interpolated between emitted frames), or false if not covered.
   bool emitted_at(std::int64_t t_ns, GlobalPose& out, std::array<bool, 2>& contact) const;
   // The tracker pose of `role` at t_ns in model scale; pads with the first sample before it.
@@ -111,8 +150,6 @@ class DiffusionReconstructor final : public Reconstructor {
   std::array<bool, 2> hand_ever_valid_{};  // a valid sample of the hand since reset()
   std::array<Vec3, 2> hand_offset_{Vec3::Zero(), Vec3::Zero()};
   std::array<Quat, 2> hand_rot_offset_{Quat::Identity(), Quat::Identity()};
-  // Hand easing after a loss: offset (model scale) from the model's hand, decaying to zero.
-  std::array<Vec3, 2> hand_loss_offset_{Vec3::Zero(), Vec3::Zero()};
 
   // Foot locking state (model scale, world).
   std::array<bool, 2> foot_locked_{};
