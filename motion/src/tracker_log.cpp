@@ -7,8 +7,15 @@
 #include <charconv>
 #include <cmath>
 #include <iterator>
+#include <limits>
 
 namespace bodyd {
+
+Quat unit_rotation(const Quat& q) {
+  constexpr double kTolerance = 8.0 * std::numeric_limits<double>::epsilon();
+  return std::abs(q.squaredNorm() - 1.0) <= kTolerance ? q : q.normalized();
+}
+
 namespace {
 
 constexpr std::string_view kVersionPrefix = "# bodyd-tracker-log ";
@@ -183,7 +190,7 @@ TrackerSample TrackerLogParser::parse_sample(std::string_view line) const {
     fail(fmt::format("quaternion (qx,qy,qz,qw) = ({}, {}, {}, {}) has length {:.6g}, not 1 (tolerance {}); "
                      "are the columns in the order qx,qy,qz,qw?",
                      v[3], v[4], v[5], v[6], norm, kTrackerLogQuatNormTolerance));
-  s.rotation = q.normalized();
+  s.rotation = unit_rotation(q);  // idempotent: the daemon's conditioning ends with it too
   return s;
 }
 

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
 #include <string>
 #include <unistd.h>
@@ -378,4 +379,24 @@ TEST(TrackerLog, SpecificationExampleParses) {
   EXPECT_EQ(log.samples[3].t_ns, 11111111);
   ASSERT_EQ(log.metadata.size(), 2u);
   EXPECT_EQ(log.metadata[1], std::make_pair(std::string("source"), std::string("walk_60.bvh")));
+}
+
+// The reader's normalisation is idempotent (unit_rotation): the daemon's sample conditioning ends
+// with it too, so a recording's replay reaches the reconstructor bit-identical. q.normalized()
+// alone is not: normalising its result again changes many quaternions in the last bit.
+TEST(TrackerLog, UnitRotationIsIdempotentWhereNormalizedIsNot) {
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> n;
+  int normalized_changed = 0;
+  for (int i = 0; i < 100000; ++i) {
+    const Quat q(n(rng), n(rng), n(rng), n(rng));
+    const Quat a = q.normalized();
+    normalized_changed += a.coeffs() != a.normalized().coeffs();
+    const Quat u = unit_rotation(q);
+    ASSERT_EQ(u.coeffs(), unit_rotation(u).coeffs()) << i;
+    ASSERT_EQ(u.coeffs(), a.coeffs()) << i;  // a non-unit quaternion: exactly q.normalized()
+    const Quat near_unit = unit_rotation(u);
+    ASSERT_LE(std::abs(near_unit.squaredNorm() - 1.0), 8 * std::numeric_limits<double>::epsilon());
+  }
+  EXPECT_GT(normalized_changed, 0);
 }

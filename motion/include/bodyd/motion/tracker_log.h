@@ -40,8 +40,16 @@ inline constexpr std::string_view kTrackerLogHeader = "t_ns,role,valid,px,py,pz,
 // The metadata line "# pose_frame: device" says the samples are device poses (docs/tracker-log.md;
 // TrackerSample::frame); "joint", or no such line, keeps them joint poses (every older log).
 inline constexpr std::string_view kTrackerLogPoseFrameKey = "pose_frame";
-// A valid sample's quaternion must have | |q| - 1 | <= this; it is then renormalised.
+// A valid sample's quaternion must have | |q| - 1 | <= this; it is then renormalised
+// (unit_rotation).
 inline constexpr double kTrackerLogQuatNormTolerance = limits::kQuatNormTolerance;
+
+// `q` made unit length, idempotently: q itself when its squared norm is already 1 to within
+// 8 ulp (q.normalized() gives one to within 3), else q.normalized(). So unit_rotation(
+// unit_rotation(q)) == unit_rotation(q) bit for bit, which q.normalized() is not (about a third
+// of random quaternions change again). The reader below and the daemon's sample conditioning
+// both end with it, so a recorded session replays to bit-identical reconstructor inputs.
+[[nodiscard]] Quat unit_rotation(const Quat& q);
 // Plausible ranges (docs/tracker-log.md "Limits"): each position coordinate within
 // +-limits::kMaxAbsPositionM metres, |t_ns| <= limits::kMaxAbsTimeNs. The reader rejects
 // a line outside them, the writer refuses to write one.
