@@ -1,22 +1,28 @@
 // The daemon's threads and the frame path. The pieces live in their own units:
 // outputs (output.h, zmq_publisher, the registry in outputs.cpp), the control socket
-// (control_server), the command hand-off (command_channel), statistics (stats) and the
-// pose -> message conversion (pose_wire).
+// (control_server), the command hand-off (command_channel), statistics (stats), the
+// pose -> message conversion (pose_wire), what every sample goes through before the
+// reconstructor (sample_conditioning), the calibration's state (calibration_state) and the
+// status reply (status).
 #include "bodyd/daemon/daemon.h"
+
+#include "bodyd/base/require.h"
 
 #include "bodyd/daemon/control.h"
 #include "bodyd/daemon/output.h"
 #include "bodyd/daemon/sample_queue.h"
 #include "bodyd/daemon/tracker_recorder.h"
 #include "bodyd/inference/calibration.h"
-#include "bodyd/inference/features.h"
 #include "bodyd/drivers/open_source.h"
 #include "bodyd/protocol/pose_message.h"
+#include "calibration_state.h"
 #include "command_channel.h"
 #include "control_server.h"
 #include "mounting_state.h"
 #include "pose_wire.h"
+#include "sample_conditioning.h"
 #include "stats.h"
+#include "status.h"
 #include "zmq_publisher.h"
 
 #include <fmt/format.h>
@@ -66,6 +72,7 @@ std::chrono::nanoseconds queue_max_age(const DaemonConfig& config) {
 // One output and what the daemon keeps for it: its rate gate and counters.
 struct OutputSlot {
   std::unique_ptr<Output> output;
+  bool primary = false;  // the --pub stream: its sends are the pipeline's frames_out and latency
   RateGate gate;
   Counter sent, failed, skipped_by_rate;
   mutable std::mutex error_mutex;
@@ -105,7 +112,11 @@ struct Daemon::Impl final : ControlTarget {
   ReconstructorFactory factory;
   std::function<void(const FrameTiming&)> observer;
 
-  // Outputs: outputs[0] is the --pub pose stream (`pub`); the others come from --output.
+  // Outputs: the --pub pose stream and those of --output, each sent every pose (its rate gate
+  // permitting) and handed every skeleton. `pub` is the --pub output's endpoint, for what only
+  // it has: the bound address (status, the endpoints file), the CURVE key, its subscriptions
+  // and --wait-for-subscriber. Its slot is the `primary` one: its sends are the frames_out,
+  // sends_failed and latency statistics (FrameTiming).
   std::vector<std::unique_ptr<OutputSlot>> outputs;
   ZmqPublisher* pub = nullptr;
   ControlServer control;
@@ -128,17 +139,12 @@ struct Daemon::Impl final : ControlTarget {
   PipelineStats stats;
   CommandChannel commands;
 
-  // State shared with the control thread.
+  // State shared with the control thread (shared_mutex): what status and the replies say.
   mutable std::mutex shared_mutex;
-  protocol::SkeletonMessage skeleton_msg;
-  std::string method_name, model_path_text;
-  double head_height_m = 0.0;
-  bool height_calibrated = false;
-  // Where the height came from: "none" (the model's size), "config", "control", "auto" or "file" (the mounting file); and the
-  // auto calibration's state: "off", "waiting", "still", "fallback", "superseded" (a height came
-  // from the config or the control socket first) or "refused" (an implausible height).
-  std::string calibration_source = "none";
-  std::string auto_calibration = "off";
+  ReconstructionSummary summary;
+  json recentre_status = json{{"recentred", false}};
+  json mounting_status = json::object();
+  std::optional<json> pose_result;  // the calibration pose's reply, handed to the control thread
   bool offsets_configured = false;
 
   // Reconstruction-thread state.
@@ -153,43 +159,34 @@ struct Daemon::Impl final : ControlTarget {
   // Head time going back by more than this restarts the reconstruction (handle_sample).
   static constexpr std::int64_t kTimeBaseRestartNs = 1'000'000'000;
   std::int64_t next_no_head_warning_ns = 0;
-  TrackerSample head_as_received;  // the last head sample before its device offset
   std::atomic<std::uint64_t> loop_iterations{0};
 
-  // Re-centring ("reset", docs/control.md): every sample, after its device offset, becomes
-  // T_recentre * sample with T_recentre(p) = recentre_rotation * p + recentre_translation_m
-  // (a turn about +Y and a move on the floor). Reconstruction thread; status reads a copy.
-  Quat recentre_rotation = Quat::Identity();
-  Vec3 recentre_translation_m = Vec3::Zero();
-  bool recentred = false;                  // recon thread
-  json recentre_status = json{{"recentred", false}};  // shared_mutex
-  TrackerSample last_valid_head;           // as the reconstructor got it
-  double head_speed_m_s = 0.0;             // its speed, smoothed over about 0.2 s
-  std::int64_t last_valid_head_arrival_ns = 0;
+  // Every sample's mounting, offset and re-centring (sample_conditioning.h), and the latest
+  // valid head sample as the reconstructor got it.
+  SampleConditioner conditioner;
+  LatestHead latest_head;
 
   TrackerRecorder recorder;  // --record-trackers (reconstruction thread once started)
 
-  // Auto calibration (config.auto_calibrate): reconstruction thread. The same detector and
+  // Calibration (calibration_state.h). `calibration` is the reconstruction thread's (and
+  // start()'s); summary.calibration its copy for the control thread (publish_calibration).
+  // The auto calibration (config.auto_calibrate) uses the same detector and
   // calibrate_from_head_height() as bodyd-eval --body-scale (inference/calibration.h).
+  CalibrationState calibration;
   StandingHeightDetector height_detector;
-  bool auto_calibrating = false;
 
   // Device mounting (docs/daemon.md "Device mounting"): device poses (PoseFrame::Device) become
-  // joint poses through `mounting` before the per-device offsets. Each role's mounting is the
-  // default (from the body reference), or one a calibration pose measured ("pose", "auto" for
-  // the head's refinement by the auto calibration) or read from config.mounting_file ("file").
+  // joint poses through the conditioner's mounting before the per-device offsets. Each role's
+  // mounting is the default (from the body reference), or one a calibration pose measured, the
+  // auto calibration refined (the head) or config.mounting_file stored (mounting_origin).
   // Reconstruction thread; status reads mounting_status (shared_mutex).
   BodyReference body_reference;
   Mounting default_mount;
-  Mounting mounting;
-  std::array<std::string, kRoleCount> mounting_origin{"default", "default", "default"};
-  std::array<bool, kRoleCount> device_frames_seen{};  // a device sample of the role has arrived
-  json mounting_status = json::object();
+  MountingOrigins mounting_origin{MountingOrigin::Default, MountingOrigin::Default, MountingOrigin::Default};
   // The calibration pose: started by the control thread (calibrate_pose), fed raw samples here,
   // its result handed back through pose_result (shared_mutex).
   std::optional<PoseCalibrator> pose_calibrator;
   std::int64_t pose_deadline_ns = 0;
-  std::optional<json> pose_result;
   // The auto calibration's head refinement: a calibrator fed raw samples while it waits, for the
   // first kAutoHeadRefineWindowNs of head samples.
   std::optional<PoseCalibrator> auto_pose;
@@ -200,17 +197,19 @@ struct Daemon::Impl final : ControlTarget {
       : config(std::move(c)),
         factory(std::move(f)),
         queue(std::max<std::size_t>(config.queue_capacity, 16), queue_max_age(config)),
-        rate_gate(config.rate_hz) {
+        rate_gate(config.rate_hz),
+        conditioner(config.offsets) {
     for (const auto& o : config.offsets) offsets_configured |= o.has_value();
   }
 
   // ---------------------------------------------------------------- outputs
-  // Creates the --pub publisher and the --output outputs (not opened yet).
+  // Creates the --pub output and the --output outputs (not opened yet).
   std::string make_outputs() {
-    auto primary = std::make_unique<ZmqPublisher>(config.pub_endpoint, "--pub", config);
+    std::unique_ptr<ZmqPublisher> primary = make_pub_output(config);
     pub = primary.get();
     outputs.push_back(std::make_unique<OutputSlot>());
     outputs.back()->output = std::move(primary);
+    outputs.back()->primary = true;
     const OutputEnv env{config};
     for (const std::string& text : config.outputs) {
       OutputSpec spec;
@@ -238,7 +237,8 @@ struct Daemon::Impl final : ControlTarget {
 
   // ---------------------------------------------------------------- skeleton
   // Reconstruction thread (or start()): refreshes the shared skeleton message from `recon`
-  // and hands the skeleton to every output.
+  // and hands the skeleton to every output (each ZeroMQ output sends it before the next pose,
+  // which names it).
   void refresh_skeleton() {
     protocol::SkeletonMessage m = skeleton_message(recon->skeleton());
     hips_index = recon->skeleton().find("Hips");
@@ -247,43 +247,23 @@ struct Daemon::Impl final : ControlTarget {
       spdlog::error("the reconstructor's skeleton cannot be encoded: {} (a bug: please report it)", s.error);
     {
       std::lock_guard lock(shared_mutex);
-      skeleton_msg = std::move(m);
-      method_name = std::string(recon->name());
-      head_height_m = recon->head_height_m();
+      summary.skeleton = std::move(m);
+      summary.method = std::string(recon->name());
+      summary.head_height_m = recon->head_height_m();
     }
     for (auto& slot : outputs) slot->output->set_skeleton(recon->skeleton(), bytes);
   }
 
   // ---------------------------------------------------------------- reconstruction thread
-  void apply_offset(TrackerSample& s) const {
-    const auto& o = config.offsets[static_cast<int>(s.role)];
-    if (!o || !s.valid) return;
-    s.position_m = s.position_m + s.rotation * o->position_m;
-    s.rotation = (s.rotation * o->rotation).normalized();
-  }
-
-  void apply_recentre(TrackerSample& s) const {
-    if (!recentred || !s.valid) return;
-    s.position_m = recentre_rotation * s.position_m + recentre_translation_m;
-    s.rotation = (recentre_rotation * s.rotation).normalized();
-  }
-
   void handle_sample(drivers::SourceSample& in) {
     TrackerSample& s = in.sample;
-    if (s.role == Role::Head) head_as_received = s;
+    const TrackerSample as_received = s;  // before the mounting and offset (OutputFrame::head_as_received)
     feed_pose_calibrators(s, in.arrival_ns);
-    if (s.frame == PoseFrame::Device) {
-      device_frames_seen[static_cast<int>(s.role)] = true;
-      s = device_to_joint(s, mounting.T_device_joint[static_cast<int>(s.role)]);
-    }
-    apply_offset(s);
-    apply_recentre(s);
-    if (recorder.is_open()) {
-      // The log reader normalises each rotation it reads; the reconstructor gets exactly that,
-      // so a replay of the recording is bit-identical (tracker_recorder.h).
-      recorder.record(s);
-      if (s.valid) s.rotation = s.rotation.normalized();
-    }
+    conditioner.condition(s);
+    // The log reader ends with the same normalisation (sample_conditioning.h), so a replay of the
+    // recording is bit-identical (tracker_recorder.h).
+    if (recorder.is_open()) recorder.record(s);
+    SampleConditioner::finish(s);
     if (s.role == Role::Head && last_pose_t_ns != INT64_MIN && s.t_ns < last_pose_t_ns - kTimeBaseRestartNs) {
       // Head time went far back: a replay's time base started over (a loop at the int64 limit,
       // issue 11) or a source restarted. The reconstruction starts over instead of waiting,
@@ -291,23 +271,13 @@ struct Daemon::Impl final : ControlTarget {
       spdlog::warn("head time went back by {:.3f} s: the reconstruction starts over", (last_pose_t_ns - s.t_ns) * 1e-9);
       stats.time_restarts.add();
       recon->reset();
-      if (auto_calibrating) height_detector.reset();  // its times went back too
+      if (calibration.auto_waiting()) height_detector.reset();  // its times went back too
       last_pose_t_ns = INT64_MIN;
       rate_gate = RateGate(rate_gate.rate_hz());
       for (auto& slot : outputs) slot->gate = RateGate(slot->gate.rate_hz());
     }
-    if (s.role == Role::Head && s.valid) {
-      // The head's speed, smoothed over about 0.2 s (calibrate --from-head refuses a walking head).
-      const double dt_s = static_cast<double>(s.t_ns - last_valid_head.t_ns) * 1e-9;
-      if (last_valid_head_arrival_ns != 0 && dt_s > 0.0 && dt_s < 0.5) {
-        const double speed = (s.position_m - last_valid_head.position_m).norm() / dt_s;
-        const double a = std::min(1.0, dt_s / 0.2);
-        head_speed_m_s += a * (speed - head_speed_m_s);
-      }
-      last_valid_head = s;
-      last_valid_head_arrival_ns = in.arrival_ns;
-    }
-    if (auto_calibrating && s.role == Role::Head) auto_calibrate(s);
+    if (s.role == Role::Head && s.valid) latest_head.update(s, in.arrival_ns);
+    if (calibration.auto_waiting() && s.role == Role::Head) auto_calibrate(s);
     const std::int64_t refused_before = recon->refused_samples();
     recon->push(s);
     if (recon->refused_samples() != refused_before) stats.samples_refused.add();
@@ -317,10 +287,6 @@ struct Daemon::Impl final : ControlTarget {
     if (!head_seen && s.valid) {  // an invalid head gives no pose (issue 11)
       head_seen = true;
       spdlog::info("first valid head sample received; publishing poses");
-    }
-    if (s.valid) {
-      stats.last_head_y_m.store(s.position_m.y(), std::memory_order_relaxed);
-      stats.last_head_arrival_ns.store(in.arrival_ns, std::memory_order_relaxed);
     }
     if (s.t_ns <= last_pose_t_ns) return;  // a pose for this time was already sent
     if (!rate_gate.due(s.t_ns)) {
@@ -347,8 +313,8 @@ struct Daemon::Impl final : ControlTarget {
     context.offsets_configured = offsets_configured;
     {
       std::lock_guard lock(shared_mutex);
-      context.height_calibrated = height_calibrated;
-      context.skeleton_id = skeleton_msg.skeleton_id;
+      context.height_calibrated = summary.calibration.height_calibrated();
+      context.skeleton_id = summary.skeleton.skeleton_id;
     }
     fill_pose_message(body, context, pose_msg);
     pose_msg.publish_t_ns = monotonic_ns();
@@ -360,12 +326,11 @@ struct Daemon::Impl final : ControlTarget {
     }
 
     const OutputFrame frame{seq,        s.t_ns,           in.arrival_ns,     body,
-                            recon->skeleton(), pose_msg,  pose_bytes,        head_as_received,
-                            recentred ? recentre_rotation : Quat::Identity(),
-                            recentred ? recentre_translation_m : Vec3::Zero()};
+                            recon->skeleton(), pose_msg,  pose_bytes,        as_received,
+                            conditioner.recentre_rotation(), conditioner.recentre_translation_m()};
     std::string error;
-    for (std::size_t i = 0; i < outputs.size(); ++i) {
-      OutputSlot& slot = *outputs[i];
+    for (auto& slot_ptr : outputs) {
+      OutputSlot& slot = *slot_ptr;
       if (!slot.gate.due(s.t_ns)) {
         slot.skipped_by_rate.add();
         continue;
@@ -373,7 +338,7 @@ struct Daemon::Impl final : ControlTarget {
       const bool sent = slot.output->send(frame, error);
       if (sent) slot.sent.add();
       else slot.count_failure(error, monotonic_ns());
-      if (i == 0) {
+      if (slot.primary) {
         timing.sent = sent;
         timing.published_ns = monotonic_ns();
         if (sent) stats.frames_out.add();
@@ -386,13 +351,19 @@ struct Daemon::Impl final : ControlTarget {
     if (observer) observer(timing);
   }
 
-  // ---------------------------------------------------------------- device mounting
+  // ---------------------------------------------------------------- calibration
+  // Copies the calibration state for the control thread.
+  void publish_calibration() {
+    std::lock_guard lock(shared_mutex);
+    summary.calibration = calibration;
+  }
+
   // Reconstruction thread: the raw sample (before mounting, offsets, re-centring) to the
   // calibration pose in progress and to the auto calibration's head refinement.
   void feed_pose_calibrators(const TrackerSample& raw, std::int64_t arrival_ns) {
     if (pose_calibrator) {
       if (std::optional<PoseCalibration> c = pose_calibrator->push(raw)) {
-        json reply = apply_pose_calibration(*c, "pose");
+        json reply = apply_pose_calibration(*c);
         pose_calibrator.reset();
         std::lock_guard lock(shared_mutex);
         pose_result = std::move(reply);
@@ -433,7 +404,7 @@ struct Daemon::Impl final : ControlTarget {
   // calibrate --from-head: a standing head sways at a few cm/s; a slow walk moves at 0.5 m/s.
   static constexpr double kMaxStandingHeadSpeedMS = 0.2;
   void refine_head_mounting(const PoseCalibration& c) {
-    if (!c.device_frames || mounting_origin[0] != "default") return;
+    if (!c.device_frames || mounting_origin[0] != MountingOrigin::Default) return;
     const RigidTransform& T = c.mounting.T_device_joint[0];
     const double change_deg = mounting_difference(T, default_mount.T_device_joint[0]).angle_deg;
     if (change_deg > kMaxAutoHeadChangeDeg) {
@@ -442,23 +413,24 @@ struct Daemon::Impl final : ControlTarget {
                    change_deg);
       return;
     }
-    mounting.T_device_joint[0] = T;
-    mounting_origin[0] = "auto";
+    conditioner.set_mounting(Role::Head, T);
+    mounting_origin[0] = MountingOrigin::Auto;
     publish_mounting_status();
     spdlog::info("auto calibration: the headset sits {:.1f} deg from the default on the head (from a still second)", change_deg);
-    recorder.comment(fmt::format("t_ns {}: mounting head {} (auto)", c.t_ns, transform_text(mounting.T_device_joint[0])));
+    recorder.comment(
+        fmt::format("t_ns {}: mounting head {} (auto)", c.t_ns, transform_text(conditioner.mounting().T_device_joint[0])));
   }
 
   // Applies a calibration pose's result: mountings, the height, the mounting file. Returns the
   // control reply.
-  json apply_pose_calibration(const PoseCalibration& c, const std::string& origin) {
+  json apply_pose_calibration(const PoseCalibration& c) {
     json roles = json::object();
     for (Role r : kRoles) {
       const int i = static_cast<int>(r);
       if (!c.measured[i]) continue;
-      mounting.T_device_joint[i] = c.mounting.T_device_joint[i];
-      mounting_origin[i] = origin;
-      const MountingDifference d = mounting_difference(mounting.T_device_joint[i], default_mount.T_device_joint[i]);
+      conditioner.set_mounting(r, c.mounting.T_device_joint[i]);
+      mounting_origin[i] = MountingOrigin::Pose;
+      const MountingDifference d = mounting_difference(conditioner.mounting().T_device_joint[i], default_mount.T_device_joint[i]);
       roles[std::string(role_name(r))] = {{"from_default_deg", d.angle_deg},
                                           {"from_default_cm", d.position_cm},
                                           {"sd_deg", c.rotation_sd_deg[i]},
@@ -467,13 +439,13 @@ struct Daemon::Impl final : ControlTarget {
     recon->reset();  // the inputs jumped
     std::string height_error = calibrate_from_head_height(*recon, c.head_height_m);
     if (height_error.empty()) {
-      manual_calibration_applied();
-      if (auto_calibrating) auto_calibrating = false;
+      calibration.manual();
+      publish_calibration();
       auto_pose.reset();
     }
     refresh_skeleton();
-    pub->publish_skeleton(monotonic_ns());
     publish_mounting_status();
+    const Mounting& mounting = conditioner.mounting();
     spdlog::info("calibrated from the calibration pose: standing head height {:.3f} m{}; mounting {}", recon->head_height_m(),
                  height_error.empty() ? "" : " (the height was refused: " + height_error + ")", mounting_text(mounting));
     recorder.comment(fmt::format("t_ns {}: calibrate pose head_height_m {} mounting {}", c.t_ns, recon->head_height_m(),
@@ -482,7 +454,7 @@ struct Daemon::Impl final : ControlTarget {
     if (!config.mounting_file.empty()) {
       MountingState st;
       st.mounting = mounting;
-      for (Role r : kRoles) st.measured[static_cast<int>(r)] = mounting_origin[static_cast<int>(r)] != "default";
+      for (Role r : kRoles) st.measured[static_cast<int>(r)] = mounting_origin[static_cast<int>(r)] != MountingOrigin::Default;
       st.head_height_m = height_error.empty() ? recon->head_height_m() : 0.0;
       st.calibrated = utc_now();
       file_error = write_mounting_state(config.mounting_file, st);
@@ -491,15 +463,10 @@ struct Daemon::Impl final : ControlTarget {
     std::lock_guard lock(shared_mutex);
     json reply{{"ok", height_error.empty()},
                {"device_frames", c.device_frames},
-               {"head_height_m", head_height_m},
-               {"user_height_m", head_height_m / kHeadHeightPerStature},
-               {"height_calibrated", height_calibrated},
-               {"calibration_source", calibration_source},
-               {"auto_calibration", auto_calibration},
                {"eye_offset_sd_cm", c.eye_offset_sd_cm},
                {"roles", roles},
-               {"mounting", mounting_status},
-               {"skeleton_id", skeleton_msg.skeleton_id}};
+               {"mounting", mounting_status}};
+    summary_json(summary, reply);
     if (!height_error.empty()) reply["error"] = "calibrate from pose: " + height_error;
     if (!c.device_frames)
       reply["note"] = "the sources deliver joint poses: there is no device mounting to learn, only the height";
@@ -517,20 +484,9 @@ struct Daemon::Impl final : ControlTarget {
 
   // Reconstruction thread (or start()): the mounting as status shows it.
   void publish_mounting_status() {
-    json roles = json::object();
-    for (Role r : kRoles) {
-      const int i = static_cast<int>(r);
-      const RigidTransform& T = mounting.T_device_joint[i];
-      const MountingDifference d = mounting_difference(T, default_mount.T_device_joint[i]);
-      roles[std::string(role_name(r))] = {{"origin", mounting_origin[i]},
-                                          {"device_frames", device_frames_seen[i]},
-                                          {"position_m", {T.position_m.x(), T.position_m.y(), T.position_m.z()}},
-                                          {"rotation_xyzw", {T.rotation.x(), T.rotation.y(), T.rotation.z(), T.rotation.w()}},
-                                          {"from_default_deg", d.angle_deg},
-                                          {"from_default_cm", d.position_cm}};
-    }
+    json m = mounting_status_json(conditioner.mounting(), default_mount, mounting_origin, conditioner, config.mounting_file);
     std::lock_guard lock(shared_mutex);
-    mounting_status = json{{"roles", roles}, {"file", config.mounting_file}};
+    mounting_status = std::move(m);
   }
 
   // Feeds the head sample `s` (as the reconstructor gets it) to the detector; when it reports,
@@ -539,23 +495,23 @@ struct Daemon::Impl final : ControlTarget {
     const std::optional<StandingHeight> h = height_detector.push(s);
     if (!h) {
       if (height_detector.done()) {
-        auto_calibrating = false;
-        set_calibration(std::nullopt, "refused");
+        calibration.auto_refused();
+        publish_calibration();
         spdlog::warn("auto calibration: no plausible standing head height in the first {:.1f} s (sitting?): the "
                      "model's size stays; stand up and run `bodyd-ctl calibrate --from-head`",
                      StandingHeightOptions{}.fallback_after_s);
       }
       return;
     }
-    auto_calibrating = false;
     if (std::string e = calibrate_from_head_height(*recon, h->head_height_m); !e.empty()) {
-      set_calibration(std::nullopt, "refused");
+      calibration.auto_refused();
+      publish_calibration();
       spdlog::warn("auto calibration refused: {}", e);
       return;
     }
-    set_calibration("auto", h->fallback ? "fallback" : "still");
+    calibration.auto_measured(h->fallback);
+    publish_calibration();
     refresh_skeleton();
-    pub->publish_skeleton(monotonic_ns());
     const std::string how =
         h->fallback ? fmt::format("no still half second: the head's {:.0f}th percentile height {:.3f} m over the first {:.1f} s",
                                   StandingHeightOptions{}.fallback_percentile, h->measured_m,
@@ -565,88 +521,69 @@ struct Daemon::Impl final : ControlTarget {
     recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {} (auto: {})", s.t_ns, recon->head_height_m(), how));
   }
 
-  // Records where the height came from (`source`: empty keeps it) and the auto state (empty keeps it).
-  void set_calibration(std::optional<std::string> source, std::string auto_state) {
-    std::lock_guard lock(shared_mutex);
-    if (source) {
-      calibration_source = *source;
-      height_calibrated = *source != "none";
-    }
-    if (!auto_state.empty()) auto_calibration = std::move(auto_state);
-  }
-
   // A calibration from the control socket replaces the auto one (and stops it if it is waiting).
   void manual_calibration_applied() {
-    const bool waiting = auto_calibrating;
-    auto_calibrating = false;
-    set_calibration("control", waiting ? "superseded" : std::string());
+    calibration.manual();
+    publish_calibration();
   }
 
   json apply_command(Command& c) {
+    const std::int64_t now_ns = monotonic_ns();
     switch (c.kind) {
       case Command::Kind::Height: {
         recon->set_head_height_m(c.height_m);
-        if (c.height_m > 0.0) manual_calibration_applied();
-        else set_calibration("none", "");
+        if (c.height_m > 0.0) {
+          manual_calibration_applied();
+        } else {
+          calibration.cleared();
+          publish_calibration();
+        }
         refresh_skeleton();
         spdlog::info("calibrated: standing head height {:.3f} m", recon->head_height_m());
-        recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {}", last_valid_head.t_ns, recon->head_height_m()));
+        recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {}", latest_head.sample().t_ns, recon->head_height_m()));
         break;
       }
       case Command::Kind::FromHead: {
-        const std::int64_t arrival_ns = stats.last_head_arrival_ns.load();
-        if (arrival_ns == 0 || monotonic_ns() - arrival_ns > 2'000'000'000)
+        if (!latest_head.fresh(now_ns))
           return control_error("no valid head sample in the last 2 s: wear the headset, stand up straight, and retry");
         // The Head joint's height now, as a standing height: the same correction and checks as
         // the auto calibration and bodyd-eval (inference/calibration.h).
         // Walking or swaying: the height would be a step's, not the standing height (issue 16).
-        if (head_speed_m_s > kMaxStandingHeadSpeedMS)
+        if (latest_head.speed_m_s() > kMaxStandingHeadSpeedMS)
           return control_error(fmt::format(
               "calibrate from head: the head is moving at {:.2f} m/s: stand still (up straight, looking ahead) and retry",
-              head_speed_m_s));
-        const double measured_m = stats.last_head_y_m.load();
+              latest_head.speed_m_s()));
+        const double measured_m = latest_head.sample().position_m.y();
         if (std::string e = calibrate_from_head_height(*recon, standing_height_from_head(measured_m, StandingHeightOptions{}));
             !e.empty())
           return control_error(e);
         manual_calibration_applied();
         refresh_skeleton();
         spdlog::info("calibrated from the standing head height: {:.3f} m", recon->head_height_m());
-        recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {}", last_valid_head.t_ns, recon->head_height_m()));
+        recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {}", latest_head.sample().t_ns, recon->head_height_m()));
         break;
       }
       case Command::Kind::Recentre: {
-        if (last_valid_head_arrival_ns == 0 || monotonic_ns() - last_valid_head_arrival_ns > 2'000'000'000)
+        if (!latest_head.fresh(now_ns))
           return control_error("reset: no valid head sample in the last 2 s: wear the headset (is it tracking?) and retry");
-        // The head's heading and floor position (the model's canonical frame, features.h) become
-        // forward (+Z) and the origin: T_new = C * T_old with C(p) = R_canon_world * (p - origin).
-        const features::Canonical c = features::canonical_from_head(last_valid_head.position_m, last_valid_head.rotation);
-        recentre_rotation = (c.R_canon_world * recentre_rotation).normalized();
-        recentre_translation_m = c.R_canon_world * (recentre_translation_m - c.origin_m);
-        recentred = true;
-        last_valid_head.position_m = c.R_canon_world * (last_valid_head.position_m - c.origin_m);
-        last_valid_head.rotation = (c.R_canon_world * last_valid_head.rotation).normalized();
+        const Recentring r = conditioner.recentre_on(latest_head.sample());
         recon->reset();  // the space jumped: start a fresh history
-        const double heading_deg = c.yaw_rad * 180.0 / M_PI;
-        // The total transform, as "turned by" and "moved by" (for status).
-        const Vec3 f = recentre_rotation * Vec3::UnitZ();
-        const double total_deg = -std::atan2(f.x(), f.z()) * 180.0 / M_PI;
-        const Vec3 origin = recentre_rotation.conjugate() * (-recentre_translation_m);
         {
+          json st = conditioner.recentre_status();
           std::lock_guard lock(shared_mutex);
-          recentre_status = json{{"recentred", true},
-                                 {"recentre", {{"heading_deg", total_deg}, {"origin_m", {origin.x(), origin.z()}}}}};
+          recentre_status = std::move(st);
         }
         recorder.comment(fmt::format("t_ns {}: reset (re-centred: turned by {:.3f} deg, origin x {:.4f} z {:.4f} m)",
-                                     last_valid_head.t_ns, heading_deg, c.origin_m.x(), c.origin_m.z()));
+                                     latest_head.sample().t_ns, r.heading_deg, r.origin_m.x(), r.origin_m.z()));
         spdlog::info("re-centred: facing {:.1f} deg from forward, at x {:.3f} z {:.3f} m: that is now forward and the origin",
-                     heading_deg, c.origin_m.x(), c.origin_m.z());
+                     r.heading_deg, r.origin_m.x(), r.origin_m.z());
         return json{{"ok", true},
-                    {"heading_deg", heading_deg},
-                    {"origin_m", {c.origin_m.x(), c.origin_m.z()}},
+                    {"heading_deg", r.heading_deg},
+                    {"origin_m", {r.origin_m.x(), r.origin_m.z()}},
                     {"recentred", true}};
       }
       case Command::Kind::PoseBegin: {
-        if (last_valid_head_arrival_ns == 0 || monotonic_ns() - last_valid_head_arrival_ns > 2'000'000'000)
+        if (!latest_head.fresh(now_ns))
           return control_error(
               "calibrate from pose: no valid head sample in the last 2 s: wear the headset (is it tracking?) and retry");
         pose_calibrator.emplace(body_reference, default_mount, PoseCalibrationOptions{});
@@ -665,31 +602,23 @@ struct Daemon::Impl final : ControlTarget {
         return json{{"ok", true}};
       }
       case Command::Kind::Swap: {
-        bool calibrated;
         {
           std::lock_guard lock(shared_mutex);
-          calibrated = height_calibrated;
-          model_path_text = c.model_path;
+          summary.model_path = c.model_path;
         }
-        if (calibrated) c.recon->set_head_height_m(recon->head_height_m());
+        if (calibration.height_calibrated()) c.recon->set_head_height_m(recon->head_height_m());
         recon = std::move(c.recon);
         last_pose_t_ns = INT64_MIN;
         refresh_skeleton();
         spdlog::info("model reloaded: {} ({})", recon->name(), c.model_path);
-        recorder.comment(fmt::format("t_ns {}: reload-model {} {}", last_valid_head.t_ns, recon->name(), c.model_path));
+        recorder.comment(fmt::format("t_ns {}: reload-model {} {}", latest_head.sample().t_ns, recon->name(), c.model_path));
         break;
       }
     }
-    pub->publish_skeleton(monotonic_ns());
     std::lock_guard lock(shared_mutex);
-    return json{{"ok", true},
-                {"method", method_name},
-                {"head_height_m", head_height_m},
-                {"user_height_m", head_height_m / kHeadHeightPerStature},
-                {"height_calibrated", height_calibrated},
-                {"calibration_source", calibration_source},
-                {"auto_calibration", auto_calibration},
-                {"skeleton_id", skeleton_msg.skeleton_id}};
+    json reply{{"ok", true}, {"method", summary.method}};
+    summary_json(summary, reply);
+    return reply;
   }
 
   void process_command() {
@@ -728,17 +657,25 @@ struct Daemon::Impl final : ControlTarget {
     next_no_head_warning_ns = now_ns + (next_no_head_warning_ns == 0 ? 3'000'000'000LL : 30'000'000'000LL);
   }
 
+  void poll_outputs(std::int64_t now_ns, const Output* except = nullptr) {
+    for (auto& slot : outputs)
+      if (slot->output.get() != except) slot->output->poll(now_ns);
+  }
+
   void reconstruction_loop() {
     if (config.wait_for_subscriber) {
       spdlog::info("waiting for a subscriber on {} before starting the sources", pub->bound());
       while (!stop_flag.load()) {
         loop_iterations.fetch_add(1, std::memory_order_relaxed);
         process_command();
+        // The other outputs meanwhile as always (a ZeroMQ output sends its skeleton to a
+        // subscriber that is already there); --pub's subscriptions are what this waits for.
+        poll_outputs(monotonic_ns(), pub);
         if (pub->wait_for_subscription(50, monotonic_ns())) break;
       }
       if (stop_flag.load()) return;
     }
-    pub->publish_skeleton(monotonic_ns());
+    poll_outputs(monotonic_ns());  // the skeleton, before the sources start
     if (!start_sources()) {
       fatal.store(true);
       notify();
@@ -748,8 +685,7 @@ struct Daemon::Impl final : ControlTarget {
     drivers::SourceSample sample;
     while (!stop_flag.load(std::memory_order_relaxed)) {
       loop_iterations.fetch_add(1, std::memory_order_relaxed);
-      const std::int64_t before = monotonic_ns();
-      for (auto& slot : outputs) slot->output->poll(before);
+      poll_outputs(monotonic_ns());
       process_command();
       if (queue.pop(sample, kPopTimeout)) {
         handle_sample(sample);
@@ -771,71 +707,37 @@ struct Daemon::Impl final : ControlTarget {
 
   // ---------------------------------------------------------------- ControlTarget (control thread)
   json status() override {
-    json j = json::object();
-    j["ok"] = true;
-    j["uptime_s"] = static_cast<double>(drivers::monotonic_ns() - start_ns) / 1e9;
+    StatusSnapshot s;
+    s.uptime_s = static_cast<double>(drivers::monotonic_ns() - start_ns) / 1e9;
     {
       std::lock_guard lock(shared_mutex);
-      j["method"] = method_name;
-      j["model"] = model_path_text;
-      j["head_height_m"] = head_height_m;
-      j["user_height_m"] = head_height_m / kHeadHeightPerStature;
-      j["height_calibrated"] = height_calibrated;
-      j["calibration_source"] = calibration_source;
-      j["auto_calibration"] = auto_calibration;
-      j["skeleton_id"] = skeleton_msg.skeleton_id;
+      s.summary = summary;
+      s.recentre = recentre_status;
+      s.mounting = mounting_status;
     }
-    j["offsets_configured"] = offsets_configured;
-    {
-      std::lock_guard lock(shared_mutex);
-      j.update(recentre_status);
-      j["mounting"] = mounting_status;
+    s.offsets_configured = offsets_configured;
+    s.record_trackers_file = config.record_trackers_file;
+    for (const auto& source : sources) s.sources.push_back(source->status());
+    s.sources_started = sources_started.load();
+    s.samples_dropped = queue.dropped();
+    s.samples_dropped_stale = queue.dropped_stale();
+    s.queue_depth = queue.size();
+    s.queue_capacity = queue.capacity();
+    if (pub) {
+      s.pub = pub->bound();
+      s.pub_subscriptions = pub->subscriptions();
+      s.pub_skeleton_sends_failed = pub->skeleton_sends_failed();
+      s.curve = !pub->curve_public_key().empty();
     }
-    if (!config.record_trackers_file.empty()) j["record_trackers"] = config.record_trackers_file;
-    json src = json::array();
-    for (const auto& s : sources) {
-      const drivers::SourceStatus st = s->status();
-      src.push_back({{"name", st.name},
-                     {"connected", st.connected},
-                     {"finished", st.finished},
-                     {"samples", st.samples},
-                     {"rate_hz", st.rate_hz},
-                     {"last_error", st.last_error},
-                     {"rejected", st.rejected},
-                     {"rejected_by_reason", st.rejected_by_reason},
-                     {"counters", st.counters}});
-    }
-    j["sources"] = src;
-    j["sources_started"] = sources_started.load();
-    stats.to_json(j);
-    j["samples_dropped"] = queue.dropped();
-    j["samples_dropped_stale"] = queue.dropped_stale();
-    j["queue_depth"] = queue.size();
-    j["queue_capacity"] = queue.capacity();
-    if (pub) j["sends_failed"] = j["sends_failed"].get<std::uint64_t>() + pub->skeleton_sends_failed();
-    j["subscriptions"] = pub ? pub->subscriptions() : 0;
-    j["pub"] = pub ? pub->bound() : std::string();
-    j["control"] = control.bound();
-    j["curve"] = pub && !pub->curve_public_key().empty();
-    j["rate_hz"] = config.rate_hz;
-    json outs = json::array();
-    for (const auto& slot : outputs) outs.push_back(slot->status());
-    j["outputs"] = outs;
-    return j;
+    s.control = control.bound();
+    s.rate_hz = config.rate_hz;
+    for (const auto& slot : outputs) s.outputs.push_back(slot->status());
+    return status_json(s, stats);
   }
 
   json skeleton() override {
     std::lock_guard lock(shared_mutex);
-    json offsets = json::array();
-    for (const auto& o : skeleton_msg.offsets_m) offsets.push_back({o[0], o[1], o[2]});
-    json reply{{"ok", true},
-               {"skeleton_id", skeleton_msg.skeleton_id},
-               {"names", skeleton_msg.names},
-               {"parents", skeleton_msg.parents},
-               {"offsets_m", offsets},
-               {"head_height_m", head_height_m}};
-    if (!skeleton_msg.rest_rotations_xyzw.empty()) reply["rest_rotations_xyzw"] = rest_rotations_json(skeleton_msg);
-    return reply;
+    return skeleton_reply(summary.skeleton, summary.head_height_m);
   }
 
   json calibrate_height(double height_m) override {
@@ -855,7 +757,7 @@ struct Daemon::Impl final : ControlTarget {
     std::string current;
     {
       std::lock_guard lock(shared_mutex);
-      current = model_path_text;
+      current = summary.model_path;
     }
     ModelChoice choice{config.method, path ? std::filesystem::path(*path)
                                            : (current.empty() ? default_model_path() : std::filesystem::path(current))};
@@ -945,15 +847,14 @@ std::string Daemon::start() {
   if (!d.recon) return error.empty() ? "cannot create the " + choice.method + " reconstructor" : error;
   if (const double head_height_m = configured_head_height_m(d.config); head_height_m > 0.0) {
     d.recon->set_head_height_m(head_height_m);
-    d.height_calibrated = true;
-    d.calibration_source = "config";
-    if (d.config.auto_calibrate) d.auto_calibration = "superseded";
-  } else if (d.config.auto_calibrate) {
-    d.auto_calibrating = true;
-    d.auto_calibration = "waiting";
+    d.calibration.start(true, d.config.auto_calibrate);
+  } else {
+    d.calibration.start(false, d.config.auto_calibrate);
+  }
+  if (d.calibration.auto_waiting()) {
     spdlog::info("auto calibration: the user's size from the head's first still half second (off: --no-auto-calibrate)");
   }
-  d.model_path_text = choice.method == "ik" ? std::string() : choice.model_path.string();
+  d.summary.model_path = choice.method == "ik" ? std::string() : choice.model_path.string();
 
   // Device mounting: the defaults from the body reference, then what a calibration pose stored.
   try {
@@ -962,38 +863,34 @@ std::string Daemon::start() {
     return std::string("device mounting: ") + e.what();
   }
   d.default_mount = default_mounting(d.body_reference);
-  d.mounting = d.default_mount;
+  d.conditioner.set_mounting(d.default_mount);
   if (!d.config.mounting_file.empty()) {
     std::string merror;
     if (std::optional<MountingState> st = read_mounting_state(d.config.mounting_file, merror)) {
       for (Role r : kRoles) {
         const int i = static_cast<int>(r);
         if (!st->measured[i]) continue;
-        d.mounting.T_device_joint[i] = st->mounting.T_device_joint[i];
-        d.mounting_origin[i] = "file";
+        d.conditioner.set_mounting(r, st->mounting.T_device_joint[i]);
+        d.mounting_origin[i] = MountingOrigin::File;
       }
       spdlog::info("device mounting from {} (calibrated {}): {}", d.config.mounting_file, st->calibrated,
-                   mounting_text(d.mounting));
-      if (st->head_height_m > 0.0 && !d.height_calibrated) {
+                   mounting_text(d.conditioner.mounting()));
+      if (st->head_height_m > 0.0 && !d.calibration.height_calibrated()) {
         d.recon->set_head_height_m(st->head_height_m);
-        d.height_calibrated = true;
-        d.calibration_source = "file";
-        if (d.auto_calibrating) {
-          d.auto_calibrating = false;
-          d.auto_calibration = "superseded";
-        }
+        d.calibration.from_file();
       }
     } else if (!merror.empty()) {
       spdlog::warn("{}: the default device mounting is used", merror);
     }
   }
-  if (d.auto_calibrating && d.mounting_origin[0] == "default")
+  if (d.calibration.auto_waiting() && d.mounting_origin[0] == MountingOrigin::Default)
     d.auto_pose.emplace(d.body_reference, d.default_mount, PoseCalibrationOptions{});
+  d.publish_calibration();
   d.publish_mounting_status();
   d.refresh_skeleton();
   spdlog::info("reconstruction: {}{}, standing head height {:.3f} m, skeleton {} joints (id {:#010x})", d.recon->name(),
-               d.model_path_text.empty() ? "" : " (" + d.model_path_text + ")", d.recon->head_height_m(),
-               d.recon->skeleton().size(), d.skeleton_msg.skeleton_id);
+               d.summary.model_path.empty() ? "" : " (" + d.summary.model_path + ")", d.recon->head_height_m(),
+               d.recon->skeleton().size(), d.summary.skeleton.skeleton_id);
 
   // The sources.
   std::vector<std::string> specs = d.config.sources;
@@ -1036,9 +933,9 @@ std::string Daemon::start() {
         {"offsets", offsets.empty() ? "none" : "applied to the samples below: " + offsets},
         {"recentre", "applied to the samples below after a reset (comment lines mark each)"},
         {"calibration", fmt::format("head_height_m {} ({})", d.recon->head_height_m(),
-                                    d.height_calibrated ? "calibrated" : "the model's size")},
+                                    d.calibration.height_calibrated() ? "calibrated" : "the model's size")},
         {"method", std::string(d.recon->name())},
-        {"model", d.model_path_text.empty() ? "none" : d.model_path_text},
+        {"model", d.summary.model_path.empty() ? "none" : d.summary.model_path},
         {"rate_hz", fmt::format("{}", d.config.rate_hz)},
         {"replay", "bodyd --replay FILE --fast, without offsets, with the same method, model, calibration, rate_hz"}};
     if (std::string re = d.recorder.open(d.config.record_trackers_file, meta, d.config.record_trackers_overwrite); !re.empty()) return re;
@@ -1054,8 +951,9 @@ std::string Daemon::start() {
     return e;
   }
   spdlog::info("publishing poses on {}{}", d.pub->bound(), d.pub->curve_public_key().empty() ? "" : " (CURVE)");
-  for (std::size_t i = 1; i < d.outputs.size(); ++i) {
-    const OutputSlot& slot = *d.outputs[i];
+  for (const auto& slot_ptr : d.outputs) {
+    const OutputSlot& slot = *slot_ptr;
+    if (slot.primary) continue;
     if (slot.gate.rate_hz() > 0) spdlog::info("output: {} (at most {} poses/s)", slot.output->name(), slot.gate.rate_hz());
     else spdlog::info("output: {}", slot.output->name());
   }

@@ -43,9 +43,6 @@ struct PipelineStats {
   Counter samples_refused, time_restarts;
   std::array<Counter, kRoleCount> role_samples;
   TimingRing reconstruct, latency;
-  // The last valid head sample (after its device offset), for calibrate-from-head.
-  std::atomic<double> last_head_y_m{0.0};
-  std::atomic<std::int64_t> last_head_arrival_ns{0};
 
   // Writes the pipeline keys of the status reply into `out`.
   void to_json(nlohmann::json& out) const;

@@ -38,6 +38,9 @@ std::string ZmqPublisher::open() {
 }
 
 bool ZmqPublisher::send(const OutputFrame& frame, std::string& out_error) {
+  // A pose names its skeleton by id: a subscriber gets a new skeleton before the first pose
+  // that names it (the same socket keeps the order).
+  if (skeleton_pending_) publish_skeleton(frame.arrival_ns);
   const auto topic = protocol::kPoseTopic;
   // Never blocks: PUB drops for a subscriber whose queue (send_hwm) is full.
   if (zmq_send(socket_.get(), topic.data(), topic.size(), ZMQ_SNDMORE | ZMQ_DONTWAIT) >= 0 &&
@@ -49,10 +52,13 @@ bool ZmqPublisher::send(const OutputFrame& frame, std::string& out_error) {
 
 void ZmqPublisher::poll(std::int64_t now_ns) {
   read_subscriptions(now_ns);
-  if (now_ns - last_skeleton_ns_ >= kSkeletonPeriodNs) publish_skeleton(now_ns);
+  if (skeleton_pending_ || now_ns - last_skeleton_ns_ >= kSkeletonPeriodNs) publish_skeleton(now_ns);
 }
 
-void ZmqPublisher::set_skeleton(const Skeleton&, const std::vector<std::uint8_t>& bytes) { skeleton_bytes_ = bytes; }
+void ZmqPublisher::set_skeleton(const Skeleton&, const std::vector<std::uint8_t>& bytes) {
+  skeleton_bytes_ = bytes;
+  skeleton_pending_ = true;
+}
 
 void ZmqPublisher::publish_skeleton(std::int64_t now_ns) {
   if (skeleton_bytes_.empty() || !socket_.get()) return;
@@ -60,6 +66,8 @@ void ZmqPublisher::publish_skeleton(std::int64_t now_ns) {
   if (zmq_send(socket_.get(), topic.data(), topic.size(), ZMQ_SNDMORE | ZMQ_DONTWAIT) < 0 ||
       zmq_send(socket_.get(), skeleton_bytes_.data(), skeleton_bytes_.size(), ZMQ_DONTWAIT) < 0)
     skeleton_failed_.fetch_add(1, std::memory_order_relaxed);
+  else
+    skeleton_pending_ = false;
   last_skeleton_ns_ = now_ns;
 }
 
@@ -91,6 +99,10 @@ bool ZmqPublisher::wait_for_subscription(int timeout_ms, std::int64_t now_ns) {
 nlohmann::json ZmqPublisher::status() const {
   return {{"subscriptions", subscriptions()}, {"skeleton_sends_failed", skeleton_sends_failed()},
           {"curve", !curve_public_.empty()}};
+}
+
+std::unique_ptr<ZmqPublisher> make_pub_output(const DaemonConfig& config) {
+  return std::make_unique<ZmqPublisher>(config.pub_endpoint, "--pub", config);
 }
 
 std::unique_ptr<Output> make_zmq_output(const OutputSpec& spec, const OutputEnv& env, std::string& error) {

@@ -1,6 +1,8 @@
 // The ZeroMQ pose stream (docs/protocol.md) as an output: an XPUB socket that sends each
-// pose and, once a second and to every new subscriber of the skeleton topic, the skeleton.
-// The daemon's --pub endpoint is one; `--output zmq:ENDPOINT` adds more.
+// pose and the skeleton: a new skeleton (set_skeleton) before the next pose, which names it,
+// then once a second and to every new subscriber of the skeleton topic. The daemon's --pub
+// endpoint is one such output (make_pub_output); `--output zmq:ENDPOINT` adds more, which
+// behave the same.
 #pragma once
 
 #include "bodyd/daemon/output.h"
@@ -27,8 +29,8 @@ class ZmqPublisher final : public Output {
   [[nodiscard]] nlohmann::json status() const override;
   void close() override { socket_.close(); }
 
-  // Sends the skeleton message now (after a calibration or model change). Counted as a
-  // failed send when ZeroMQ refuses it.
+  // Sends the skeleton message now. Counted as a failed send when ZeroMQ refuses it (then it
+  // stays pending: the next send() or poll() tries again, before the pose).
   void publish_skeleton(std::int64_t now_ns);
   // Reads subscription messages without blocking; true if one arrived.
   bool read_subscriptions(std::int64_t now_ns);
@@ -48,9 +50,12 @@ class ZmqPublisher final : public Output {
   ZmqSocket socket_;
   std::vector<std::uint8_t> skeleton_bytes_;  // reconstruction thread only
   std::int64_t last_skeleton_ns_ = 0;
+  bool skeleton_pending_ = false;  // set_skeleton() gave one not sent yet (reconstruction thread only)
   std::atomic<std::uint64_t> subscriptions_{0}, skeleton_failed_{0};
 };
 
+// The --pub output (config.pub_endpoint; "--pub" in messages).
+std::unique_ptr<ZmqPublisher> make_pub_output(const DaemonConfig& config);
 // The "zmq" row of outputs.cpp.
 std::unique_ptr<Output> make_zmq_output(const OutputSpec& spec, const OutputEnv& env, std::string& error);
 

@@ -1,6 +1,7 @@
 // The daemon's auto calibration (docs/daemon.md, "Calibration") on replays of scaled logs, a
-// manual calibration winning over it, and the "auto_calibrate" and "filter" config keys reaching
-// the daemon and the reconstructor.
+// manual calibration winning over it, the "auto_calibrate" and "filter" config keys reaching
+// the daemon and the reconstructor, and every ZeroMQ output sending each skeleton before the
+// poses that name it.
 #include "bodyd/daemon/config.h"
 #include "bodyd/daemon/daemon.h"
 #include "bodyd/daemon/reconstructors.h"
@@ -18,6 +19,7 @@
 #include <spdlog/spdlog.h>
 
 #include <fstream>
+#include <set>
 #include <sstream>
 #include <thread>
 
@@ -263,6 +265,73 @@ TEST(DaemonConfigKeys, FilterValuesReachTheReconstructor) {
   }
   EXPECT_EQ(max_same, 0.0);
   EXPECT_GT(max_other, 1e-4);
+}
+
+
+// One message of any topic (topic, bytes) within timeout_ms; nullopt on timeout.
+std::optional<std::pair<std::string, std::vector<std::uint8_t>>> recv_any(zmq::socket_t& sub, int timeout_ms) {
+  zmq::pollitem_t item{sub.handle(), 0, ZMQ_POLLIN, 0};
+  if (zmq::poll(&item, 1, std::chrono::milliseconds(timeout_ms)) == 0) return std::nullopt;
+  zmq::message_t topic, message;
+  if (!sub.recv(topic) || !topic.more() || !sub.recv(message)) return std::nullopt;
+  const auto* p = static_cast<const std::uint8_t*>(message.data());
+  return std::make_pair(topic.to_string(), std::vector<std::uint8_t>(p, p + message.size()));
+}
+
+// docs/protocol.md: a pose names its skeleton by skeleton_id, and the skeleton is sent whenever it
+// changes. A subscriber of an `--output zmq:` endpoint (not --pub) gets the skeleton before the
+// first pose, and the auto calibration's new skeleton (half a second into the 0.8-scaled bow)
+// before the first pose that names it: a fast replay sends all its poses well within the
+// skeleton's once-a-second repeat, so only a skeleton sent on change can come first.
+TEST(ZmqOutputs, AnOutputZmqSubscriberGetsEachSkeletonBeforeThePosesNamingIt) {
+  test::TempDir dir;
+  const std::filesystem::path bow = test::fixtures() / "bow_30.bvh";
+  write_tracker_log(dir.path / "scaled.csv", scaled_samples(bow, 0.8));
+  DaemonConfig c = replay_config(dir.path / "scaled.csv", dir.path);
+  const std::string extra = "ipc://" + (dir.path / "extra").string();
+  c.outputs = {"zmq:" + extra};
+  Daemon d(c, daemon::make_default_factory(bow));
+  ASSERT_EQ(d.start(), "");
+  zmq::context_t ctx;
+  auto sub = test::sub_socket(ctx, extra);  // every topic
+  std::thread runner([&] { d.run(); });
+  // While the daemon waits for a subscriber on --pub, the extra output sends its skeleton to this
+  // subscriber: once it has arrived, this subscription is in place before the first pose.
+  std::set<std::uint32_t> known;
+  const auto deadline = std::chrono::steady_clock::now() + 10s;
+  while (known.empty() && std::chrono::steady_clock::now() < deadline) {
+    const auto m = recv_any(sub, 100);
+    if (!m) continue;
+    ASSERT_EQ(m->first, "skeleton") << "a pose before any skeleton";
+    protocol::SkeletonMessage skeleton;
+    ASSERT_TRUE(protocol::decode_skeleton(m->second, skeleton).ok());
+    known.insert(skeleton.skeleton_id);
+  }
+  ASSERT_FALSE(known.empty()) << "no skeleton on the --output zmq: endpoint while the daemon waits";
+  auto pub_sub = test::sub_socket(ctx, d.pub_endpoint(), "pose");  // starts the replay
+
+  std::size_t poses = 0;
+  std::set<std::uint32_t> named;
+  while (const auto m = recv_any(sub, poses == 0 ? 10000 : 1500)) {
+    if (m->first == "skeleton") {
+      protocol::SkeletonMessage skeleton;
+      ASSERT_TRUE(protocol::decode_skeleton(m->second, skeleton).ok());
+      known.insert(skeleton.skeleton_id);
+      continue;
+    }
+    ASSERT_EQ(m->first, "pose");
+    protocol::PoseMessage pose;
+    ASSERT_TRUE(protocol::decode_pose(m->second, pose).ok());
+    ASSERT_TRUE(known.count(pose.skeleton_id)) << "pose " << poses << " (seq " << pose.seq << ") names skeleton "
+                                               << pose.skeleton_id << " before it was sent";
+    named.insert(pose.skeleton_id);
+    ++poses;
+  }
+  EXPECT_GT(poses, 100u);
+  EXPECT_EQ(named.size(), 2u) << "the auto calibration should have changed the skeleton once";
+  EXPECT_EQ(d.status()["calibration_source"], "auto");
+  d.request_stop();
+  runner.join();
 }
 
 }  // namespace

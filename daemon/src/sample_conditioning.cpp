@@ -1,0 +1,61 @@
+#include "sample_conditioning.h"
+
+#include "bodyd/inference/features.h"
+#include "bodyd/motion/tracker_log.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace bodyd::daemon {
+
+void SampleConditioner::condition(TrackerSample& s) {
+  if (s.frame == PoseFrame::Device) {
+    device_frames_seen_[static_cast<int>(s.role)] = true;
+    s = device_to_joint(s, mounting_.T_device_joint[static_cast<int>(s.role)]);
+  }
+  if (!s.valid) return;
+  if (const auto& o = offsets_[static_cast<int>(s.role)]) {
+    s.position_m = s.position_m + s.rotation * o->position_m;
+    s.rotation = (s.rotation * o->rotation).normalized();
+  }
+  if (recentred_) {
+    s.position_m = recentre_rotation_ * s.position_m + recentre_translation_m_;
+    s.rotation = (recentre_rotation_ * s.rotation).normalized();
+  }
+}
+
+void SampleConditioner::finish(TrackerSample& s) {
+  if (s.valid) s.rotation = unit_rotation(s.rotation);
+}
+
+Recentring SampleConditioner::recentre_on(TrackerSample& head) {
+  const features::Canonical c = features::canonical_from_head(head.position_m, head.rotation);
+  recentre_rotation_ = (c.R_canon_world * recentre_rotation_).normalized();
+  recentre_translation_m_ = c.R_canon_world * (recentre_translation_m_ - c.origin_m);
+  recentred_ = true;
+  head.position_m = c.R_canon_world * (head.position_m - c.origin_m);
+  head.rotation = (c.R_canon_world * head.rotation).normalized();
+  return {c.yaw_rad * 180.0 / M_PI, c.origin_m};
+}
+
+nlohmann::json SampleConditioner::recentre_status() const {
+  if (!recentred_) return {{"recentred", false}};
+  // The total transform, as "turned by" and "moved by".
+  const Vec3 f = recentre_rotation_ * Vec3::UnitZ();
+  const double total_deg = -std::atan2(f.x(), f.z()) * 180.0 / M_PI;
+  const Vec3 origin = recentre_rotation_.conjugate() * (-recentre_translation_m_);
+  return {{"recentred", true}, {"recentre", {{"heading_deg", total_deg}, {"origin_m", {origin.x(), origin.z()}}}}};
+}
+
+void LatestHead::update(const TrackerSample& s, std::int64_t arrival_ns) {
+  const double dt_s = static_cast<double>(s.t_ns - sample_.t_ns) * 1e-9;
+  if (arrival_ns_ != 0 && dt_s > 0.0 && dt_s < 0.5) {
+    const double speed = (s.position_m - sample_.position_m).norm() / dt_s;
+    const double a = std::min(1.0, dt_s / 0.2);
+    speed_m_s_ += a * (speed - speed_m_s_);
+  }
+  sample_ = s;
+  arrival_ns_ = arrival_ns;
+}
+
+}  // namespace bodyd::daemon

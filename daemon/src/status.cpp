@@ -1,0 +1,90 @@
+#include "status.h"
+
+#include "bodyd/daemon/config.h"
+#include "pose_wire.h"
+#include "sample_conditioning.h"
+
+namespace bodyd::daemon {
+
+using nlohmann::json;
+
+void summary_json(const ReconstructionSummary& summary, json& out) {
+  out["head_height_m"] = summary.head_height_m;
+  out["user_height_m"] = summary.head_height_m / kHeadHeightPerStature;
+  summary.calibration.to_json(out);
+  out["skeleton_id"] = summary.skeleton.skeleton_id;
+}
+
+json skeleton_reply(const protocol::SkeletonMessage& skeleton, double head_height_m) {
+  json offsets = json::array();
+  for (const auto& o : skeleton.offsets_m) offsets.push_back({o[0], o[1], o[2]});
+  json reply{{"ok", true},
+             {"skeleton_id", skeleton.skeleton_id},
+             {"names", skeleton.names},
+             {"parents", skeleton.parents},
+             {"offsets_m", offsets},
+             {"head_height_m", head_height_m}};
+  if (!skeleton.rest_rotations_xyzw.empty()) reply["rest_rotations_xyzw"] = rest_rotations_json(skeleton);
+  return reply;
+}
+
+json source_status_json(const drivers::SourceStatus& st) {
+  return {{"name", st.name},
+          {"connected", st.connected},
+          {"finished", st.finished},
+          {"samples", st.samples},
+          {"rate_hz", st.rate_hz},
+          {"last_error", st.last_error},
+          {"rejected", st.rejected},
+          {"rejected_by_reason", st.rejected_by_reason},
+          {"counters", st.counters}};
+}
+
+json mounting_status_json(const Mounting& mounting, const Mounting& defaults, const MountingOrigins& origins,
+                          const SampleConditioner& conditioner, const std::string& mounting_file) {
+  json roles = json::object();
+  for (Role r : kRoles) {
+    const int i = static_cast<int>(r);
+    const RigidTransform& T = mounting.T_device_joint[i];
+    const MountingDifference d = mounting_difference(T, defaults.T_device_joint[i]);
+    roles[std::string(role_name(r))] = {{"origin", std::string(name(origins[i]))},
+                                        {"device_frames", conditioner.device_frames_seen(r)},
+                                        {"position_m", {T.position_m.x(), T.position_m.y(), T.position_m.z()}},
+                                        {"rotation_xyzw", {T.rotation.x(), T.rotation.y(), T.rotation.z(), T.rotation.w()}},
+                                        {"from_default_deg", d.angle_deg},
+                                        {"from_default_cm", d.position_cm}};
+  }
+  return json{{"roles", roles}, {"file", mounting_file}};
+}
+
+json status_json(const StatusSnapshot& s, const PipelineStats& stats) {
+  json j = json::object();
+  j["ok"] = true;
+  j["uptime_s"] = s.uptime_s;
+  j["method"] = s.summary.method;
+  j["model"] = s.summary.model_path;
+  summary_json(s.summary, j);
+  j["offsets_configured"] = s.offsets_configured;
+  j.update(s.recentre);
+  j["mounting"] = s.mounting;
+  if (!s.record_trackers_file.empty()) j["record_trackers"] = s.record_trackers_file;
+  json src = json::array();
+  for (const drivers::SourceStatus& st : s.sources) src.push_back(source_status_json(st));
+  j["sources"] = src;
+  j["sources_started"] = s.sources_started;
+  stats.to_json(j);
+  j["samples_dropped"] = s.samples_dropped;
+  j["samples_dropped_stale"] = s.samples_dropped_stale;
+  j["queue_depth"] = s.queue_depth;
+  j["queue_capacity"] = s.queue_capacity;
+  j["sends_failed"] = j["sends_failed"].get<std::uint64_t>() + s.pub_skeleton_sends_failed;
+  j["subscriptions"] = s.pub_subscriptions;
+  j["pub"] = s.pub;
+  j["control"] = s.control;
+  j["curve"] = s.curve;
+  j["rate_hz"] = s.rate_hz;
+  j["outputs"] = s.outputs;
+  return j;
+}
+
+}  // namespace bodyd::daemon
