@@ -310,9 +310,13 @@ TEST(ZmqOutputs, AnOutputZmqSubscriberGetsEachSkeletonBeforeThePosesNamingIt) {
   ASSERT_FALSE(known.empty()) << "no skeleton on the --output zmq: endpoint while the daemon waits";
   auto pub_sub = test::sub_socket(ctx, d.pub_endpoint(), "pose");  // starts the replay
 
+  // Until no pose has come for a while (the skeleton keeps coming once a second).
   std::size_t poses = 0;
   std::set<std::uint32_t> named;
-  while (const auto m = recv_any(sub, poses == 0 ? 10000 : 1500)) {
+  auto last_pose = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() - last_pose < (poses == 0 ? 10000ms : 1500ms)) {
+    const auto m = recv_any(sub, 100);
+    if (!m) continue;
     if (m->first == "skeleton") {
       protocol::SkeletonMessage skeleton;
       ASSERT_TRUE(protocol::decode_skeleton(m->second, skeleton).ok());
@@ -326,6 +330,7 @@ TEST(ZmqOutputs, AnOutputZmqSubscriberGetsEachSkeletonBeforeThePosesNamingIt) {
                                                << pose.skeleton_id << " before it was sent";
     named.insert(pose.skeleton_id);
     ++poses;
+    last_pose = std::chrono::steady_clock::now();
   }
   EXPECT_GT(poses, 100u);
   EXPECT_EQ(named.size(), 2u) << "the auto calibration should have changed the skeleton once";
