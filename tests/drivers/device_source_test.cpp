@@ -9,7 +9,9 @@
 #include "bodyd/motion/bvh.h"
 
 #include "../test_paths.h"
-#include "sink_helpers.h"
+
+#include "bodyd/test/sinks.h"
+#include "bodyd/test/wait.h"
 
 #include <gtest/gtest.h>
 
@@ -25,16 +27,8 @@ namespace {
 using namespace std::chrono_literals;
 
 using test::CollectingSink;
+using test::eventually;
 
-// Polls `done` every 5 ms for up to `timeout`; true when it became true.
-bool eventually(const std::function<bool()>& done, std::chrono::milliseconds timeout) {
-  const auto end = std::chrono::steady_clock::now() + timeout;
-  while (std::chrono::steady_clock::now() < end) {
-    if (done()) return true;
-    std::this_thread::sleep_for(5ms);
-  }
-  return done();
-}
 
 const TrackerTrajectory& walk() {
   static const TrackerTrajectory t(read_bvh(test::fixtures() / "walk_60.bvh"));
@@ -303,10 +297,14 @@ TEST(HidSource, StopIsPrompt) {
   auto source = make_hid_source(hid_options(), transport);
   ASSERT_EQ(source->start(sink, 0), "");
   ASSERT_TRUE(eventually([&] { return source->status().connected; }, 1000ms));
-  const std::int64_t t0 = monotonic_ns();
-  source->stop();
-  EXPECT_LT(monotonic_ns() - t0, 200'000'000);
+  // stop() returns while the read waits for the next report, and nothing comes after it (how
+  // long stopping takes: bodyd-bench-stop --hid-clip).
+  EXPECT_TRUE(test::returns_within([&] { source->stop(); }, 10s));
+  const std::size_t after_stop = sink.size();
   source->stop();  // idempotent
+  std::this_thread::sleep_for(600ms);  // more than a report period at 2 Hz
+  EXPECT_EQ(sink.size(), after_stop);
+  EXPECT_FALSE(source->status().connected);
 }
 
 class UsbSourceTest : public ::testing::TestWithParam<bool> {};
@@ -395,6 +393,23 @@ TEST(DeviceList, NothingFoundIsAnEmptyList) {
   FakeHidTransport hid;
   FakeUsbTransport usb;
   EXPECT_TRUE(list_devices(&hid, &usb).empty());
+  EXPECT_TRUE(list_devices(nullptr, nullptr).empty());
+  // Trackers that are not plugged in and a USB device bodyd does not know are not found either...
+  auto hid_tracker = device({}, false);
+  auto usb_tracker = device({}, false);
+  SimulatedDeviceConfig mouse;
+  mouse.id = {0x046d, 0xc52b};
+  usb.add(device(mouse));
+  hid.add(hid_tracker);
+  usb.add(usb_tracker);
+  EXPECT_TRUE(list_devices(&hid, &usb).empty());
+  // ...while the same transports list the trackers, once each, when they are plugged in.
+  hid_tracker->plug(monotonic_ns());
+  usb_tracker->plug(monotonic_ns());
+  const std::vector<ListedDevice> listed = list_devices(&hid, &usb);
+  ASSERT_EQ(listed.size(), 2u);
+  EXPECT_EQ(listed[0].spec, "hid:1209:B0D1");
+  EXPECT_EQ(listed[1].spec, "usb:1209:B0D1");
 }
 
 // Issue 20 item 8: with nothing found, the text names the network inputs a headset user needs
