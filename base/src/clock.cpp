@@ -1,0 +1,12 @@
+#include "bodyd/base/clock.h"
+
+#include <chrono>
+
+namespace bodyd {
+
+std::int64_t monotonic_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+}  // namespace bodyd
