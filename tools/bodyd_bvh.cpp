@@ -3,6 +3,7 @@
 #include "bodyd/motion/bvh.h"
 #include "bodyd/motion/mounting.h"
 #include "bodyd/motion/printable.h"
+#include "bodyd/motion/split_file.h"
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>

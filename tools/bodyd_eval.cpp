@@ -3,7 +3,9 @@
 //
 //   bodyd-eval --model MODEL --json OUT.json [--seed N] [--noise-mm S] [--dropout-rate P]
 //              [--body-scale S] [--out-dir DIR] [--methods diffusion,ik] [--split FILE.txt] [FILE.bvh...]
+#include "bodyd/base/random.h"
 #include "bodyd/inference/evaluation.h"
+#include "bodyd/motion/split_file.h"
 #include "bodyd/simulators/tracker_sim.h"
 
 #include <CLI/CLI.hpp>
@@ -20,13 +22,8 @@
 
 namespace {
 
-// SplitMix64 (Steele et al. 2014): decorrelates the per-clip seeds derived from one run seed.
-std::uint64_t mix_seed(std::uint64_t seed, std::uint64_t clip_index) {
-  std::uint64_t z = seed + 0x9E3779B97F4A7C15ULL * (clip_index + 1);
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-  return z ^ (z >> 31);
-}
+// SplitMix64 (bodyd/base/random.h): decorrelates the per-clip seeds derived from one run seed.
+std::uint64_t mix_seed(std::uint64_t seed, std::uint64_t clip_index) { return bodyd::splitmix64_at(seed, clip_index); }
 
 std::vector<std::string> split_list(const std::string& text) {
   std::vector<std::string> out;

@@ -5,6 +5,7 @@
 // Records every pose and skeleton message as received, with the receive time. Frames that do
 // not decode are skipped (and counted), so a recording always loads. Stops after N poses,
 // after S seconds, or on SIGINT/SIGTERM, and closes the file cleanly in every case.
+#include "bodyd/base/clock.h"
 #include "bodyd/protocol/recording.h"
 
 #include <CLI/CLI.hpp>
@@ -22,11 +23,6 @@ namespace {
 
 std::atomic<bool> g_stop{false};
 extern "C" void on_signal(int) { g_stop = true; }
-
-std::int64_t monotonic_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
 
 }  // namespace
 
@@ -79,7 +75,7 @@ int main(int argc, char** argv) {
   };
   flush();
 
-  const std::int64_t start_ns = monotonic_ns();
+  const std::int64_t start_ns = bodyd::monotonic_ns();
   std::int64_t last_pose_ns = start_ns;
   std::int64_t last_flush_ns = start_ns;
   std::uint64_t poses = 0, skeletons = 0, skipped = 0, dropped = 0;
@@ -89,7 +85,7 @@ int main(int argc, char** argv) {
   protocol::SkeletonMessage skeleton;
   int status = 0;
   while (!g_stop && !write_failed && (count == 0 || poses < count)) {
-    const std::int64_t now_ns = monotonic_ns();
+    const std::int64_t now_ns = bodyd::monotonic_ns();
     if (duration_s > 0 && static_cast<double>(now_ns - start_ns) >= duration_s * 1e9) break;
     if (timeout_s > 0 && static_cast<double>(now_ns - last_pose_ns) > timeout_s * 1e9) {
       fmt::print(stderr, "bodyd-record: no pose from {} for {} s (is bodyd running and publishing there?)\n",
@@ -118,7 +114,7 @@ int main(int argc, char** argv) {
       status = 1;
       break;
     }
-    const std::int64_t recv_ns = monotonic_ns();
+    const std::int64_t recv_ns = bodyd::monotonic_ns();
     if (frames != 2) {
       ++skipped;
       continue;

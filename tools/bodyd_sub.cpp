@@ -6,6 +6,8 @@
 // With --json, one JSON object per pose and line (client::pose_to_json); otherwise a live
 // one-line summary once a second: receive rate, latencies, sequence gaps.
 // Exit status: 0 done (count reached or interrupted), 1 error, 2 no pose within --timeout-s.
+#include "bodyd/base/clock.h"
+#include "bodyd/base/percentile.h"
 #include "bodyd/client/client.h"
 
 #include <CLI/CLI.hpp>
@@ -17,6 +19,7 @@
 #include <atomic>
 #include <csignal>
 #include <cstdio>
+#include <span>
 #include <vector>
 
 namespace {
@@ -24,16 +27,9 @@ namespace {
 std::atomic<bool> g_stop{false};
 extern "C" void on_signal(int) { g_stop = true; }
 
-std::int64_t monotonic_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
-
+// Nearest rank (bodyd/base/percentile.h), in ms; 0 for a second without poses.
 double percentile_ms(std::vector<std::int64_t>& values_ns, double p) {
-  if (values_ns.empty()) return 0.0;
-  const auto k = static_cast<std::size_t>(p * static_cast<double>(values_ns.size() - 1) + 0.5);
-  std::nth_element(values_ns.begin(), values_ns.begin() + static_cast<std::ptrdiff_t>(k), values_ns.end());
-  return static_cast<double>(values_ns[k]) / 1e6;
+  return static_cast<double>(bodyd::percentile(std::span<std::int64_t>(values_ns), p).value_or(0)) / 1e6;
 }
 
 }  // namespace
@@ -80,14 +76,14 @@ int main(int argc, char** argv) {
   const bool tty = isatty(STDOUT_FILENO) != 0;
   bodyd::protocol::PoseMessage pose;
   std::uint64_t received = 0;
-  std::int64_t last_pose_ns = monotonic_ns();
+  std::int64_t last_pose_ns = bodyd::monotonic_ns();
   std::int64_t window_start_ns = last_pose_ns;
   std::uint64_t window_poses = 0;
   std::vector<std::int64_t> pipeline_ns, transport_ns;
   std::string last_malformed;
   while (!g_stop && (count == 0 || received < count)) {
     const auto result = client->receive(pose, std::chrono::milliseconds(100));
-    const std::int64_t now_ns = monotonic_ns();
+    const std::int64_t now_ns = bodyd::monotonic_ns();
     if (result == bodyd::client::Received::kError) {
       fmt::print(stderr, "bodyd-sub: {}\n", client->error());
       return 1;

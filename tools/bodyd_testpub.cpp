@@ -5,6 +5,7 @@
 //
 // Prints the bound endpoint (ZMQ_LAST_ENDPOINT, useful with a "*" port) as the first line of
 // stdout. Publishes the skeleton first and once a second, like the daemon.
+#include "bodyd/base/clock.h"
 #include "bodyd/protocol/synthetic.h"
 
 #include <CLI/CLI.hpp>
@@ -21,11 +22,6 @@ namespace {
 
 std::atomic<bool> g_stop{false};
 extern "C" void on_signal(int) { g_stop = true; }
-
-std::int64_t monotonic_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
 
 void send(zmq::socket_t& socket, std::string_view topic, const std::vector<std::uint8_t>& frame) {
   socket.send(zmq::buffer(topic), zmq::send_flags::sndmore);
@@ -86,7 +82,7 @@ int main(int argc, char** argv) {
     return 1;
   }
   const auto period = std::chrono::nanoseconds(static_cast<std::int64_t>(1e9 / rate_hz));
-  const std::int64_t start_ns = monotonic_ns();
+  const std::int64_t start_ns = bodyd::monotonic_ns();
   auto next = std::chrono::steady_clock::now();
   auto next_skeleton = next;
   for (std::uint64_t seq = 0; !g_stop && (count == 0 || seq < count); ++seq) {
@@ -97,7 +93,7 @@ int main(int argc, char** argv) {
       next_skeleton = now + std::chrono::seconds(1);
     }
     protocol::PoseMessage pose = protocol::synthetic_pose(seq, start_ns, period.count());
-    pose.publish_t_ns = monotonic_ns();
+    pose.publish_t_ns = bodyd::monotonic_ns();
     if (auto s = protocol::encode_pose(pose, pose_frame); !s) {
       fmt::print(stderr, "bodyd-testpub: {}\n", s.error);
       return 1;

@@ -80,20 +80,25 @@ def parse_args():
 
 
 def read_clip_list(path):
-    """The clip paths of a list file like training/heldout.txt: blank and '#' lines skipped, one path per line
-    relative to the dataset root (dataset-1/....bvh). Exits with the file and line on a bad line."""
+    """The clip paths of a list file like training/heldout.txt, one path per line relative to the dataset root
+    (dataset-1/....bvh). Lines as the C++ split reader reads them (motion/include/bodyd/motion/split_file.h):
+    spaces, tabs and CRs at either end are not part of the path; a line then empty or starting with '#' is
+    skipped; a list must name at least one clip. Exits with the file and line on a bad line."""
     out = []
     try:
-        lines = open(path).read().splitlines()
+        with open(path, newline="") as f:  # lines end at '\n' only, as std::getline's
+            lines = f.read().split("\n")
     except OSError as e:
         sys.exit(f"--exclude-split {path}: cannot read: {e.strerror}")
     for n, line in enumerate(lines, 1):
-        line = line.rstrip(" \r")
+        line = line.strip(" \t\r")
         if not line or line.startswith("#"):
             continue
         if os.path.isabs(line) or ".." in line.split("/"):
             sys.exit(f"{path}:{n}: '{line}' must be relative to the dataset root (e.g. dataset-1/NAME.bvh)")
         out.append(os.path.normpath(line))
+    if not out:
+        sys.exit(f"--exclude-split {path}: the list names no clips")
     return out
 
 

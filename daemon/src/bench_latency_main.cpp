@@ -10,6 +10,7 @@
 // two more rows say what they add: arrival -> every output sent, and the outputs' own time
 // after the --pub send. --udp-sink PORT binds 127.0.0.1:PORT (UDP) and never reads it, so an
 // OSC output has a receiver (no ICMP "port unreachable") that costs this process nothing.
+#include "bodyd/base/percentile.h"
 #include "bodyd/daemon/config.h"
 #include "bodyd/daemon/daemon.h"
 #include "bodyd/daemon/reconstructors.h"
@@ -29,6 +30,7 @@
 #include <chrono>
 #include <cmath>
 #include <csignal>
+#include <span>
 #include <thread>
 #include <vector>
 
@@ -52,9 +54,9 @@ Percentiles percentiles_us(std::vector<std::int64_t> v_ns) {
   Percentiles p;
   if (v_ns.empty()) return p;
   std::sort(v_ns.begin(), v_ns.end());
+  // Nearest rank (bodyd/base/percentile.h); all zero without values (above).
   auto at = [&](double q) {
-    const auto k = static_cast<std::size_t>(std::max(0.0, std::ceil(q * static_cast<double>(v_ns.size())) - 1));
-    return static_cast<double>(v_ns[std::min(k, v_ns.size() - 1)]) / 1e3;
+    return static_cast<double>(*bodyd::percentile_of_sorted(std::span<const std::int64_t>(v_ns), q)) / 1e3;
   };
   p.p50 = at(0.5), p.p90 = at(0.9), p.p99 = at(0.99), p.max = static_cast<double>(v_ns.back()) / 1e3;
   double sum = 0;

@@ -1,5 +1,6 @@
 #include "bodyd/daemon/endpoint.h"
 
+#include "bodyd/base/loopback.h"
 #include "bodyd/paths/private_dir.h"
 
 #include <zmq.h>
@@ -31,20 +32,14 @@ std::string_view tcp_host(std::string_view endpoint) {
   return rest.substr(0, colon);
 }
 
-bool is_loopback_host(std::string_view host) {
-  if (host == "localhost" || host == "lo" || host == "[::1]" || host == "::1") return true;
-  in_addr v4{};
-  const std::string h(host);
-  if (inet_pton(AF_INET, h.c_str(), &v4) == 1) return (ntohl(v4.s_addr) >> 24) == 127;
-  return false;
-}
-
 }  // namespace
 
 bool is_local_endpoint(std::string_view endpoint) {
   if (starts_with(endpoint, "ipc://") || starts_with(endpoint, "inproc://")) return true;
-  if (starts_with(endpoint, "tcp://")) return is_loopback_host(tcp_host(endpoint));
-  return false;
+  if (!starts_with(endpoint, "tcp://")) return false;
+  // bodyd's one loopback rule (bodyd/base/loopback.h), plus ZeroMQ's name of the loopback interface.
+  const std::string_view host = tcp_host(endpoint);
+  return host == "lo" || is_loopback_host(host);
 }
 
 std::string check_bind_endpoint(std::string_view endpoint, bool allow_remote, std::string_view what) {

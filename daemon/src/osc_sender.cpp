@@ -1,5 +1,7 @@
 #include "osc_sender.h"
 
+#include "bodyd/base/loopback.h"
+
 #include <spdlog/spdlog.h>
 
 #include <arpa/inet.h>
@@ -68,12 +70,12 @@ std::string OscSender::open(const std::string& host, const std::string& port, co
   if (a.ai_family == AF_INET) {
     const auto* in = reinterpret_cast<const sockaddr_in*>(a.ai_addr);
     ::inet_ntop(AF_INET, &in->sin_addr, text, sizeof(text));
-    loopback_ = (ntohl(in->sin_addr.s_addr) >> 24) == 127;
+    loopback_ = is_loopback(in->sin_addr);
     address_ = std::string(text) + ":" + port;
   } else {
     const auto* in6 = reinterpret_cast<const sockaddr_in6*>(a.ai_addr);
     ::inet_ntop(AF_INET6, &in6->sin6_addr, text, sizeof(text));
-    loopback_ = IN6_IS_ADDR_LOOPBACK(&in6->sin6_addr);
+    loopback_ = is_loopback(in6->sin6_addr);
     address_ = "[" + std::string(text) + "]:" + port;
   }
   // Not one receiver's address (issue 20): refused like a broadcast address, whose refusal is

@@ -1,9 +1,12 @@
 #include "bodyd/daemon/output.h"
 
+#include "bodyd/base/spec_options.h"
+
 #include <nlohmann/json.hpp>
 
 #include <cmath>
 #include <string>
+#include <vector>
 
 namespace bodyd::daemon {
 
@@ -12,33 +15,21 @@ nlohmann::json Output::status() const { return nlohmann::json::object(); }
 bool parse_output_spec(std::string_view text, OutputSpec& out, std::string& error) {
   out = OutputSpec{};
   out.text = std::string(text);
-  const auto colon = text.find(':');
-  const auto query = text.find('?');
-  const auto scheme_end = std::min(colon, query);
-  out.scheme = std::string(text.substr(0, scheme_end));
+  const auto [head, query] = split_spec_query(text);
+  const auto colon = head.find(':');
+  out.scheme = std::string(head.substr(0, colon));
   if (out.scheme.empty()) {
     error = "--output \"" + std::string(text) + "\": expected SCHEME:TARGET[?KEY=VALUE&...], e.g. vrchat:127.0.0.1:9000";
     return false;
   }
-  if (colon != std::string_view::npos && colon < query)
-    out.target = std::string(text.substr(colon + 1, query == std::string_view::npos ? std::string_view::npos : query - colon - 1));
-  if (query == std::string_view::npos) return true;
-  std::string_view rest = text.substr(query + 1);
-  while (!rest.empty()) {
-    const auto amp = rest.find('&');
-    const std::string_view item = rest.substr(0, amp);
-    rest = amp == std::string_view::npos ? std::string_view() : rest.substr(amp + 1);
-    const auto eq = item.find('=');
-    const std::string key(item.substr(0, eq));
-    if (key.empty() || eq == std::string_view::npos) {
-      error = "--output \"" + std::string(text) + "\": option \"" + std::string(item) + "\" is not KEY=VALUE";
-      return false;
-    }
-    if (!out.options.emplace(key, std::string(item.substr(eq + 1))).second) {
-      error = "--output \"" + std::string(text) + "\": option \"" + key + "\" given twice";
-      return false;
-    }
+  if (colon != std::string_view::npos) out.target = std::string(head.substr(colon + 1));
+  // The options by the one spec rule (bodyd/base/spec_options.h).
+  std::vector<SpecOption> options;
+  if (std::string e = parse_spec_options(query, options); !e.empty()) {
+    error = "--output \"" + std::string(text) + "\": " + e;
+    return false;
   }
+  for (SpecOption& o : options) out.options.emplace(std::move(o.key), std::move(o.value));
   return true;
 }
 

@@ -1,7 +1,9 @@
 #include "stats.h"
 
+#include "bodyd/base/percentile.h"
+
 #include <algorithm>
-#include <cmath>
+#include <span>
 #include <vector>
 
 namespace bodyd::daemon {
@@ -13,9 +15,9 @@ nlohmann::json TimingRing::summary_us() const {
   std::vector<std::int64_t> v(m);
   for (std::size_t i = 0; i < m; ++i) v[i] = values_[i].load(std::memory_order_relaxed);
   std::sort(v.begin(), v.end());
+  // Nearest rank (bodyd/base/percentile.h); no values is {"count": 0} above.
   auto pct = [&](double p) {
-    const std::size_t k = std::min(m - 1, static_cast<std::size_t>(std::ceil(p * static_cast<double>(m))) - (p > 0 ? 1 : 0));
-    return static_cast<double>(v[k]) / 1000.0;
+    return static_cast<double>(*percentile_of_sorted(std::span<const std::int64_t>(v), p)) / 1000.0;
   };
   return nlohmann::json{
       {"count", n}, {"window", m}, {"p50", pct(0.5)}, {"p99", pct(0.99)}, {"max", static_cast<double>(v.back()) / 1000.0}};

@@ -1,5 +1,6 @@
 #include "bodyd/drivers/fake_devices.h"
 
+#include "bodyd/base/random.h"
 #include "bodyd/drivers/report.h"
 #include "bodyd/motion/bvh.h"
 
@@ -13,14 +14,8 @@ namespace {
 
 constexpr std::int64_t kNever = std::numeric_limits<std::int64_t>::max();
 
-// splitmix64: a tiny, seedable generator with the same output everywhere.
-std::uint64_t next_random(std::uint64_t& state) {
-  std::uint64_t z = (state += 0x9E3779B97F4A7C15ull);
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
-}
-double uniform01(std::uint64_t& state) { return static_cast<double>(next_random(state) >> 11) * 0x1.0p-53; }
+// splitmix64 (bodyd/base/random.h): a tiny, seedable generator with the same output everywhere.
+double uniform01(std::uint64_t& state) { return static_cast<double>(splitmix64(state) >> 11) * 0x1.0p-53; }
 
 void sleep_until_ns(std::int64_t t_ns) {
   std::this_thread::sleep_until(std::chrono::steady_clock::time_point(std::chrono::nanoseconds(t_ns)));
@@ -122,11 +117,11 @@ std::optional<std::vector<std::uint8_t>> SimulatedDevice::poll(std::int64_t now_
     }
     std::vector<std::uint8_t> bytes = clean;
     if (f.garbage_probability > 0.0 && uniform01(rng_state_) < f.garbage_probability) {
-      bytes.resize(1 + next_random(rng_state_) % 64);
-      for (auto& b : bytes) b = static_cast<std::uint8_t>(next_random(rng_state_));
+      bytes.resize(1 + splitmix64(rng_state_) % 64);
+      for (auto& b : bytes) b = static_cast<std::uint8_t>(splitmix64(rng_state_));
       ++counters_.garbage;
     } else if (f.short_report_probability > 0.0 && uniform01(rng_state_) < f.short_report_probability) {
-      bytes.resize(next_random(rng_state_) % bytes.size());  // 0 .. size-1 bytes
+      bytes.resize(splitmix64(rng_state_) % bytes.size());  // 0 .. size-1 bytes
       ++counters_.short_reports;
     }
     ++counters_.sent;

@@ -1,5 +1,6 @@
 #include "bodyd/drivers/hydra.h"
 
+#include "bodyd/base/little_endian.h"
 #include "bodyd/drivers/report.h"
 
 #include <algorithm>
@@ -61,10 +62,10 @@ HydraError decode_hydra_report(const std::uint8_t* data, std::size_t size, const
   for (int c = 0; c < 2; ++c) {
     const std::uint8_t* p = data + kOffController[c];
     HydraController& out = r.controllers[c];
-    const Vec3 raw_mm(read_i16_le(p + kOffPosition), read_i16_le(p + kOffPosition + 2),
-                      read_i16_le(p + kOffPosition + 4));
-    const Quat raw_q(read_i16_le(p + kOffRotation) / kInt16Scale, read_i16_le(p + kOffRotation + 2) / kInt16Scale,
-                     read_i16_le(p + kOffRotation + 4) / kInt16Scale, read_i16_le(p + kOffRotation + 6) / kInt16Scale);
+    const Vec3 raw_mm(load_le<std::int16_t>(p + kOffPosition), load_le<std::int16_t>(p + kOffPosition + 2),
+                      load_le<std::int16_t>(p + kOffPosition + 4));
+    const Quat raw_q(load_le<std::int16_t>(p + kOffRotation) / kInt16Scale, load_le<std::int16_t>(p + kOffRotation + 2) / kInt16Scale,
+                     load_le<std::int16_t>(p + kOffRotation + 4) / kInt16Scale, load_le<std::int16_t>(p + kOffRotation + 6) / kInt16Scale);
     const double norm = raw_q.norm();
     out.valid = std::abs(norm - 1.0) <= kHydraQuatNormTolerance;
     if (out.valid) {
@@ -73,8 +74,8 @@ HydraError decode_hydra_report(const std::uint8_t* data, std::size_t size, const
       out.rotation = (hydra_to_bodyd() * q * hydra_to_bodyd().conjugate() * controller_flip()).normalized();
     }
     out.buttons = p[kOffButtons];
-    out.joystick_x = read_i16_le(p + kOffJoystick) / kInt16Scale;
-    out.joystick_y = read_i16_le(p + kOffJoystick + 2) / kInt16Scale;
+    out.joystick_x = load_le<std::int16_t>(p + kOffJoystick) / kInt16Scale;
+    out.joystick_y = load_le<std::int16_t>(p + kOffJoystick + 2) / kInt16Scale;
     out.trigger = p[kOffTrigger] / 255.0;
   }
   out_report = r;
@@ -98,17 +99,17 @@ std::array<std::uint8_t, kHydraReportSize> encode_hydra_report(const HydraReport
     if (in.valid && in.position_m.allFinite() && in.rotation.coeffs().allFinite() && in.rotation.norm() > 0.5) {
       const Vec3 raw_mm = hydra_to_bodyd().conjugate() * (in.position_m - options.base_position_m) * 1e3;
       for (int i = 0; i < 3; ++i)
-        write_u16_le(p + kOffPosition + 2 * i, static_cast<std::uint16_t>(clamp_i16(raw_mm[i])));
+        store_le<std::uint16_t>(p + kOffPosition + 2 * i, static_cast<std::uint16_t>(clamp_i16(raw_mm[i])));
       const Quat q = hydra_to_bodyd().conjugate() * (in.rotation.normalized() * controller_flip().conjugate()) *
                      hydra_to_bodyd();
       const double c4[4] = {q.w(), q.x(), q.y(), q.z()};
       // 1.0 * 32768 does not fit; 32767 is the device's largest value.
       for (int i = 0; i < 4; ++i)
-        write_u16_le(p + kOffRotation + 2 * i, static_cast<std::uint16_t>(clamp_i16(c4[i] * kInt16Scale)));
+        store_le<std::uint16_t>(p + kOffRotation + 2 * i, static_cast<std::uint16_t>(clamp_i16(c4[i] * kInt16Scale)));
     }
     p[kOffButtons] = in.buttons;
-    write_u16_le(p + kOffJoystick, static_cast<std::uint16_t>(clamp_i16(in.joystick_x * kInt16Scale)));
-    write_u16_le(p + kOffJoystick + 2, static_cast<std::uint16_t>(clamp_i16(in.joystick_y * kInt16Scale)));
+    store_le<std::uint16_t>(p + kOffJoystick, static_cast<std::uint16_t>(clamp_i16(in.joystick_x * kInt16Scale)));
+    store_le<std::uint16_t>(p + kOffJoystick + 2, static_cast<std::uint16_t>(clamp_i16(in.joystick_y * kInt16Scale)));
     p[kOffTrigger] = static_cast<std::uint8_t>(std::clamp(std::lround(in.trigger * 255.0), 0L, 255L));
   }
   return b;

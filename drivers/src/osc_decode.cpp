@@ -163,10 +163,6 @@ InputReject decode_osc_packet(const std::uint8_t* data, std::size_t size, std::v
 }
 
 // ---------------------------------------------------------------------------------------------
-Vec3 unity_position_to_bodyd(const Vec3& p) { return Vec3(p.x(), p.y(), -p.z()); }
-
-Quat unity_rotation_to_bodyd(const Quat& q) { return Quat(q.w(), -q.x(), -q.y(), q.z()); }
-
 Quat unity_euler_deg_to_quat(double x_deg, double y_deg, double z_deg) {
   // Order "YXZ": R = Ry(y) * Rx(x) * Rz(z) (rotation.h applies the last axis first).
   static const EulerOrder kUnity = [] {

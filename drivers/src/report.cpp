@@ -1,5 +1,7 @@
 #include "bodyd/drivers/report.h"
 
+#include "bodyd/base/little_endian.h"
+
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -60,7 +62,7 @@ std::string describe_report_error(ReportError error, const std::uint8_t* data, s
       double n2 = 0.0;
       if (full)
         for (int i = 0; i < 4; ++i) {
-          const double c = read_i16_le(data + kOffRotation + 2 * i) / kTrackerReportQuatScale;
+          const double c = load_le<std::int16_t>(data + kOffRotation + 2 * i) / kTrackerReportQuatScale;
           n2 += c * c;
         }
       std::snprintf(text, sizeof text, "bytes 24-31 (quaternion, Q1.14) have norm %.4f, expected 1 +- %.2f",
@@ -83,16 +85,16 @@ ReportError decode_tracker_report(const std::uint8_t* data, std::size_t size, Tr
   r.valid = (flags & kReportFlagValid) != 0;
   r.battery_low = (flags & kReportFlagBatteryLow) != 0;
   r.clock_reset = (flags & kReportFlagClockReset) != 0;
-  r.sequence = read_u16_le(data + kOffSequence);
+  r.sequence = load_le<std::uint16_t>(data + kOffSequence);
   r.battery_percent = data[kOffBattery];
-  r.device_time_us = read_u32_le(data + kOffDeviceTime);
+  r.device_time_us = load_le<std::uint32_t>(data + kOffDeviceTime);
   if (r.valid) {
     for (int i = 0; i < 3; ++i)
-      r.position_m[i] = read_i32_le(data + kOffPosition + 4 * i) * kTrackerReportPositionUnitM;
-    const double x = read_i16_le(data + kOffRotation + 0) / kTrackerReportQuatScale;
-    const double y = read_i16_le(data + kOffRotation + 2) / kTrackerReportQuatScale;
-    const double z = read_i16_le(data + kOffRotation + 4) / kTrackerReportQuatScale;
-    const double w = read_i16_le(data + kOffRotation + 6) / kTrackerReportQuatScale;
+      r.position_m[i] = load_le<std::int32_t>(data + kOffPosition + 4 * i) * kTrackerReportPositionUnitM;
+    const double x = load_le<std::int16_t>(data + kOffRotation + 0) / kTrackerReportQuatScale;
+    const double y = load_le<std::int16_t>(data + kOffRotation + 2) / kTrackerReportQuatScale;
+    const double z = load_le<std::int16_t>(data + kOffRotation + 4) / kTrackerReportQuatScale;
+    const double w = load_le<std::int16_t>(data + kOffRotation + 6) / kTrackerReportQuatScale;
     const double norm = std::sqrt(x * x + y * y + z * z + w * w);
     if (!(std::abs(norm - 1.0) <= kTrackerReportQuatNormTolerance)) return ReportError::BadQuaternion;
     r.rotation = Quat(w / norm, x / norm, y / norm, z / norm);
@@ -112,9 +114,9 @@ ReportError encode_tracker_report(const TrackerReport& report,
   b[kOffFlags] = static_cast<std::uint8_t>((report.valid ? kReportFlagValid : 0) |
                                            (report.battery_low ? kReportFlagBatteryLow : 0) |
                                            (report.clock_reset ? kReportFlagClockReset : 0));
-  write_u16_le(&b[kOffSequence], report.sequence);
+  store_le<std::uint16_t>(&b[kOffSequence], report.sequence);
   b[kOffBattery] = report.battery_percent;
-  write_u32_le(&b[kOffDeviceTime], report.device_time_us);
+  store_le<std::uint32_t>(&b[kOffDeviceTime], report.device_time_us);
   if (report.valid) {
     const Quat& q = report.rotation;
     if (!report.position_m.allFinite() || !q.coeffs().allFinite()) return ReportError::NotFinite;
@@ -124,13 +126,13 @@ ReportError encode_tracker_report(const TrackerReport& report,
       const double units = std::round(report.position_m[i] / kTrackerReportPositionUnitM);
       if (!(units >= std::numeric_limits<std::int32_t>::min() && units <= std::numeric_limits<std::int32_t>::max()))
         return ReportError::PositionOutOfRange;
-      write_u32_le(&b[kOffPosition + 4 * i], static_cast<std::uint32_t>(static_cast<std::int32_t>(units)));
+      store_le<std::uint32_t>(&b[kOffPosition + 4 * i], static_cast<std::uint32_t>(static_cast<std::int32_t>(units)));
     }
     const double c[4] = {q.x() / norm, q.y() / norm, q.z() / norm, q.w() / norm};
     for (int i = 0; i < 4; ++i) {
       // |c| <= 1, so the rounded value is within [-16384, 16384] and fits in int16.
       const auto v = static_cast<std::int16_t>(std::lround(c[i] * kTrackerReportQuatScale));
-      write_u16_le(&b[kOffRotation + 2 * i], static_cast<std::uint16_t>(v));
+      store_le<std::uint16_t>(&b[kOffRotation + 2 * i], static_cast<std::uint16_t>(v));
     }
   }
   out_bytes = b;

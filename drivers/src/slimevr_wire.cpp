@@ -2,6 +2,7 @@
 // classes protoc generates at build time from drivers/proto/slimevr_bridge.proto.
 #include "bodyd/drivers/slimevr_bridge.h"
 
+#include "bodyd/base/little_endian.h"
 #include "slimevr_bridge.pb.h"
 
 #include <google/protobuf/stubs/logging.h>
@@ -14,8 +15,7 @@ FrameView next_frame(const std::uint8_t* data, std::size_t size, std::size_t max
   FrameView v;
   if (size < kFrameHeaderBytes) return v;
   // uint32 little-endian, counting its own 4 bytes (BridgeTransport.cpp).
-  v.declared_bytes = static_cast<std::uint32_t>(data[0]) | (static_cast<std::uint32_t>(data[1]) << 8) |
-                     (static_cast<std::uint32_t>(data[2]) << 16) | (static_cast<std::uint32_t>(data[3]) << 24);
+  v.declared_bytes = load_le<std::uint32_t>(data);
   if (v.declared_bytes < kFrameHeaderBytes) {
     v.result = FrameResult::TooShort;
     return v;
@@ -108,10 +108,7 @@ struct Encoder::Impl {
     const std::uint32_t framed = static_cast<std::uint32_t>(size + kFrameHeaderBytes);
     const std::size_t at = out.size();
     out.resize(at + framed);
-    out[at + 0] = static_cast<std::uint8_t>(framed & 0xff);
-    out[at + 1] = static_cast<std::uint8_t>((framed >> 8) & 0xff);
-    out[at + 2] = static_cast<std::uint8_t>((framed >> 16) & 0xff);
-    out[at + 3] = static_cast<std::uint8_t>((framed >> 24) & 0xff);
+    store_le(out.data() + at, framed);
     m.SerializeWithCachedSizesToArray(out.data() + at + kFrameHeaderBytes);
   }
 };

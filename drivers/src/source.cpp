@@ -2,12 +2,6 @@
 
 namespace bodyd::drivers {
 
-std::int64_t monotonic_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
-
 void RateMeter::count(std::int64_t now_ns) {
   constexpr std::int64_t kWindowNs = 1'000'000'000;
   if (window_count_ == 0 && window_start_ns_ == 0) window_start_ns_ = now_ns;

@@ -1,5 +1,6 @@
 #include "bodyd/inference/evaluation.h"
 
+#include "bodyd/base/percentile.h"
 #include "bodyd/inference/factory.h"
 #include "bodyd/inference/ik.h"
 
@@ -121,14 +122,6 @@ CausalityReport check_causality(const std::function<std::unique_ptr<Reconstructo
     }
   }
   return report;
-}
-
-double percentile(std::vector<double> values, double p) {
-  if (values.empty()) return std::numeric_limits<double>::quiet_NaN();
-  std::sort(values.begin(), values.end());
-  const double rank = std::ceil(std::clamp(p, 0.0, 100.0) / 100.0 * static_cast<double>(values.size()));
-  const size_t i = rank < 1.0 ? 0 : static_cast<size_t>(rank) - 1;
-  return values[std::min(i, values.size() - 1)];
 }
 
 namespace {
@@ -481,8 +474,9 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
     MethodReport r;
     r.name = options.methods[m];
     if (!metrics.empty()) r.metrics = metrics[m].result();
-    r.ms_per_frame_p50 = percentile(times[m], 50.0);
-    r.ms_per_frame_p99 = percentile(times[m], 99.0);
+    // Nearest rank (bodyd/base/percentile.h); NaN, written as null, for a method that never ran.
+    r.ms_per_frame_p50 = percentile(times[m], 0.5).value_or(std::numeric_limits<double>::quiet_NaN());
+    r.ms_per_frame_p99 = percentile(times[m], 0.99).value_or(std::numeric_limits<double>::quiet_NaN());
     r.unanswered_frames = unanswered[m];
     report.methods.push_back(r);
     if (options.methods[m] == "diffusion") timed = m;
@@ -656,29 +650,6 @@ std::string report_table(const EvalReport& report) {
     out += "(per method: mpjpe_cm, lower_pe_cm, jitter_m_s3 / ground truth's)\n";
   }
   return out;
-}
-
-std::vector<std::filesystem::path> read_split(const std::filesystem::path& split_file) {
-  std::ifstream in(split_file);
-  if (!in) throw std::runtime_error(fmt::format("{}: cannot open the split file", split_file.string()));
-  // Paths are relative to the split folder's parent (splits/val.txt -> the dataset root).
-  const std::filesystem::path base = split_file.parent_path().parent_path();
-  std::vector<std::filesystem::path> paths;
-  std::string line;
-  int line_no = 0;
-  while (std::getline(in, line)) {
-    ++line_no;
-    while (!line.empty() && (line.back() == '\r' || line.back() == ' ' || line.back() == '\t')) line.pop_back();
-    size_t start = line.find_first_not_of(" \t");
-    if (start == std::string::npos || line[start] == '#') continue;
-    const std::filesystem::path p = base / line.substr(start);
-    if (!std::filesystem::exists(p))
-      throw std::runtime_error(fmt::format("{}:{}: '{}' does not exist (paths are relative to {})", split_file.string(),
-                                           line_no, p.string(), base.string()));
-    paths.push_back(p);
-  }
-  if (paths.empty()) throw std::runtime_error(fmt::format("{}: the split lists no files", split_file.string()));
-  return paths;
 }
 
 }  // namespace bodyd

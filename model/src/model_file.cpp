@@ -1,6 +1,7 @@
 // Model-file container decoder and model loader (docs/model-file.md).
 #include "bodyd/inference/model_file.h"
 
+#include "bodyd/base/little_endian.h"
 #include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/features.h"
 
@@ -65,11 +66,7 @@ std::string_view sha256_digits(std::string_view text) {
 
 std::string shape_str(const std::vector<std::int64_t>& shape) { return fmt::format("[{}]", fmt::join(shape, ",")); }
 
-std::uint64_t read_u64_le(const std::byte* p) {
-  std::uint64_t v = 0;
-  for (int i = 7; i >= 0; --i) v = (v << 8) | static_cast<std::uint64_t>(p[i]);
-  return v;
-}
+std::uint64_t read_u64_le(const std::byte* p) { return load_le<std::uint64_t>(reinterpret_cast<const std::uint8_t*>(p)); }
 
 // A non-negative integer JSON value that fits `limit`, or nullopt.
 std::optional<std::uint64_t> json_uint(const Json& j, std::uint64_t limit) {

@@ -10,17 +10,11 @@
 #include <numbers>
 #include <stdexcept>
 
-#include "require.h"
+#include "bodyd/base/random.h"
+#include "bodyd/base/require.h"
 
 namespace bodyd::inference {
 namespace {
-
-std::uint64_t splitmix64(std::uint64_t& state) {
-  std::uint64_t z = (state += 0x9e3779b97f4a7c15ULL);
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-  return z ^ (z >> 31);
-}
 
 std::uint64_t rotl(std::uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
 

@@ -1,5 +1,7 @@
 // bodyd-dataset: BVH clips -> training windows (.npy) + metadata (.json), using the runtime's feature code.
+#include "bodyd/base/little_endian.h"
 #include "bodyd/inference/dataset.h"
+#include "bodyd/motion/split_file.h"
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
@@ -13,26 +15,6 @@ using namespace bodyd;
 
 namespace {
 
-std::vector<std::filesystem::path> read_split(const std::filesystem::path& split) {
-  std::ifstream in(split);
-  if (!in) throw std::runtime_error(fmt::format("{}: cannot open split file", split.string()));
-  // Paths in a split are relative to the split folder's parent (splits/train.txt -> dataset root).
-  const auto root = split.parent_path().parent_path();
-  std::vector<std::filesystem::path> files;
-  std::string line;
-  int line_no = 0;
-  while (std::getline(in, line)) {
-    ++line_no;
-    while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.pop_back();
-    if (line.empty() || line[0] == '#') continue;
-    auto p = root / line;
-    if (!std::filesystem::exists(p))
-      throw std::runtime_error(fmt::format("{}:{}: file '{}' does not exist", split.string(), line_no, p.string()));
-    files.push_back(p);
-  }
-  return files;
-}
-
 // .npy v1.0: magic, version, little-endian header length, a Python dict literal padded to 64 bytes.
 void write_npy(const std::filesystem::path& path, const std::vector<float>& data, size_t n, size_t w, size_t d) {
   std::string header = fmt::format("{{'descr': '<f4', 'fortran_order': False, 'shape': ({}, {}, {}), }}", n, w, d);
@@ -44,8 +26,9 @@ void write_npy(const std::filesystem::path& path, const std::vector<float>& data
   const unsigned char magic[8] = {0x93, 'N', 'U', 'M', 'P', 'Y', 1, 0};
   out.write(reinterpret_cast<const char*>(magic), 8);
   const auto len = static_cast<uint16_t>(header.size());
-  const char len_le[2] = {static_cast<char>(len & 0xff), static_cast<char>(len >> 8)};
-  out.write(len_le, 2);
+  std::uint8_t len_le[2];
+  store_le(len_le, len);
+  out.write(reinterpret_cast<const char*>(len_le), 2);
   out.write(header.data(), static_cast<std::streamsize>(header.size()));
   out.write(reinterpret_cast<const char*>(data.data()), static_cast<std::streamsize>(data.size() * sizeof(float)));
   if (!out) throw std::runtime_error(fmt::format("{}: write failed", path.string()));

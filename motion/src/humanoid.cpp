@@ -143,10 +143,6 @@ bool make_rest_pose(const Skeleton& skeleton, RestPose& out, std::string& out_er
   return true;
 }
 
-Vec3 unity_from_bodyd(const Vec3& p) { return Vec3(p.x(), p.y(), -p.z()); }
-
-Quat unity_from_bodyd(const Quat& q) { return Quat(q.w(), -q.x(), -q.y(), q.z()); }
-
 bool make_unity_rig(const Skeleton& skeleton, UnityRig& out, std::string& out_error) {
   RestPose rest;
   if (!make_rest_pose(skeleton, rest, out_error)) return false;

@@ -1,6 +1,9 @@
-// Little-endian field writers and a bounds-checked reader (internal to bodyd_protocol).
-// Fields are assembled byte by byte, so neither host endianness nor alignment matters.
+// Little-endian field writers and a bounds-checked reader (internal to bodyd_protocol), over
+// the one little-endian definition (bodyd/base/little_endian.h).
 #pragma once
+
+#include "bodyd/base/little_endian.h"
+#include "bodyd/base/require.h"
 
 #include <bit>
 #include <cstdint>
@@ -11,16 +14,15 @@
 namespace bodyd::protocol::detail {
 
 inline void put_u8(std::vector<std::uint8_t>& out, std::uint8_t v) { out.push_back(v); }
-inline void put_u16(std::vector<std::uint8_t>& out, std::uint16_t v) {
-  out.push_back(static_cast<std::uint8_t>(v));
-  out.push_back(static_cast<std::uint8_t>(v >> 8));
+template <typename T>
+inline void put_le(std::vector<std::uint8_t>& out, T v) {
+  std::uint8_t bytes[sizeof(T)];
+  store_le(bytes, v);
+  out.insert(out.end(), bytes, bytes + sizeof(T));
 }
-inline void put_u32(std::vector<std::uint8_t>& out, std::uint32_t v) {
-  for (int i = 0; i < 4; ++i) out.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
-}
-inline void put_u64(std::vector<std::uint8_t>& out, std::uint64_t v) {
-  for (int i = 0; i < 8; ++i) out.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
-}
+inline void put_u16(std::vector<std::uint8_t>& out, std::uint16_t v) { put_le(out, v); }
+inline void put_u32(std::vector<std::uint8_t>& out, std::uint32_t v) { put_le(out, v); }
+inline void put_u64(std::vector<std::uint8_t>& out, std::uint64_t v) { put_le(out, v); }
 inline void put_i16(std::vector<std::uint8_t>& out, std::int16_t v) { put_u16(out, static_cast<std::uint16_t>(v)); }
 inline void put_i64(std::vector<std::uint8_t>& out, std::int64_t v) { put_u64(out, static_cast<std::uint64_t>(v)); }
 inline void put_f32(std::vector<std::uint8_t>& out, float v) { put_u32(out, std::bit_cast<std::uint32_t>(v)); }
@@ -43,9 +45,15 @@ class Reader {
       overrun = true;
       return 0;
     }
-    std::uint64_t v = 0;
-    for (int i = 0; i < size; ++i) v |= static_cast<std::uint64_t>(bytes_[offset + i]) << (8 * i);
-    return v;
+    const std::uint8_t* p = bytes_.data() + offset;
+    switch (size) {
+      case 1: return load_le<std::uint8_t>(p);
+      case 2: return load_le<std::uint16_t>(p);
+      case 4: return load_le<std::uint32_t>(p);
+      case 8: return load_le<std::uint64_t>(p);
+    }
+    BODYD_REQUIRE(false, "Reader::uint reads 1, 2, 4 or 8 bytes");
+    return 0;
   }
   std::uint8_t u8(std::size_t o) { return static_cast<std::uint8_t>(uint(o, 1)); }
   std::uint16_t u16(std::size_t o) { return static_cast<std::uint16_t>(uint(o, 2)); }

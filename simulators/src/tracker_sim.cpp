@@ -1,5 +1,6 @@
 #include "bodyd/simulators/tracker_sim.h"
 
+#include "bodyd/base/random.h"
 #include "bodyd/motion/limits.h"
 
 #include <fmt/format.h>
@@ -14,13 +15,6 @@ namespace {
 
 constexpr double kMaxRateHz = 10'000.0;
 
-std::uint64_t splitmix64(std::uint64_t x) {
-  x += 0x9e3779b97f4a7c15ULL;
-  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
-  return x ^ (x >> 31);
-}
-
 // The random effects; each (role, effect) pair has its own stream so that turning one
 // effect on or changing one role's rate leaves the other streams' numbers unchanged.
 enum class Effect : std::uint64_t { PositionNoise = 1, RotationNoise = 2, Jitter = 3, Dropout = 4 };
@@ -30,8 +24,8 @@ enum class Effect : std::uint64_t { PositionNoise = 1, RotationNoise = 2, Jitter
 class Rng {
  public:
   Rng(std::uint64_t seed, Role role, Effect effect)
-      : engine_(splitmix64(seed ^ splitmix64((static_cast<std::uint64_t>(role) << 8) |
-                                             static_cast<std::uint64_t>(effect)))) {}
+      : engine_(splitmix64_at(seed ^ splitmix64_at((static_cast<std::uint64_t>(role) << 8) |
+                                                     static_cast<std::uint64_t>(effect), 0), 0)) {}
 
   double uniform01() { return static_cast<double>(engine_() >> 11) * 0x1.0p-53; }  // [0, 1)
   // Box-Muller; 1 - u is in (0, 1], so the log is finite.

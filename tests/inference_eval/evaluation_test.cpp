@@ -3,6 +3,7 @@
 #include "bodyd/inference/factory.h"
 #include "bodyd/inference/ik.h"
 #include "bodyd/inference/tracker_history.h"
+#include "bodyd/motion/split_file.h"
 #include "bodyd/simulators/tracker_sim.h"
 
 #include "../test_paths.h"
@@ -222,13 +223,6 @@ TEST(Evaluation, OutDirHoldsReadableReconstructions) {
                .norm();
   EXPECT_LT(err / truth.frame_count(), 0.01);
   std::filesystem::remove_all(dir);
-}
-
-TEST(Evaluation, PercentileIsNearestRank) {
-  EXPECT_DOUBLE_EQ(percentile({5, 1, 4, 2, 3}, 50), 3);
-  EXPECT_DOUBLE_EQ(percentile({5, 1, 4, 2, 3}, 99), 5);
-  EXPECT_DOUBLE_EQ(percentile({5, 1, 4, 2, 3}, 0), 1);
-  EXPECT_TRUE(std::isnan(percentile({}, 50)));
 }
 
 TEST(Evaluation, SplitFilesResolveAgainstTheDatasetRoot) {

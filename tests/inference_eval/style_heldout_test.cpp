@@ -2,6 +2,7 @@
 // clip of the documented styles, and nothing else. Read with the project's one split reader (read_split) and
 // style parser (clip_groups). Skipped when ../shared/data is absent.
 #include "bodyd/inference/evaluation.h"
+#include "bodyd/motion/split_file.h"
 
 #include "../test_paths.h"
 

@@ -16,6 +16,7 @@
 // the pose stream over a WebSocket; POSTs take only application/json (a cross-site form or a
 // no-cors fetch cannot send it); no CORS headers. Workers are never all held: WebSockets are capped
 // below the worker count, each client address has its own cap, headers and bodies have deadlines.
+#include "bodyd/base/loopback.h"
 #include "bodyd/client/client.h"
 #include "bodyd/paths/data_files.h"
 
@@ -608,7 +609,7 @@ std::string check_http_spec(const std::string& spec, bool allow_remote) {
   }
   in_addr addr{};
   if (::inet_pton(AF_INET, host.c_str(), &addr) != 1) return fmt::format("--http '{}': '{}' is not an IPv4 address", spec, host);
-  if (!allow_remote && (ntohl(addr.s_addr) >> 24) != 127) {
+  if (!allow_remote && !bodyd::is_loopback(addr)) {
     return fmt::format("--http '{}': not a loopback address; the viewer has no authentication, pass --allow-remote "
                        "to serve it to the network anyway",
                        spec);

@@ -16,6 +16,7 @@
 
 #include "bodyd/motion/limits.h"
 #include "bodyd/motion/tracker.h"
+#include "bodyd/motion/unity_axes.h"
 
 #include <array>
 #include <cstddef>
@@ -113,12 +114,9 @@ struct VmcPose {
 inline constexpr std::size_t kMaxTrackerLineBytes = 1024;
 
 // ---- Unity <-> bodyd axes --------------------------------------------------------------------------
-// Unity is left-handed (x right, y up, z forward); bodyd right-handed (x right, y up, the
-// user facing -z at rest). The change of basis is the mirror S = diag(1, 1, -1): positions
-// (x, y, z) -> (x, y, -z); a rotation R -> S R S, i.e. quaternion (x, y, z, w) -> (-x, -y, z, w).
-// The mirror is its own inverse, so the same functions convert back.
-[[nodiscard]] Vec3 unity_position_to_bodyd(const Vec3& p_unity);
-[[nodiscard]] Quat unity_rotation_to_bodyd(const Quat& q_unity);
+// The mirror S = diag(1, 1, -1) of bodyd/motion/unity_axes.h (its own inverse, so these convert back too).
+[[nodiscard]] inline Vec3 unity_position_to_bodyd(const Vec3& p_unity) { return bodyd_from_unity(p_unity); }
+[[nodiscard]] inline Quat unity_rotation_to_bodyd(const Quat& q_unity) { return bodyd_from_unity(q_unity); }
 // Unity's Quaternion.Euler(x, y, z) (degrees): q = Ry(y) * Rx(x) * Rz(z), in Unity's axes.
 [[nodiscard]] Quat unity_euler_deg_to_quat(double x_deg, double y_deg, double z_deg);
 

@@ -104,26 +104,4 @@ enum class ReportError : std::uint8_t {
 // The TrackerSample a report carries, stamped with `t_ns` (host monotonic time at read).
 [[nodiscard]] TrackerSample sample_from_report(const TrackerReport& report, std::int64_t t_ns);
 
-// Little-endian field access (also used by the other device decoders).
-[[nodiscard]] inline std::uint16_t read_u16_le(const std::uint8_t* p) {
-  return static_cast<std::uint16_t>(p[0] | (p[1] << 8));
-}
-[[nodiscard]] inline std::int16_t read_i16_le(const std::uint8_t* p) {
-  return static_cast<std::int16_t>(read_u16_le(p));
-}
-[[nodiscard]] inline std::uint32_t read_u32_le(const std::uint8_t* p) {
-  return static_cast<std::uint32_t>(p[0]) | (static_cast<std::uint32_t>(p[1]) << 8) |
-         (static_cast<std::uint32_t>(p[2]) << 16) | (static_cast<std::uint32_t>(p[3]) << 24);
-}
-[[nodiscard]] inline std::int32_t read_i32_le(const std::uint8_t* p) {
-  return static_cast<std::int32_t>(read_u32_le(p));
-}
-inline void write_u16_le(std::uint8_t* p, std::uint16_t v) {
-  p[0] = static_cast<std::uint8_t>(v);
-  p[1] = static_cast<std::uint8_t>(v >> 8);
-}
-inline void write_u32_le(std::uint8_t* p, std::uint32_t v) {
-  for (int i = 0; i < 4; ++i) p[i] = static_cast<std::uint8_t>(v >> (8 * i));
-}
-
 }  // namespace bodyd::drivers

@@ -12,6 +12,7 @@
 // daemon measures its latency from it.
 #pragma once
 
+#include "bodyd/base/clock.h"
 #include "bodyd/motion/tracker.h"
 
 #include <atomic>
@@ -23,8 +24,8 @@
 
 namespace bodyd::drivers {
 
-// Host CLOCK_MONOTONIC in nanoseconds (std::chrono::steady_clock is CLOCK_MONOTONIC on Linux).
-[[nodiscard]] std::int64_t monotonic_ns();
+// Host CLOCK_MONOTONIC in nanoseconds (bodyd/base/clock.h): every sample's arrival stamp.
+using bodyd::monotonic_ns;
 
 // A sample as a source delivers it.
 struct SourceSample {

@@ -172,18 +172,9 @@ struct EvalReport {
 [[nodiscard]] EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOptions& options,
                                   const TrackerSource& source);
 
-// Nearest-rank percentile (p in [0, 100]) of values; NaN for none.
-[[nodiscard]] double percentile(std::vector<double> values, double p);
-
 // The report as the JSON document of docs/evaluation.md (NaN metrics as null), 2-space indented.
 [[nodiscard]] std::string report_json(const EvalReport& report);
 // A human-readable table of the report.
 [[nodiscard]] std::string report_table(const EvalReport& report);
-
-// Reads a split file: one path per line, relative to the parent of the split file's folder
-// (splits/val.txt lists dataset-1/... relative to the dataset root, as bodyd-dataset reads it);
-// blank lines and lines starting with '#' are skipped. Throws std::runtime_error naming the
-// file (and line) when it cannot be read or names a file that does not exist.
-[[nodiscard]] std::vector<std::filesystem::path> read_split(const std::filesystem::path& split_file);
 
 }  // namespace bodyd

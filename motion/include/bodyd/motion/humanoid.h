@@ -18,6 +18,7 @@
 #pragma once
 
 #include "bodyd/motion/skeleton.h"
+#include "bodyd/motion/unity_axes.h"  // unity_from_bodyd: bodyd's axes to Unity's
 
 #include <array>
 #include <string>
@@ -79,12 +80,6 @@ inline constexpr std::array<HumanoidBone, 21> kHumanoidBones{{
     {"RightFoot", "Foot_R"},
     {"RightToes", "Toes_R"},
 }};
-
-// bodyd's axes (right-handed, +Y up) to Unity's (left-handed, +Y up): (x, y, z) -> (x, y, -z),
-// the conversion of OpenXR and VRChat. A rotation converts as q = (x, y, z, w) -> (-x, -y, z, w).
-// Each is its own inverse.
-[[nodiscard]] Vec3 unity_from_bodyd(const Vec3& p);
-[[nodiscard]] Quat unity_from_bodyd(const Quat& q);
 
 // What the retargeting needs of a skeleton, computed once per skeleton (make_unity_rig).
 struct UnityRig {
