@@ -1,8 +1,6 @@
 #include "bodyd/daemon/config.h"
 
 #include "bodyd/daemon/output.h"
-#include "bodyd/drivers/device_list.h"
-#include "bodyd/drivers/network_source.h"
 #include "bodyd/drivers/open_source.h"
 #include "bodyd/motion/limits.h"
 #include "bodyd/paths/data_files.h"
@@ -396,30 +394,8 @@ std::string validate_config(const DaemonConfig& c) {
 
 std::string check_specs(const DaemonConfig& c) {
   std::string error;
-  for (const std::string& text : c.sources) {
-    const std::optional<drivers::SourceSpec> spec = drivers::parse_source_spec(text, error);
-    if (!spec) return error;
-    using drivers::SourceKind;
-    switch (spec->kind) {
-      case SourceKind::Hid:
-      case SourceKind::Usb:
-        if (!drivers::parse_device_ids(spec->argument, error)) return "source \"" + text + "\": " + error;
-        break;
-      case SourceKind::Vrchat:
-      case SourceKind::Vmc:
-      case SourceKind::Udp: {
-        const drivers::NetworkKind kind = spec->kind == SourceKind::Vrchat ? drivers::NetworkKind::Vrchat
-                                          : spec->kind == SourceKind::Vmc  ? drivers::NetworkKind::Vmc
-                                                                           : drivers::NetworkKind::Udp;
-        if (!drivers::parse_network_spec(kind, text, spec->argument, error)) return error;
-        break;
-      }
-      case SourceKind::Replay:
-      case SourceKind::Sim: break;  // a missing or bad file is found when it is opened
-      case SourceKind::Steamvr:
-      case SourceKind::Monado: break;  // any path: checked when the socket is made
-    }
-  }
+  for (const std::string& text : c.sources)
+    if (std::string e = drivers::check_source_spec(text); !e.empty()) return e;
   // Made, not opened: the factories check the target and the options.
   const OutputEnv env{c};
   for (const std::string& text : c.outputs) {
@@ -538,9 +514,8 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
 
   std::vector<std::string> source_flags, replay_flags, sim_flags, offset_flags;
   app.add_option("--source", source_flags,
-                 "tracker source: replay:FILE, sim:FILE.bvh, hid:VID:PID, usb:VID:PID, vrchat:[HOST:]PORT, "
-                 "vmc:[HOST:]PORT, udp:[HOST:]PORT (docs/drivers.md, docs/vr-apps.md); repeatable. "
-                 "Default: the bundled recording, looped");
+                 "tracker source: " + drivers::source_syntax_list(", ") +
+                     " (docs/drivers.md, docs/vr-apps.md); repeatable. Default: the bundled recording, looped");
   app.add_option("--replay", replay_flags, "replay a tracker log (same as --source replay:LOG)");
   app.add_option("--sim", sim_flags, "simulated trackers from a BVH clip (same as --source sim:FILE.bvh)");
   app.add_flag("--fast", config.fast, "replay as fast as possible (lossless) instead of at the log's pace");

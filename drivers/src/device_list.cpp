@@ -1,6 +1,9 @@
 #include "bodyd/drivers/device_list.h"
 
+#include "bodyd/drivers/device_table.h"
+
 #include "bodyd/drivers/fake_devices.h"
+#include "bodyd/drivers/open_source.h"
 #include "bodyd/drivers/hid_source.h"
 #include "bodyd/drivers/usb_source.h"
 #include "bodyd/drivers/hydra.h"
@@ -12,40 +15,49 @@
 namespace bodyd::drivers {
 
 std::vector<DeviceId> known_device_ids() {
-  return {{0x1209, 0xB0D1}, {0x1209, 0xB0D2}, {kHydraVendorId, kHydraProductId}};
+  std::vector<DeviceId> ids;
+  for (const KnownDevice& d : known_devices()) ids.push_back(d.id);
+  return ids;
 }
 
 std::vector<ListedDevice> list_devices(HidTransport* hid, UsbTransport* usb) {
-  const std::vector<DeviceId> known = known_device_ids();
-  auto is_known = [&](DeviceId id) { return std::find(known.begin(), known.end(), id) != known.end(); };
   std::vector<ListedDevice> out;
   if (hid) {
     for (const HidDeviceInfo& d : hid->enumerate(0, 0)) {
       const DeviceId id{d.vendor_id, d.product_id};
-      const bool hydra = id == DeviceId{kHydraVendorId, kHydraProductId};
+      const KnownDevice* known = known_device(id);
+      if (known && !known->hid) known = nullptr;
       const bool bodyd_usage = d.usage_page == 0xFF00 && d.usage == 0x01;
-      if (!is_known(id) && !bodyd_usage) continue;
-      if (hydra && d.interface_number == kHydraControlInterface) continue;  // one line per Hydra
-      std::string what = hydra ? "Razer Hydra (two hands)" : "bodyd tracker report";
+      if (!known && !bodyd_usage) continue;
+      const DeviceProtocol protocol = known ? known->protocol : DeviceProtocol::BodydReport;
+      if (protocol == DeviceProtocol::Hydra && d.interface_number == kHydraControlInterface)
+        continue;  // one line per Hydra
+      std::string what = known ? std::string(known->name) : "bodyd tracker report";
       if (!d.product.empty()) what = d.product + ", " + what;
       out.push_back({"hid:" + detail::format_device_id(id), d.path, what});
     }
   }
   if (usb) {
-    for (const DeviceId id : known) {
-      if (id == DeviceId{kHydraVendorId, kHydraProductId}) continue;  // HID only
-      for (const UsbDeviceInfo& d : usb->enumerate(id.vendor_id, id.product_id))
-        out.push_back({"usb:" + detail::format_device_id(id), d.key,
-                       (d.product.empty() ? std::string() : d.product + ", ") + "bodyd tracker report over USB"});
+    for (const KnownDevice& known : known_devices()) {
+      if (!known.usb) continue;
+      for (const UsbDeviceInfo& d : usb->enumerate(known.id.vendor_id, known.id.product_id))
+        out.push_back({"usb:" + detail::format_device_id(known.id), d.key,
+                       (d.product.empty() ? std::string() : d.product + ", ") + std::string(known.name) + " over USB"});
     }
   }
   return out;
 }
 
 std::string no_tracker_device_text(std::string_view demo_recording) {
+  std::string hid_ids, usb_ids;
+  for (const KnownDevice& d : known_devices()) {
+    if (d.hid) hid_ids += (hid_ids.empty() ? "" : ", ") + detail::format_device_id(d.id);
+    if (d.usb) usb_ids += (usb_ids.empty() ? "" : ", ") + detail::format_device_id(d.id);
+  }
   std::string text =
-      "no tracker device found (searched HID devices with the bodyd report usage 0xFF00:0x01 or IDs "
-      "1209:B0D1, 1209:B0D2, 1532:0300, and USB devices 1209:B0D1, 1209:B0D2).\n"
+      "no tracker device found (searched HID devices with the bodyd report usage 0xFF00:0x01 or IDs " + hid_ids +
+      ", and USB devices " + usb_ids +
+      ").\n"
       "Check that the device is plugged in (lsusb lists it); if it is, the udev rule may be missing: "
       "see docs/drivers.md.\n"
       "A VR headset's trackers come over the network instead (docs/vr-apps.md):\n"
@@ -136,6 +148,19 @@ std::unique_ptr<TrackerSource> open_device_source(std::string_view spec, bool us
   options.name = std::string(spec);
   options.devices = *ids;
   return make_hid_source(options, fake ? std::shared_ptr<HidTransport>(fake->hid) : make_hidapi_transport());
+}
+
+// The registry's factories and check (sources.cpp): hid:VID:PID[,...] and usb:VID:PID[,...].
+std::unique_ptr<TrackerSource> open_hid_spec(const SourceSpec& spec, const SourceOptions&, std::string& error) {
+  return open_device_source(spec.text, /*usb=*/false, spec.argument, error);
+}
+std::unique_ptr<TrackerSource> open_usb_spec(const SourceSpec& spec, const SourceOptions&, std::string& error) {
+  return open_device_source(spec.text, /*usb=*/true, spec.argument, error);
+}
+std::string check_device_spec(const SourceSpec& spec) {
+  std::string error;
+  if (!parse_device_ids(spec.argument, error)) return "source \"" + spec.text + "\": " + error;
+  return {};
 }
 
 }  // namespace bodyd::drivers

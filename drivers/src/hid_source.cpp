@@ -131,12 +131,12 @@ class HidSource final : public detail::DeviceSourceBase {
     std::vector<detail::Candidate> out;
     for (const DeviceId id : options_.devices) {
       std::vector<HidDeviceInfo> infos = transport_->enumerate(id.vendor_id, id.product_id);
-      const bool hydra = options_.protocol == HidProtocol::Hydra ||
-                         (options_.protocol == HidProtocol::Auto && id == DeviceId{kHydraVendorId, kHydraProductId});
-      if (hydra)
-        add_hydras(infos, out);
-      else
-        for (const HidDeviceInfo& info : infos) add_bodyd(info, out);
+      switch (options_.protocol.value_or(device_protocol_of(id))) {
+        case DeviceProtocol::BodydReport:
+          for (const HidDeviceInfo& info : infos) add_bodyd(info, out);
+          break;
+        case DeviceProtocol::Hydra: add_hydras(infos, out); break;
+      }
     }
     return out;
   }

@@ -1,9 +1,8 @@
 #include "bodyd/drivers/network_source.h"
 
-#include "oscquery.h"
-#include "vmc_roles.h"
+#include "network_protocol.h"
 
-#include "bodyd/motion/printable.h"
+#include "bodyd/drivers/open_source.h"
 
 #include <spdlog/spdlog.h>
 
@@ -31,15 +30,6 @@ std::uint64_t NetworkStats::rejected_total() const {
 }
 
 namespace {
-
-std::string_view kind_prefix(NetworkKind kind) {
-  switch (kind) {
-    case NetworkKind::Vrchat: return "vrchat:";
-    case NetworkKind::Vmc: return "vmc:";
-    case NetworkKind::Udp: return "udp:";
-  }
-  return "";
-}
 
 bool parse_port(std::string_view text, int& out) {
   const char* end = text.data() + text.size();
@@ -69,26 +59,22 @@ std::string address_text(const sockaddr_in& a) {
   return std::string(text) + ":" + std::to_string(ntohs(a.sin_port));
 }
 
-class UdpSource final : public NetworkSource {
+// The socket, the receiver thread and the counters of every network input; what a datagram
+// means is the protocol's decoder's (network_protocol.h).
+class UdpSource final : public NetworkSource, private detail::DatagramResult {
  public:
-  UdpSource(NetworkSourceOptions options, int fd, int port)
-      : options_(std::move(options)), fd_(fd), port_(port), vmc_roles_(options_.name, options_.vmc_roles) {
+  UdpSource(NetworkSourceOptions options, int fd, int port, std::unique_ptr<detail::NetworkDecoder> decoder)
+      : options_(std::move(options)), fd_(fd), port_(port), decoder_(std::move(decoder)) {
     buffer_.resize(65536);
   }
   ~UdpSource() override {
     UdpSource::stop();
-    oscquery_.reset();
+    decoder_.reset();
     if (fd_ >= 0) close(fd_);
   }
 
-  std::string start_oscquery() {
-    std::string error;
-    oscquery_ = detail::OscQueryService::start(options_.oscquery_name, options_.host, port_, error);
-    if (!oscquery_) return options_.name + ": " + error;
-    spdlog::info("{}: OSCQuery on http://{}:{}/ (VRChat finds bodyd through it when mDNS works)", options_.name,
-                 options_.host == "0.0.0.0" ? "127.0.0.1" : options_.host, oscquery_->http_port());
-    return {};
-  }
+  // After the bind (vrchat: starts OSCQuery). Empty, or what went wrong.
+  std::string open_decoder() { return decoder_->open(options_, port_); }
 
   const std::string& name() const override { return options_.name; }
 
@@ -119,7 +105,7 @@ class UdpSource final : public NetworkSource {
       s.rejected_by_reason[std::string(input_reject_name(static_cast<InputReject>(i)))] = st.rejected[i];
     s.counters["datagrams"] = st.datagrams;
     s.counters["ignored"] = st.ignored;
-    if (options_.kind == NetworkKind::Vmc) s.counters["unassigned"] = st.unassigned;
+    decoder_->add_counters(st, s);
     std::lock_guard lock(mutex_);
     s.rate_hz = s.connected ? rate_.rate_hz() : 0.0;
     s.last_error = last_error_;
@@ -137,8 +123,8 @@ class UdpSource final : public NetworkSource {
   }
 
   int bound_port() const override { return port_; }
-  int oscquery_port() const override { return oscquery_ ? oscquery_->http_port() : 0; }
-  std::string mdns_state() const override { return oscquery_ ? oscquery_->mdns_state() : "off"; }
+  int oscquery_port() const override { return decoder_->oscquery_port(); }
+  std::string mdns_state() const override { return decoder_->mdns_state(); }
 
  private:
   void run() {
@@ -172,60 +158,21 @@ class UdpSource final : public NetworkSource {
 
   void handle(const std::uint8_t* data, std::size_t size, std::int64_t arrival_ns, const sockaddr_in& from) {
     pending_.clear();
-    std::string detail;
-    if (options_.kind == NetworkKind::Udp) {
-      TrackerSample s;
-      std::int64_t sender_t_ns = 0;
-      InputReject why = InputReject::None;
-      switch (decode_tracker_line(data, size, s, sender_t_ns, why, detail)) {
-        case MessageUse::Use:
-          s.t_ns = arrival_ns;
-          pending_.push_back({s, sender_t_ns, true});
-          break;
-        case MessageUse::Ignore: ignored_.fetch_add(1, std::memory_order_relaxed); break;
-        case MessageUse::Reject: reject(why, detail, from); break;
-      }
-    } else {
-      if (InputReject why = decode_osc_packet(data, size, messages_, detail, options_.limits); why != InputReject::None) {
-        reject(why, detail, from);
-        return;
-      }
-      for (const OscMessage& m : messages_) handle_message(m, arrival_ns, from);
-    }
+    from_ = &from;
+    decoder_->decode(data, size, arrival_ns, *this);
     // Hands before the head: the daemon reconstructs when a head sample arrives, and should
     // see the hands of the same packet.
     std::stable_partition(pending_.begin(), pending_.end(), [](const Pending& p) { return p.sample.role != Role::Head; });
     for (const Pending& p : pending_) push(p, arrival_ns);
   }
 
-  void handle_message(const OscMessage& m, std::int64_t arrival_ns, const sockaddr_in& from) {
-    InputReject why = InputReject::None;
-    MessageUse use = MessageUse::Ignore;
-    if (options_.kind == NetworkKind::Vrchat) {
-      VrchatPose pose;
-      use = decode_vrchat_message(m, pose, why);
-      if (use == MessageUse::Use) pending_.push_back({sample_from_vrchat(pose, arrival_ns), 0, false});
-    } else {
-      VmcPose pose;
-      use = decode_vmc_message(m, pose, why);
-      if (use == MessageUse::Use) {
-        const std::optional<Role> role = vmc_roles_.role_of(pose, arrival_ns);
-        if (!role) {
-          unassigned_.fetch_add(1, std::memory_order_relaxed);
-          return;
-        }
-        TrackerSample s;
-        s.t_ns = arrival_ns;
-        s.role = *role;
-        s.valid = true;
-        s.position_m = pose.position_m;
-        s.rotation = pose.rotation;
-        pending_.push_back({s, 0, false});
-      }
-    }
-    if (use == MessageUse::Ignore) ignored_.fetch_add(1, std::memory_order_relaxed);
-    if (use == MessageUse::Reject) reject(why, quote_printable(m.address, 64) + " with type tags ," + printable(m.type_tags), from);
+  // detail::DatagramResult: what the decoder found in the datagram from *from_.
+  void use(const TrackerSample& sample, std::int64_t device_t_ns, bool has_device_time) override {
+    pending_.push_back({sample, device_t_ns, has_device_time});
   }
+  void ignore() override { ignored_.fetch_add(1, std::memory_order_relaxed); }
+  void unassigned() override { unassigned_.fetch_add(1, std::memory_order_relaxed); }
+  void reject(InputReject why, const std::string& detail) override { reject(why, detail, *from_); }
 
   struct Pending {
     TrackerSample sample;
@@ -264,16 +211,15 @@ class UdpSource final : public NetworkSource {
   NetworkSourceOptions options_;
   int fd_ = -1;
   int port_ = 0;
-  std::unique_ptr<detail::OscQueryService> oscquery_;
+  std::unique_ptr<detail::NetworkDecoder> decoder_;
   SampleSink* sink_ = nullptr;
   std::uint16_t source_index_ = 0;
   std::atomic<bool> stop_{false};
   std::thread thread_;
   // Receiver thread only.
   std::vector<std::uint8_t> buffer_;
-  std::vector<OscMessage> messages_;
   std::vector<Pending> pending_;
-  detail::VmcRoles vmc_roles_;
+  const sockaddr_in* from_ = nullptr;  // the datagram's sender, while the decoder runs
   // Counters: written by the receiver thread, read by any.
   std::atomic<std::uint64_t> datagrams_{0}, samples_{0}, ignored_{0}, unassigned_{0}, total_rejected_{0};
   std::array<std::atomic<std::uint64_t>, kInputRejectCount> rejected_{};
@@ -288,27 +234,32 @@ class UdpSource final : public NetworkSource {
 std::optional<NetworkSourceOptions> parse_network_spec(NetworkKind kind, std::string_view spec,
                                                        std::string_view argument, std::string& error) {
   NetworkSourceOptions o;
-  o.kind = kind;
   o.name = std::string(spec);
   const std::string where = "source \"" + std::string(spec) + "\"";
+  const detail::NetworkProtocol* protocol = detail::network_protocol(kind);
+  if (!protocol) {
+    error = where + ": no network protocol \"" + std::string(kind.scheme) + "\" (drivers/src/network_protocols.cpp)";
+    return std::nullopt;
+  }
+  o.kind = NetworkKind{protocol->scheme};  // the row's own text, which outlives the options
   std::string_view address = argument, query;
   if (const auto q = argument.find('?'); q != std::string_view::npos) {
     address = argument.substr(0, q);
     query = argument.substr(q + 1);
   }
   if (address.empty()) {
-    if (kind == NetworkKind::Udp) {
-      error = where + ": missing the port, e.g. udp:127.0.0.1:9100";
+    if (protocol->default_port == 0) {
+      error = where + ": missing the port, e.g. " + std::string(kind.scheme) + ":127.0.0.1:9100";
       return std::nullopt;
     }
-    o.port = kind == NetworkKind::Vrchat ? 9001 : 39539;
+    o.port = protocol->default_port;
   } else {
     std::string_view port = address;
     if (const auto colon = address.rfind(':'); colon != std::string_view::npos) {
       o.host = std::string(address.substr(0, colon));
       port = address.substr(colon + 1);
       if (o.host.empty()) {
-        error = where + ": empty host before ':' (write " + std::string(kind_prefix(kind)) + "PORT or HOST:PORT)";
+        error = where + ": empty host before ':' (write " + std::string(kind.scheme) + ":PORT or HOST:PORT)";
         return std::nullopt;
       }
     }
@@ -324,18 +275,8 @@ std::optional<NetworkSourceOptions> parse_network_spec(NetworkKind kind, std::st
     const auto eq = item.find('=');
     const std::string key(item.substr(0, eq));
     const std::string value(eq == std::string_view::npos ? std::string_view() : item.substr(eq + 1));
-    if (kind == NetworkKind::Vrchat && key == "oscquery" && (value == "on" || value == "off")) {
-      o.oscquery = value == "on";
-    } else if (kind == NetworkKind::Vrchat && key == "name" && !value.empty()) {
-      o.oscquery_name = value;
-    } else if (kind == NetworkKind::Vmc && role_from_name(key) && !value.empty()) {
-      o.vmc_roles[value] = *role_from_name(key);
-    } else {
-      error = where + ": unknown option \"" + std::string(item) + "\" (" +
-              (kind == NetworkKind::Vrchat ? "vrchat: takes oscquery=on|off and name=NAME"
-               : kind == NetworkKind::Vmc  ? "vmc: takes head=SERIAL, left_hand=SERIAL, right_hand=SERIAL"
-                                           : "udp: takes no options") +
-              ")";
+    if (!protocol->option(key, value, o)) {
+      error = where + ": unknown option \"" + std::string(item) + "\" (" + std::string(protocol->options_help) + ")";
       return std::nullopt;
     }
   }
@@ -344,6 +285,11 @@ std::optional<NetworkSourceOptions> parse_network_spec(NetworkKind kind, std::st
 
 std::unique_ptr<NetworkSource> open_network_source(const NetworkSourceOptions& options, std::string& error) {
   const std::string where = options.name + ": ";
+  const detail::NetworkProtocol* protocol = detail::network_protocol(options.kind);
+  if (!protocol) {
+    error = where + "no network protocol \"" + std::string(options.kind.scheme) + "\" (drivers/src/network_protocols.cpp)";
+    return nullptr;
+  }
   in_addr addr{};
   if (std::string e = resolve_ipv4(options.host, addr); !e.empty()) {
     error = where + e;
@@ -380,14 +326,29 @@ std::unique_ptr<NetworkSource> open_network_source(const NetworkSourceOptions& o
   }
   socklen_t len = sizeof sa;
   getsockname(fd, reinterpret_cast<sockaddr*>(&sa), &len);
-  auto source = std::make_unique<UdpSource>(options, fd, ntohs(sa.sin_port));
-  if (options.kind == NetworkKind::Vrchat && options.oscquery) {
-    if (std::string e = source->start_oscquery(); !e.empty()) {
-      error = e;
-      return nullptr;
-    }
+  auto source = std::make_unique<UdpSource>(options, fd, ntohs(sa.sin_port), protocol->decoder(options));
+  if (std::string e = source->open_decoder(); !e.empty()) {
+    error = e;
+    return nullptr;
   }
   return source;
+}
+
+// The registry's factory and check (sources.cpp): vrchat:, vmc: and udp:, the protocol named
+// by the spec's scheme.
+std::unique_ptr<TrackerSource> open_network_spec(const SourceSpec& spec, const SourceOptions& options,
+                                                 std::string& error) {
+  std::optional<NetworkSourceOptions> network =
+      parse_network_spec(NetworkKind{spec.scheme->scheme}, spec.text, spec.argument, error);
+  if (!network) return nullptr;
+  network->allow_remote = options.allow_remote;
+  return open_network_source(*network, error);
+}
+
+std::string check_network_spec(const SourceSpec& spec) {
+  std::string error;
+  if (!parse_network_spec(NetworkKind{spec.scheme->scheme}, spec.text, spec.argument, error)) return error;
+  return {};
 }
 
 }  // namespace bodyd::drivers

@@ -1,29 +1,17 @@
 #include "bodyd/drivers/open_source.h"
 
-#include "bodyd/drivers/device_list.h"
-#include "bodyd/drivers/network_source.h"
-#include "bodyd/drivers/sim_source.h"
-#include "bodyd/drivers/slimevr_bridge.h"
-
 namespace bodyd::drivers {
 
-// The source of a parsed spec (below), before its pose frame is stamped.
-static std::unique_ptr<TrackerSource> open_source_of_kind(const SourceSpec& parsed, std::string_view text,
-                                                          const SourceOptions& options, std::string& error);
+std::optional<PoseFrame> declared_pose_frame(const SourceScheme& scheme) { return scheme.frame; }
 
-std::optional<PoseFrame> declared_pose_frame(SourceKind kind) {
-  switch (kind) {
-    case SourceKind::Replay: return std::nullopt;
-    case SourceKind::Sim:
-    case SourceKind::Hid:
-    case SourceKind::Usb: return PoseFrame::Joint;
-    case SourceKind::Vrchat:
-    case SourceKind::Vmc:
-    case SourceKind::Udp:
-    case SourceKind::Steamvr:
-    case SourceKind::Monado: return PoseFrame::Device;
+std::string source_syntax_list(std::string_view last) {
+  const std::vector<SourceScheme>& schemes = source_schemes();
+  std::string text;
+  for (std::size_t i = 0; i < schemes.size(); ++i) {
+    if (i > 0) text += i + 1 == schemes.size() ? std::string(last) : std::string(", ");
+    text += schemes[i].syntax;
   }
-  return std::nullopt;
+  return text;
 }
 
 namespace {
@@ -82,83 +70,47 @@ class FrameStampSource final : public TrackerSource {
 
 }  // namespace
 
-std::optional<SourceSpec> parse_source_spec(std::string_view text, std::string& error) {
-  if (text == "steamvr" || text == "monado") {  // the socket's default
-    SourceSpec spec;
-    spec.kind = text == "steamvr" ? SourceKind::Steamvr : SourceKind::Monado;
-    return spec;
-  }
-  struct Prefix {
-    std::string_view text;
-    SourceKind kind;
-  };
-  static constexpr Prefix kPrefixes[] = {{"replay:", SourceKind::Replay},
-                                         {"sim:", SourceKind::Sim},
-                                         {"hid:", SourceKind::Hid},
-                                         {"usb:", SourceKind::Usb},
-                                         {"vrchat:", SourceKind::Vrchat},
-                                         {"vmc:", SourceKind::Vmc},
-                                         {"udp:", SourceKind::Udp},
-                                         {"steamvr:", SourceKind::Steamvr},
-                                         {"monado:", SourceKind::Monado}};
-  for (const Prefix& p : kPrefixes) {
-    if (text.substr(0, p.text.size()) != p.text) continue;
-    SourceSpec spec{p.kind, std::string(text.substr(p.text.size()))};
-    // vrchat: and vmc: have a default address; udp: says itself what it misses.
-    const bool network = p.kind == SourceKind::Vrchat || p.kind == SourceKind::Vmc || p.kind == SourceKind::Udp ||
-                         p.kind == SourceKind::Steamvr || p.kind == SourceKind::Monado;
-    if (spec.argument.empty() && !network) {
-      error = "source \"" + std::string(text) + "\": missing " +
-              (p.kind == SourceKind::Replay || p.kind == SourceKind::Sim ? "file" : "VID:PID") + " after '" +
-              std::string(p.text) + "'";
+std::optional<SourceSpec> parse_source_spec(std::string_view full_text, std::string& error) {
+  SourceSpec spec;
+  spec.text = std::string(full_text);
+  if (!take_frames_option(spec.text, spec.frame, error)) return std::nullopt;
+  const std::string_view text = spec.text;
+  for (const SourceScheme& row : source_schemes()) {
+    if (row.bare && text == row.scheme) {  // the default argument
+      spec.scheme = &row;
+      return spec;
+    }
+    if (text.size() <= row.scheme.size() || text.substr(0, row.scheme.size()) != row.scheme ||
+        text[row.scheme.size()] != ':')
+      continue;
+    spec.scheme = &row;
+    spec.argument = std::string(text.substr(row.scheme.size() + 1));
+    if (spec.argument.empty() && !row.required_argument.empty()) {
+      error = "source \"" + spec.text + "\": missing " + std::string(row.required_argument) + " after '" +
+              std::string(row.scheme) + ":'";
       return std::nullopt;
     }
     return spec;
   }
-  error = "source \"" + std::string(text) +
-          "\": unknown kind; expected replay:FILE, sim:FILE.bvh, hid:VID:PID, usb:VID:PID, vrchat:[HOST:]PORT, "
-          "vmc:[HOST:]PORT, udp:[HOST:]PORT, steamvr[:SOCKET] or monado[:DIR]";
+  error = "source \"" + spec.text + "\": unknown kind; expected " + source_syntax_list(" or ");
   return std::nullopt;
 }
 
-std::unique_ptr<TrackerSource> open_source(std::string_view full_text, const SourceOptions& options,
-                                           std::string& error) {
-  std::string stripped(full_text);
-  std::optional<PoseFrame> frame;
-  if (!take_frames_option(stripped, frame, error)) return nullptr;
-  const std::string_view text = stripped;
-  const std::optional<SourceSpec> parsed = parse_source_spec(text, error);
-  if (!parsed) return nullptr;
-  if (!frame) frame = declared_pose_frame(parsed->kind);
-  std::unique_ptr<TrackerSource> source = open_source_of_kind(*parsed, text, options, error);
-  if (!source || !frame) return source;
-  return std::make_unique<FrameStampSource>(std::move(source), *frame);
+std::string check_source_spec(std::string_view text) {
+  std::string error;
+  const std::optional<SourceSpec> spec = parse_source_spec(text, error);
+  if (!spec) return error;
+  return spec->scheme->check ? spec->scheme->check(*spec) : std::string();
 }
 
-static std::unique_ptr<TrackerSource> open_source_of_kind(const SourceSpec& parsed, std::string_view text,
-                                                          const SourceOptions& options, std::string& error) {
-  const SourceSpec* spec = &parsed;
-  switch (spec->kind) {
-    case SourceKind::Replay: return open_replay_source(spec->argument, options.replay, error);
-    case SourceKind::Sim: return open_sim_source(spec->argument, options.sim, options.replay, error);
-    case SourceKind::Hid:
-    case SourceKind::Usb: return open_device_source(text, spec->kind == SourceKind::Usb, spec->argument, error);
-    case SourceKind::Vrchat:
-    case SourceKind::Vmc:
-    case SourceKind::Udp: {
-      const NetworkKind kind = spec->kind == SourceKind::Vrchat ? NetworkKind::Vrchat
-                               : spec->kind == SourceKind::Vmc  ? NetworkKind::Vmc
-                                                                : NetworkKind::Udp;
-      std::optional<NetworkSourceOptions> network = parse_network_spec(kind, text, spec->argument, error);
-      if (!network) return nullptr;
-      network->allow_remote = options.allow_remote;
-      return open_network_source(*network, error);
-    }
-    case SourceKind::Steamvr: return slimevr::open_steamvr_source(text, spec->argument, error);
-    case SourceKind::Monado: return slimevr::open_monado_source(text, spec->argument, error);
-  }
-  error = "source \"" + std::string(text) + "\": unknown kind";
-  return nullptr;
+std::unique_ptr<TrackerSource> open_source(std::string_view text, const SourceOptions& options, std::string& error) {
+  const std::optional<SourceSpec> spec = parse_source_spec(text, error);
+  if (!spec) return nullptr;
+  const std::optional<PoseFrame> frame = spec->frame ? spec->frame : declared_pose_frame(*spec->scheme);
+  std::unique_ptr<TrackerSource> source = spec->scheme->open(*spec, options, error);
+  if (!source && error.empty()) error = "source \"" + spec->text + "\": cannot open the source";
+  if (!source || !frame) return source;
+  return std::make_unique<FrameStampSource>(std::move(source), *frame);
 }
 
 }  // namespace bodyd::drivers

@@ -1,4 +1,5 @@
 #include "bodyd/drivers/replay_source.h"
+#include "bodyd/drivers/open_source.h"
 
 #include "bodyd/motion/limits.h"
 #include "bodyd/motion/tracker_log.h"
@@ -225,6 +226,12 @@ std::unique_ptr<TrackerSource> open_replay_source(const std::filesystem::path& l
     error = e.what();
     return nullptr;
   }
+}
+
+// The registry's factory (sources.cpp): replay:FILE.
+std::unique_ptr<TrackerSource> open_replay_spec(const SourceSpec& spec, const SourceOptions& options,
+                                                std::string& error) {
+  return open_replay_source(spec.argument, options.replay, error);
 }
 
 }  // namespace bodyd::drivers

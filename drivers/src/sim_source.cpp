@@ -1,4 +1,5 @@
 #include "bodyd/drivers/sim_source.h"
+#include "bodyd/drivers/open_source.h"
 
 #include "bodyd/motion/bvh.h"
 
@@ -23,6 +24,11 @@ std::unique_ptr<TrackerSource> open_sim_source(const std::filesystem::path& bvh_
     error = e.what();
     return nullptr;
   }
+}
+
+// The registry's factory (sources.cpp): sim:FILE.bvh.
+std::unique_ptr<TrackerSource> open_sim_spec(const SourceSpec& spec, const SourceOptions& options, std::string& error) {
+  return open_sim_source(spec.argument, options.sim, options.replay, error);
 }
 
 }  // namespace bodyd::drivers

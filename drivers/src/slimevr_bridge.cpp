@@ -1,5 +1,6 @@
 // The SlimeVR bridge server, its registry and the steamvr:/monado: sources (slimevr_bridge.h).
 #include "bodyd/drivers/slimevr_bridge.h"
+#include "bodyd/drivers/open_source.h"
 
 #include "bodyd/paths/private_dir.h"
 
@@ -630,3 +631,15 @@ std::unique_ptr<TrackerSource> open_monado_source(std::string_view spec, std::st
 }
 
 }  // namespace bodyd::drivers::slimevr
+
+namespace bodyd::drivers {
+
+// The registry's factories (sources.cpp): steamvr[:SOCKET] and monado[:DIR].
+std::unique_ptr<TrackerSource> open_steamvr_spec(const SourceSpec& spec, const SourceOptions&, std::string& error) {
+  return slimevr::open_steamvr_source(spec.text, spec.argument, error);
+}
+std::unique_ptr<TrackerSource> open_monado_spec(const SourceSpec& spec, const SourceOptions&, std::string& error) {
+  return slimevr::open_monado_source(spec.text, spec.argument, error);
+}
+
+}  // namespace bodyd::drivers

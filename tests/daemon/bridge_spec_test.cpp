@@ -61,11 +61,11 @@ TEST(BridgeSpecs, SourcesParse) {
   std::string error;
   const auto a = drivers::parse_source_spec("steamvr", error);
   ASSERT_TRUE(a) << error;
-  EXPECT_EQ(a->kind, drivers::SourceKind::Steamvr);
+  EXPECT_EQ(a->scheme->scheme, "steamvr");
   EXPECT_TRUE(a->argument.empty());
   const auto b = drivers::parse_source_spec("monado:/tmp/x", error);
   ASSERT_TRUE(b) << error;
-  EXPECT_EQ(b->kind, drivers::SourceKind::Monado);
+  EXPECT_EQ(b->scheme->scheme, "monado");
   EXPECT_EQ(b->argument, "/tmp/x");
   EXPECT_FALSE(drivers::parse_source_spec("steamvrx", error));
   EXPECT_NE(error.find("steamvr[:SOCKET]"), std::string::npos) << error;

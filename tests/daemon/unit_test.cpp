@@ -771,7 +771,7 @@ TEST(OpenSource, SpecsAndErrors) {
   std::string error;
   auto spec = drivers::parse_source_spec("replay:/x/y.csv", error);
   ASSERT_TRUE(spec);
-  EXPECT_EQ(spec->kind, drivers::SourceKind::Replay);
+  EXPECT_EQ(spec->scheme->scheme, "replay");
   EXPECT_EQ(spec->argument, "/x/y.csv");
   EXPECT_FALSE(drivers::parse_source_spec("replay:", error));
   EXPECT_NE(error.find("missing file"), std::string::npos);
@@ -788,6 +788,23 @@ TEST(OpenSource, SpecsAndErrors) {
   // The bundled recording opens and holds all three roles at 90 Hz.
   auto bundled = drivers::open_source("replay:" + daemon::bundled_recording_path().string(), {}, error);
   ASSERT_TRUE(bundled) << error;
+}
+
+// Issue 19 item 2: the --source help names every registered scheme (drivers/src/sources.cpp),
+// as the unknown-kind error does (tests/drivers/source_registry_test.cpp).
+TEST(OpenSource, HelpListsEverySource) {
+  daemon::DaemonConfig c;
+  const char* help[] = {"bodyd", "--help"};
+  testing::internal::CaptureStdout();
+  const auto r = daemon::parse_command_line(2, help, c);
+  const std::string out = testing::internal::GetCapturedStdout();
+  EXPECT_EQ(r.exit_code, 0);
+  const std::size_t at = out.find("tracker source: ");
+  ASSERT_NE(at, std::string::npos) << out;
+  const std::string line = out.substr(at, out.find('\n', at) - at);
+  EXPECT_NE(line.find(drivers::source_syntax_list(", ")), std::string::npos) << line;
+  for (const drivers::SourceScheme& s : drivers::source_schemes())
+    EXPECT_NE(line.find(std::string(s.syntax)), std::string::npos) << s.syntax << " is not in: " << line;
 }
 
 TEST(OpenSource, SimulatedDevicesFromABvhClip) {

@@ -11,6 +11,7 @@
 #pragma once
 
 #include "bodyd/drivers/device_source.h"
+#include "bodyd/drivers/device_table.h"
 #include "bodyd/drivers/hid_transport.h"
 #include "bodyd/drivers/hydra.h"
 #include "bodyd/drivers/usb_transport.h"
@@ -40,7 +41,9 @@ struct DeviceFaults {
   std::uint64_t seed = 1;
 };
 
-enum class FakeProtocol { BodydReport, Hydra };
+// The protocol a simulated device speaks: the device table's (device_table.h), whose rows the
+// fake encoder (SimulatedDevice::encode) and the fake HID enumeration follow.
+using FakeProtocol = DeviceProtocol;
 
 struct SimulatedDeviceConfig {
   std::string name = "simulated bodyd tracker";

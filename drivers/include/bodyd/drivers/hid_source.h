@@ -7,26 +7,27 @@
 // (status().last_error, connected=false when none is left) and picked up again when it
 // reappears. A device may carry several roles.
 //
-// Protocols: the bodyd tracker report (docs/hid-tracker.md) for any ID, and the Razer
-// Hydra (1532:0300, docs/drivers.md), which is switched to motion mode with its feature report.
+// Protocols: the one of the ID's row in the device table (device_table.h), else the bodyd
+// tracker report (docs/hid-tracker.md), which any ID may stream; the Razer Hydra (1532:0300,
+// docs/drivers.md) is switched to motion mode with its feature report.
 #pragma once
 
 #include "bodyd/drivers/device_source.h"
+#include "bodyd/drivers/device_table.h"
 #include "bodyd/drivers/hid_transport.h"
 #include "bodyd/drivers/hydra.h"
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 namespace bodyd::drivers {
 
-enum class HidProtocol { Auto, BodydReport, Hydra };  // Auto: Hydra for 1532:0300, else bodyd report
-
 struct HidSourceOptions {
   std::string name;                  // status name, e.g. "hid:1209:B0D1"
   std::vector<DeviceId> devices;     // the IDs to look for
-  HidProtocol protocol = HidProtocol::Auto;
+  std::optional<DeviceProtocol> protocol;  // nullopt: each ID's from the device table (device_protocol_of)
   int read_timeout_ms = 50;
   int rescan_interval_ms = 1000;
   int stall_timeout_ms = 1000;       // an open device silent this long is reported stalled

@@ -9,8 +9,9 @@
 //   udp:[HOST:]PORT     one tracker-log v1 line per datagram (docs/tracker-log.md).
 //
 // One thread per source reads the socket with a 100 ms timeout (so stop() is prompt),
-// stamps each datagram with monotonic_ns() as soon as recvfrom returns, decodes it with the
-// pure decoders of osc_decode.h, and pushes the samples (t_ns = the arrival stamp). A
+// stamps each datagram with monotonic_ns() as soon as recvfrom returns, hands it to the
+// protocol's decoder (one per protocol, drivers/src/network_protocol.h, built on the pure
+// decoders of osc_decode.h), and pushes the samples (t_ns = the arrival stamp). A
 // malformed packet is counted by reason (status().counters, "rejected_by_reason"), logged at
 // a limited rate (the 1st, 2nd, 4th, 8th... of each source) and dropped; it never reaches
 // the reconstruction.
@@ -32,7 +33,18 @@
 
 namespace bodyd::drivers {
 
-enum class NetworkKind : std::uint8_t { Vrchat, Vmc, Udp };
+// Which UDP protocol a network input speaks, by its scheme: a row of the protocol table
+// (drivers/src/network_protocols.cpp; a protocol's decoder is a file of its own, docs/architecture.md
+// "A new tracker source"). `scheme` must outlive the options (a literal, or a registry row's).
+struct NetworkKind {
+  std::string_view scheme;  // "vrchat", "vmc", "udp"
+  friend bool operator==(const NetworkKind&, const NetworkKind&) = default;
+  // The built-in protocols, for code that names one (a new protocol needs no constant here).
+  static const NetworkKind Vrchat, Vmc, Udp;
+};
+inline constexpr NetworkKind NetworkKind::Vrchat{"vrchat"};
+inline constexpr NetworkKind NetworkKind::Vmc{"vmc"};
+inline constexpr NetworkKind NetworkKind::Udp{"udp"};
 
 struct NetworkSourceOptions {
   NetworkKind kind = NetworkKind::Vrchat;
@@ -49,7 +61,7 @@ struct NetworkSourceOptions {
 };
 
 // Parses the argument of "vrchat:", "vmc:" or "udp:" ("[HOST:]PORT[?key=value&...]").
-// Defaults: host 127.0.0.1; port 9001 (vrchat), 39539 (vmc); udp needs a port.
+// Defaults: host 127.0.0.1; the protocol's default port, 9001 (vrchat), 39539 (vmc); udp needs a port.
 [[nodiscard]] std::optional<NetworkSourceOptions> parse_network_spec(NetworkKind kind, std::string_view spec,
                                                                      std::string_view argument, std::string& error);
 
