@@ -243,8 +243,9 @@ struct Daemon::Impl final : ControlTarget {
     protocol::SkeletonMessage m = skeleton_message(recon->skeleton());
     hips_index = recon->skeleton().find("Hips");
     std::vector<std::uint8_t> bytes;
-    if (auto s = protocol::encode_skeleton(m, bytes); !s.ok())
-      spdlog::error("the reconstructor's skeleton cannot be encoded: {} (a bug: please report it)", s.error);
+    // Both reconstructors take only skeletons of the bundled joints, which encode: a failure is a bug.
+    const protocol::Status encoded = protocol::encode_skeleton(m, bytes);
+    BODYD_REQUIRE(encoded.ok(), "the reconstructor's skeleton cannot be encoded: " + encoded.error);
     {
       std::lock_guard lock(shared_mutex);
       summary.skeleton = std::move(m);
@@ -318,12 +319,9 @@ struct Daemon::Impl final : ControlTarget {
     }
     fill_pose_message(body, context, pose_msg);
     pose_msg.publish_t_ns = monotonic_ns();
-    if (auto st = protocol::encode_pose(pose_msg, pose_bytes); !st.ok()) {
-      if (stats.encode_failed.get() < 5)
-        spdlog::error("pose at t_ns={} cannot be encoded: {} (a reconstructor bug; the pose is skipped)", s.t_ns, st.error);
-      stats.encode_failed.add();
-      return;
-    }
+    // The skeleton encoded, so only a non-finite or non-unit value can fail here: a reconstructor bug.
+    const protocol::Status encoded = protocol::encode_pose(pose_msg, pose_bytes);
+    BODYD_REQUIRE(encoded.ok(), fmt::format("the pose at t_ns={} cannot be encoded: {}", s.t_ns, encoded.error));
 
     const OutputFrame frame{seq,        s.t_ns,           in.arrival_ns,     body,
                             recon->skeleton(), pose_msg,  pose_bytes,        as_received,

@@ -11,7 +11,7 @@
 #include <cstdio>
 #include <cstdlib>
 
-#include "require.h"
+#include "bodyd/base/require.h"
 
 namespace bodyd::inference {
 namespace {
