@@ -2,10 +2,12 @@
 // online protocol of docs/conventions.md (docs/evaluation.md).
 //
 //   bodyd-eval --model MODEL --json OUT.json [--seed N] [--noise-mm S] [--dropout-rate P]
+//              [the simulator's other options: docs/simulator.md]
 //              [--body-scale S] [--out-dir DIR] [--methods diffusion,ik] [--split FILE.txt] [FILE.bvh...]
 #include "bodyd/base/random.h"
 #include "bodyd/inference/evaluation.h"
 #include "bodyd/motion/split_file.h"
+#include "bodyd/simulators/sim_flags.h"
 #include "bodyd/simulators/tracker_sim.h"
 
 #include <CLI/CLI.hpp>
@@ -41,27 +43,18 @@ int main(int argc, char** argv) {
                "(docs/evaluation.md)"};
   std::string model, json_path, methods_text = "diffusion,ik", split;
   std::string out_dir;
-  std::uint64_t seed = 1;
-  double noise_mm = 0.0, noise_deg = 0.0, dropout_rate_hz = 0.0, dropout_mean_ms = 300.0;
+  // The simulated trackers: the simulator's own flags (sim_option_keys()); a rate of 0 samples
+  // each clip at its frame rate, and --seed seeds every clip's own seed.
+  bodyd::SimOptions sim;
+  sim.rate_hz = 0.0;
   std::optional<double> body_scale;
   std::vector<std::string> files;
   bodyd::ReconstructorOptions method_options;
   app.add_option("--model", model, "model file (needed by the diffusion method)");
   app.add_option("--json", json_path, "write the report as JSON to this file");
-  app.add_option("--seed", seed, "seed of the simulated tracker noise and dropout")->capture_default_str();
-  app.add_option("--noise-mm", noise_mm, "tracker position noise, standard deviation per axis (mm)")
-      ->check(CLI::Range(0.0, 1000.0))
-      ->capture_default_str();
-  app.add_option("--noise-deg", noise_deg, "tracker rotation noise, standard deviation per axis (degrees)")
-      ->check(CLI::Range(0.0, 180.0))
-      ->capture_default_str();
-  app.add_option("--dropout-rate", dropout_rate_hz,
-                 "hand tracking-loss episodes per hand per second (the head is never lost)")
-      ->check(CLI::Range(0.0, 1000.0))
-      ->capture_default_str();
-  app.add_option("--dropout-ms", dropout_mean_ms, "mean duration of a tracking-loss episode (ms)")
-      ->check(CLI::Range(0.0, 1e6))
-      ->capture_default_str();
+  bodyd::add_sim_flags(app, sim);
+  app.get_option("--rate-hz")->description("tracker sample rate, Hz (0: the clip's frame rate)");
+  app.get_option("--seed")->description("seed of the simulated tracker noise and dropout (each clip's is drawn from it)");
   app.add_option("--body-scale", body_scale,
                  "scale every clip by S (offsets and translations) to act a user S x the data's size; the "
                  "methods but ik then calibrate from the first still second, as the daemon's auto calibration")
@@ -81,7 +74,6 @@ int main(int argc, char** argv) {
   app.add_option("--filter-beta", method_options.filter.beta_per_m_s, "diffusion: the tracker filter's beta_per_m_s")
       ->capture_default_str();
   std::string device_frames = "joint", calibration_pose = "first-still", reference_path;
-  double tracker_rate_hz = 0.0, jitter_ms = 0.0;
   bool method_pose_eye = false;
   app.add_option("--device-frames", device_frames,
                  "joint: the trackers are the skeleton's joints (default); xr: what a headset and controllers send "
@@ -103,12 +95,17 @@ int main(int argc, char** argv) {
   app.add_flag("--head-roll", head_roll,
                "with a calibration pose: learn the headset's roll on the head too, not only its pitch (docs/evaluation.md)");
   app.add_option("--reference", reference_path, "body reference of the default mounting (default: data/body-reference.json)");
-  app.add_option("--tracker-rate-hz", tracker_rate_hz, "tracker sample rate (default: the clip's frame rate)")
-      ->check(CLI::Range(1.0, 2000.0));
-  app.add_option("--jitter-ms", jitter_ms, "tracker timestamp jitter, standard deviation (ms)")->check(CLI::Range(0.0, 50.0));
   app.add_option("--split", split, "split file: BVH paths relative to its folder's parent (e.g. splits/val.txt)");
   app.add_option("files", files, "BVH files (besides or instead of --split)");
   CLI11_PARSE(app, argc, argv);
+  {
+    bodyd::SimOptions check = sim;
+    if (check.rate_hz == 0.0) check.rate_hz = 90.0;  // each clip's frame rate, checked when it is read
+    if (const std::string e = check.validate(); !e.empty()) {
+      fmt::print(stderr, "bodyd-eval: bad option: {}\n", e);
+      return 2;
+    }
+  }
   spdlog::set_default_logger(spdlog::stderr_color_mt("bodyd-eval"));  // stdout holds the table
 
   try {
@@ -133,12 +130,6 @@ int main(int argc, char** argv) {
       spdlog::info("clip {}/{}: {}", i + 1, n, p.filename().string());
     };
 
-    bodyd::SimOptions sim;
-    sim.position_noise_mm = noise_mm;
-    sim.rotation_noise_deg = noise_deg;
-    sim.dropout_rate_hz = dropout_rate_hz;
-    sim.dropout_mean_ms = dropout_mean_ms;
-    sim.jitter_ms = jitter_ms;
     std::optional<int> hold_frame;
     if (device_frames == "xr") {
       options.device_frames = true;
@@ -163,13 +154,13 @@ int main(int argc, char** argv) {
     }
     const bodyd::Mounting defaults = bodyd::default_mounting(options.body_reference);
     const auto session_mounting = [&](int index) {
-      return bodyd::draw_session_mounting(defaults, bodyd::MountingSpread{}, mix_seed(seed, static_cast<std::uint64_t>(index)));
+      return bodyd::draw_session_mounting(defaults, bodyd::MountingSpread{}, mix_seed(sim.seed, static_cast<std::uint64_t>(index)));
     };
     if (options.device_frames) options.true_mounting = session_mounting;
     const bodyd::TrackerSource source = [&](const bodyd::Motion& clip, int index) {
       bodyd::SimOptions o = sim;
-      o.rate_hz = tracker_rate_hz > 0.0 ? tracker_rate_hz : clip.fps();  // default: at the frame times (docs/evaluation.md)
-      o.seed = mix_seed(seed, static_cast<std::uint64_t>(index));
+      o.rate_hz = sim.rate_hz > 0.0 ? sim.rate_hz : clip.fps();  // default: at the frame times (docs/evaluation.md)
+      o.seed = mix_seed(sim.seed, static_cast<std::uint64_t>(index));
       if (options.device_frames) o.device_mounting = session_mounting(index);
       std::vector<bodyd::TrackerSample> samples = bodyd::simulate_trackers(clip, o);
       if (calibration_pose == "reference" || calibration_pose == "person") {

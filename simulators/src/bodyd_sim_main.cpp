@@ -2,6 +2,7 @@
 // Options and models: docs/simulator.md; output format: docs/tracker-log.md.
 #include "bodyd/motion/bvh.h"
 #include "bodyd/motion/tracker_log.h"
+#include "bodyd/simulators/sim_flags.h"
 #include "bodyd/simulators/tracker_sim.h"
 
 #include <CLI/CLI.hpp>
@@ -20,30 +21,14 @@ int main(int argc, char** argv) {
       "bodyd-sim"};
   std::string bvh_path, out_path;
   bodyd::SimOptions opt;
-  double head_rate_hz = 0.0, hands_rate_hz = 0.0;
+  double hands_rate_hz = 0.0;
   bool quiet = false;
   app.add_option("--bvh", bvh_path, "input BVH clip (centimetres)")->required();
   app.add_option("--out", out_path, "output tracker log (CSV); '-' writes to stdout")->required();
-  app.add_option("--rate-hz", opt.rate_hz, "sample rate of every tracker, Hz")->capture_default_str();
-  app.add_option("--head-rate-hz", head_rate_hz, "head sample rate, Hz (overrides --rate-hz)");
-  app.add_option("--hands-rate-hz", hands_rate_hz, "hands' sample rate, Hz (overrides --rate-hz)");
-  app.add_option("--noise-mm", opt.position_noise_mm, "position noise: Gaussian std per axis, millimetres")
-      ->capture_default_str();
-  app.add_option("--noise-deg", opt.rotation_noise_deg,
-                 "rotation noise: Gaussian std per axis of a small world-frame rotation, degrees")
-      ->capture_default_str();
-  app.add_option("--latency-ms", opt.latency_ms, "constant latency added to every timestamp, ms")
-      ->capture_default_str();
-  app.add_option("--jitter-ms", opt.jitter_ms,
-                 "timestamp jitter: Gaussian std, ms (clamped below half a sample period)")
-      ->capture_default_str();
-  app.add_option("--dropout-rate", opt.dropout_rate_hz,
-                 "tracking-loss episodes per hand per second of tracked time (Poisson); the head never drops")
-      ->capture_default_str();
-  app.add_option("--dropout-mean-ms", opt.dropout_mean_ms,
-                 "mean duration of a tracking-loss episode (exponential), ms")
-      ->capture_default_str();
-  app.add_option("--seed", opt.seed, "random seed")->capture_default_str();
+  // The simulator's options, one flag per row of sim_option_keys() (the older spellings too).
+  bodyd::add_sim_flags(app, opt);
+  app.add_option("--hands-rate-hz", hands_rate_hz, "both hands' sample rate, Hz (sets --left-hand-rate-hz and "
+                                                   "--right-hand-rate-hz)");
   std::string device_frames = "joint", reference_path;
   app.add_option("--device-frames", device_frames,
                  "joint: the skeleton's joints (default); xr: what a headset and controllers send (the headset at the "
@@ -60,9 +45,10 @@ int main(int argc, char** argv) {
     return app.exit(e) == 0 ? 0 : 2;
   }
 
-  opt.role_rate_hz[static_cast<size_t>(bodyd::Role::Head)] = head_rate_hz;
-  opt.role_rate_hz[static_cast<size_t>(bodyd::Role::LeftHand)] = hands_rate_hz;
-  opt.role_rate_hz[static_cast<size_t>(bodyd::Role::RightHand)] = hands_rate_hz;
+  if (app.count("--hands-rate-hz") > 0) {
+    opt.role_rate_hz[static_cast<size_t>(bodyd::Role::LeftHand)] = hands_rate_hz;
+    opt.role_rate_hz[static_cast<size_t>(bodyd::Role::RightHand)] = hands_rate_hz;
+  }
   if (std::string err = opt.validate(); !err.empty()) {
     fmt::print(stderr, "bodyd-sim: bad option: {}\n", err);
     return 2;

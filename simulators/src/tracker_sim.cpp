@@ -62,27 +62,7 @@ double SimOptions::dropout_fraction() const {
   return x / (1.0 + x);
 }
 
-std::string SimOptions::validate() const {
-  if (!finite_in(rate_hz, 1e-3, kMaxRateHz))
-    return fmt::format("rate_hz {} must be between 0.001 and {} Hz", rate_hz, kMaxRateHz);
-  for (Role r : kRoles) {
-    const double v = role_rate_hz[static_cast<size_t>(r)];
-    if (!(v == 0.0 || finite_in(v, 1e-3, kMaxRateHz)))
-      return fmt::format("role_rate_hz[{}] {} must be 0 (use rate_hz) or between 0.001 and {} Hz", role_name(r), v,
-                         kMaxRateHz);
-  }
-  if (!finite_in(position_noise_mm, 0.0, 1e4))
-    return fmt::format("position_noise_mm {} must be between 0 and 10000", position_noise_mm);
-  if (!finite_in(rotation_noise_deg, 0.0, 180.0))
-    return fmt::format("rotation_noise_deg {} must be between 0 and 180", rotation_noise_deg);
-  if (!finite_in(latency_ms, 0.0, 1e4)) return fmt::format("latency_ms {} must be between 0 and 10000", latency_ms);
-  if (!finite_in(jitter_ms, 0.0, 1e3)) return fmt::format("jitter_ms {} must be between 0 and 1000", jitter_ms);
-  if (!finite_in(dropout_rate_hz, 0.0, 1e3))
-    return fmt::format("dropout_rate_hz {} must be between 0 and 1000 episodes per second", dropout_rate_hz);
-  if (!finite_in(dropout_mean_ms, 1e-3, 1e6))
-    return fmt::format("dropout_mean_ms {} must be between 0.001 and 1000000", dropout_mean_ms);
-  return {};
-}
+// SimOptions::validate(): sim_option_keys.cpp, from the table of options.
 
 // ---------------------------------------------------------------------------------------------
 
