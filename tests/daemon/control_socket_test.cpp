@@ -6,6 +6,8 @@
 #include "fake_reconstructor.h"
 #include "zmq_helpers.h"
 
+#include "bodyd/test/net.h"
+
 #include <gtest/gtest.h>
 #include <spdlog/spdlog.h>
 
@@ -24,21 +26,6 @@ using daemon::Daemon;
 using daemon::DaemonConfig;
 
 const bool kQuietLogs = (spdlog::set_level(spdlog::level::warn), true);
-
-// A raw TCP connection to 127.0.0.1:port; -1 when it cannot connect.
-int connect_raw(int port) {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  if (fd < 0) return -1;
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_port = htons(static_cast<std::uint16_t>(port));
-  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  if (::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof(addr)) != 0) {
-    ::close(fd);
-    return -1;
-  }
-  return fd;
-}
 
 bool send_all(int fd, const std::string& bytes) {
   std::size_t sent = 0;
@@ -92,7 +79,7 @@ class ControlSocketHostilePeers : public ::testing::Test {
   }
   // Sends `bytes` on a new raw connection, then closes it or leaves it open until TearDown.
   void raw_peer(const std::string& bytes, bool keep_open) {
-    const int fd = connect_raw(port);
+    const int fd = test::connect_loopback(port);
     ASSERT_GE(fd, 0);
     send_all(fd, bytes);  // may fail once the daemon drops the connection: that is fine
     if (keep_open)
@@ -137,7 +124,7 @@ TEST_F(ControlSocketHostilePeers, MessageWithoutEnvelopeFromAGonePeer) {
 // A well-formed ZMTP 1.0 request is answered; a peer that asks again and again and never reads
 // (its connection open) does not hold up anyone else.
 TEST_F(ControlSocketHostilePeers, APeerThatNeverReadsItsAnswers) {
-  const int fd = connect_raw(port);
+  const int fd = test::connect_loopback(port);
   ASSERT_GE(fd, 0);
   open_fds.push_back(fd);
   std::string request = zmtp10_frame("", true) + zmtp10_frame(R"({"cmd":"status"})", false);

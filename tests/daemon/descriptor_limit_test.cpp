@@ -8,6 +8,8 @@
 #include "../test_paths.h"
 #include "zmq_helpers.h"
 
+#include "bodyd/test/net.h"
+
 #include <gtest/gtest.h>
 
 #include <arpa/inet.h>
@@ -21,19 +23,6 @@
 
 namespace bodyd {
 namespace {
-
-int connect_raw(int port) {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_port = htons(static_cast<std::uint16_t>(port));
-  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  if (::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) {
-    ::close(fd);
-    return -1;
-  }
-  return fd;
-}
 
 // The process's CPU time (user + system), seconds, from /proc/PID/stat.
 double cpu_seconds(pid_t pid) {
@@ -74,9 +63,9 @@ TEST(DescriptorLimit, ControlAndOscQueryAnswerWithoutSpinningUnderUlimit64) {
 
   std::vector<int> hogs;
   for (int i = 0; i < 60; ++i)
-    if (const int fd = connect_raw(control_port); fd >= 0) hogs.push_back(fd);
+    if (const int fd = test::connect_loopback(control_port); fd >= 0) hogs.push_back(fd);
   for (int i = 0; i < 20; ++i) {
-    if (const int fd = connect_raw(osc_port); fd >= 0) {
+    if (const int fd = test::connect_loopback(osc_port); fd >= 0) {
       const std::string part = "GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n";  // never the blank line
       (void)::send(fd, part.data(), part.size(), MSG_NOSIGNAL);
       hogs.push_back(fd);
@@ -99,15 +88,9 @@ TEST(DescriptorLimit, ControlAndOscQueryAnswerWithoutSpinningUnderUlimit64) {
   for (int attempt = 0; attempt < 5 && !status; ++attempt) status = test::control_request(ctx, control, R"({"cmd":"status"})", 2000);
   ASSERT_TRUE(status) << "the control socket did not answer: " << child.log();
   EXPECT_TRUE(status->value("ok", false)) << status->dump();
-  std::string code;
-  if (FILE* p = ::popen(("curl -s --max-time 10 -o /dev/null -w '%{http_code}' 'http://127.0.0.1:" +
-                         std::to_string(osc_port) + "/?HOST_INFO'")
-                            .c_str(),
-                        "r")) {
-    char buffer[16] = {};
-    code.assign(buffer, std::fread(buffer, 1, sizeof buffer - 1, p));
-    ::pclose(p);
-  }
+  const std::string code = test::shell("curl -s --max-time 10 -o /dev/null -w '%{http_code}' 'http://127.0.0.1:" +
+                                        std::to_string(osc_port) + "/?HOST_INFO'")
+                               .out;
   EXPECT_EQ(code, "200") << child.log();
 
   // What happened is in the log, once each at most.

@@ -72,12 +72,7 @@ TEST(MonadoBridge, HandshakeThenBonesFollowTheZmqPoseFedByTheFeeder) {
                      dir.path / "client.err");
   protocol::SkeletonMessage skeleton;
   std::vector<protocol::PoseMessage> poses;
-  auto quiet_since = std::chrono::steady_clock::now();
-  std::size_t last = 0;
-  collect(sub, skeleton, poses, [&] {
-    if (poses.size() != last) last = poses.size(), quiet_since = std::chrono::steady_clock::now();
-    return client.wait(0).has_value() && std::chrono::steady_clock::now() - quiet_since > std::chrono::milliseconds(500);
-  });
+  collect_until_quiet(sub, skeleton, poses, client);
   ASSERT_EQ(client.wait(0), 0) << client.log() << daemon.log();
   daemon.signal(SIGINT);
   ASSERT_EQ(daemon.wait(10000), 0) << daemon.log();

@@ -88,12 +88,7 @@ struct Loop {
     std::vector<std::string> full{python, client_script("driver_client.py").string(), pb_dir().string()};
     full.insert(full.end(), args.begin(), args.end());
     test::Child client(full, err);
-    auto quiet_since = std::chrono::steady_clock::now();
-    std::size_t last = 0;
-    collect(*sub, skeleton, poses, [&] {
-      if (poses.size() != last) last = poses.size(), quiet_since = std::chrono::steady_clock::now();
-      return client.wait(0).has_value() && std::chrono::steady_clock::now() - quiet_since > std::chrono::milliseconds(500);
-    });
+    collect_until_quiet(*sub, skeleton, poses, client);
     const int rc = client.wait(0).value_or(-1);
     if (rc != 0) ADD_FAILURE() << "client: " << client.log();
     return rc;

@@ -13,6 +13,8 @@
 #include "../test_paths.h"
 #include "zmq_helpers.h"
 
+#include "bodyd/test/net.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -37,12 +39,7 @@ std::string find_on_path(const std::string& name) {
   return {};
 }
 
-std::string read_text(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using test::read_file;
 
 Vec3 vec(const nlohmann::json& a) { return Vec3(a[0].get<double>(), a[1].get<double>(), a[2].get<double>()); }
 Quat quat_xyzw(const nlohmann::json& a) {
@@ -51,19 +48,6 @@ Quat quat_xyzw(const nlohmann::json& a) {
 Vec3 vec(const std::array<float, 3>& a) { return Vec3(a[0], a[1], a[2]); }
 Quat quat_xyzw(const std::array<float, 4>& a) { return Quat(a[3], a[0], a[1], a[2]).normalized(); }
 double angle_deg(const Quat& a, const Quat& b) { return a.angularDistance(b) * 180.0 / M_PI; }
-
-// A UDP port free right now (bound, read, released): bodyd binds it a moment later.
-int free_udp_port() {
-  const int fd = ::socket(AF_INET, SOCK_DGRAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
-  socklen_t len = sizeof a;
-  ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
-  ::close(fd);
-  return ntohs(a.sin_port);
-}
 
 // osc.js standing in for VRChat's tracker input (tests/node/vrchat_receiver.js).
 struct Receiver {
@@ -90,40 +74,18 @@ std::string node_or_skip_reason(std::string& out_node) {
   while (!fs::exists(dir / "port") && r.child->running() && std::chrono::steady_clock::now() < deadline)
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   if (!fs::exists(dir / "port")) return ::testing::AssertionFailure() << "osc.js did not start: " << r.child->log();
-  r.port = read_text(dir / "port");
+  r.port = read_file(dir / "port");
   return ::testing::AssertionSuccess();
 }
 
 std::vector<nlohmann::json> read_bundles(const fs::path& file) {
   std::vector<nlohmann::json> bundles;
-  std::stringstream lines(read_text(file));
+  std::stringstream lines(read_file(file));
   for (std::string line; std::getline(lines, line);) bundles.push_back(nlohmann::json::parse(line));
   return bundles;
 }
 
-// Receives skeleton and poses until `done` says so (checked when nothing arrives for 100 ms).
-template <typename Done>
-void collect(zmq::socket_t& sub, protocol::SkeletonMessage& skeleton, std::vector<protocol::PoseMessage>& poses, Done done) {
-  for (;;) {
-    zmq::pollitem_t item{sub.handle(), 0, ZMQ_POLLIN, 0};
-    if (zmq::poll(&item, 1, std::chrono::milliseconds(100)) == 0) {
-      if (done()) return;
-      continue;
-    }
-    zmq::message_t topic, payload;
-    if (!sub.recv(topic, zmq::recv_flags::dontwait) || !topic.more()) continue;
-    (void)sub.recv(payload);
-    const auto* p = static_cast<const std::uint8_t*>(payload.data());
-    const std::vector<std::uint8_t> bytes(p, p + payload.size());
-    if (topic.to_string_view() == protocol::kSkeletonTopic) {
-      ASSERT_TRUE(protocol::decode_skeleton(bytes, skeleton).ok());
-    } else if (topic.to_string_view() == protocol::kPoseTopic) {
-      protocol::PoseMessage pose;
-      ASSERT_TRUE(protocol::decode_pose(bytes, pose).ok());
-      poses.push_back(pose);
-    }
-  }
-}
+using test::collect_until_quiet;
 
 struct Worst {
   double slot_mm = 0, slot_deg = 0, head_mm = 0, head_deg = 0;
@@ -203,7 +165,7 @@ TEST(VrchatOutput, OscJsReceivesTheZmqPoseAndTheHeadAsReceived) {
   zmq::socket_t sub = test::sub_socket(ctx, (*endpoints)["pub"].get<std::string>());
   protocol::SkeletonMessage skeleton;
   std::vector<protocol::PoseMessage> poses;
-  collect(sub, skeleton, poses, [&] { return daemon.wait(0).has_value(); });
+  collect_until_quiet(sub, skeleton, poses, daemon);  // every pose: the daemon ends with the log
   ASSERT_EQ(daemon.wait(10000), 0) << daemon.log();
   ASSERT_EQ(receiver.child->wait(20000), 0) << receiver.child->log();
   ASSERT_GT(poses.size(), 100u) << daemon.log();
@@ -253,7 +215,7 @@ TEST(VrchatOutput, FullLoopFromVrchatInputToVrchatTrackers) {
   for (const TrackerSample& s : samples)
     if (s.role == Role::Head && s.valid) heads.push_back(s);
 
-  const std::string in_port = std::to_string(free_udp_port());
+  const std::string in_port = std::to_string(test::free_loopback_port());
   test::Child daemon({(test::bin_dir() / "bodyd").string(), "--method", "ik", "--source",
                       "vrchat:127.0.0.1:" + in_port + "?oscquery=off", "--output",
                       "vrchat:127.0.0.1:" + receiver.port + "?slots=hip,feet,knees,chest,elbows", "--pub",
@@ -271,12 +233,7 @@ TEST(VrchatOutput, FullLoopFromVrchatInputToVrchatTrackers) {
                      dir.path / "sender.err");
   protocol::SkeletonMessage skeleton;
   std::vector<protocol::PoseMessage> poses;
-  auto quiet_since = std::chrono::steady_clock::now();
-  std::size_t last_count = 0;
-  collect(sub, skeleton, poses, [&] {
-    if (poses.size() != last_count) last_count = poses.size(), quiet_since = std::chrono::steady_clock::now();
-    return sender.wait(0).has_value() && std::chrono::steady_clock::now() - quiet_since > std::chrono::milliseconds(500);
-  });
+  collect_until_quiet(sub, skeleton, poses, sender);
   ASSERT_EQ(sender.wait(0), 0) << sender.log();
   daemon.signal(SIGINT);
   ASSERT_EQ(daemon.wait(10000), 0) << daemon.log();

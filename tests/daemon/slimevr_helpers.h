@@ -74,13 +74,6 @@ inline std::vector<nlohmann::json> read_jsonl(const fs::path& file) {
   return lines;
 }
 
-inline std::string read_text(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 inline Vec3 vec3(const nlohmann::json& a) { return Vec3(a[0].get<double>(), a[1].get<double>(), a[2].get<double>()); }
 inline Quat quat_xyzw(const nlohmann::json& a) {
   return Quat(a[3].get<double>(), a[0].get<double>(), a[1].get<double>(), a[2].get<double>()).normalized();
@@ -89,31 +82,8 @@ inline Vec3 vec3(const std::array<float, 3>& a) { return Vec3(a[0], a[1], a[2]);
 inline Quat quat_xyzw(const std::array<float, 4>& a) { return Quat(a[3], a[0], a[1], a[2]).normalized(); }
 inline double angle_deg(const Quat& a, const Quat& b) { return a.angularDistance(b) * 180.0 / M_PI; }
 
-// Receives skeleton and poses until `done` says so (checked after each message and when
-// nothing arrives for 100 ms).
-template <typename Done>
-void collect(zmq::socket_t& sub, protocol::SkeletonMessage& skeleton, std::vector<protocol::PoseMessage>& poses, Done done) {
-  for (bool first = true;; first = false) {
-    if (!first && done()) return;
-    zmq::pollitem_t item{sub.handle(), 0, ZMQ_POLLIN, 0};
-    if (zmq::poll(&item, 1, std::chrono::milliseconds(100)) == 0) {
-      if (done()) return;
-      continue;
-    }
-    zmq::message_t topic, payload;
-    if (!sub.recv(topic, zmq::recv_flags::dontwait) || !topic.more()) continue;
-    (void)sub.recv(payload);
-    const auto* p = static_cast<const std::uint8_t*>(payload.data());
-    const std::vector<std::uint8_t> bytes(p, p + payload.size());
-    if (topic.to_string_view() == protocol::kSkeletonTopic) {
-      ASSERT_TRUE(protocol::decode_skeleton(bytes, skeleton).ok());
-    } else if (topic.to_string_view() == protocol::kPoseTopic) {
-      protocol::PoseMessage pose;
-      ASSERT_TRUE(protocol::decode_pose(bytes, pose).ok());
-      poses.push_back(pose);
-    }
-  }
-}
+using test::collect;
+using test::collect_until_quiet;
 
 inline std::size_t joint_index(const protocol::SkeletonMessage& skeleton, const std::string& name) {
   const auto it = std::find(skeleton.names.begin(), skeleton.names.end(), name);

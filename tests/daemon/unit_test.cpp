@@ -12,6 +12,8 @@
 #include "../test_paths.h"
 #include "zmq_helpers.h"
 
+#include "bodyd/test/wait.h"
+
 #include <gtest/gtest.h>
 
 #include <sys/socket.h>
@@ -649,17 +651,19 @@ TEST(ReplaySource, PacedFollowsTheTimestampsAndRestampsToHostTime) {
   std::vector<SourceSample> got;
   while (got.size() < samples.size() && sink.queue.pop(s, 1s)) got.push_back(s);
   ASSERT_EQ(got.size(), samples.size());
+  // Not early: the last sample comes no sooner than the log's span after the start (how late
+  // a paced replay delivers depends on the machine: bodyd-bench-stop measures it).
   const std::int64_t elapsed = got.back().arrival_ns - start;
-  EXPECT_GE(elapsed, samples.back().t_ns - samples.front().t_ns);  // not early
-  EXPECT_LT(elapsed, 1'000'000'000);
+  EXPECT_GE(elapsed, samples.back().t_ns - samples.front().t_ns);
   for (std::size_t i = 0; i < got.size(); ++i) {
     EXPECT_EQ(got[i].source_index, 3);
     EXPECT_EQ(got[i].sample.role, samples[i].role);
     EXPECT_EQ(got[i].sample.position_m, samples[i].position_m);
-    // Restamped: host time, same spacing as the log, never after the arrival.
+    // Restamped: host time from the start on (not the log's), same spacing as the log, never
+    // after the arrival.
     EXPECT_EQ(got[i].sample.t_ns - got[0].sample.t_ns, samples[i].t_ns - samples[0].t_ns);
+    EXPECT_GE(got[i].sample.t_ns, start);
     EXPECT_LE(got[i].sample.t_ns, got[i].arrival_ns);
-    EXPECT_LT(got[i].arrival_ns - got[i].sample.t_ns, 50'000'000);
   }
   for (int i = 0; i < 50 && !source->status().finished; ++i) std::this_thread::sleep_for(10ms);
   EXPECT_TRUE(source->status().finished);
@@ -696,21 +700,23 @@ TEST(ReplaySource, LoopKeepsTimeIncreasingAndStopIsPrompt) {
     EXPECT_GT(s.sample.t_ns, last[static_cast<int>(s.sample.role)]);
     last[static_cast<int>(s.sample.role)] = s.sample.t_ns;
   }
-  // The source is now blocked on a full queue; stop() must still return quickly.
-  const auto t0 = std::chrono::steady_clock::now();
-  source->stop();
-  EXPECT_LT(std::chrono::steady_clock::now() - t0, 500ms);
+  // The source is now blocked on a full queue; stop() must still return, without the queue
+  // being drained (how long it takes: bodyd-bench-stop).
+  EXPECT_TRUE(test::returns_within([&] { source->stop(); }, 10s));
 
-  // A paced source waiting for a far-away sample stops promptly too.
+  // A paced source waiting for a far-away sample stops too, long before the sample is due,
+  // and never delivers it.
   std::vector<TrackerSample> far = test::synthetic_samples(1);
   far.push_back(far.front());
   far.back().t_ns += 60'000'000'000;  // a minute later
-  auto paced = drivers::make_replay_source("far", far, {});
-  ASSERT_EQ(paced->start(queue, 0), "");
-  std::this_thread::sleep_for(20ms);
-  const auto t1 = std::chrono::steady_clock::now();
-  paced->stop();
-  EXPECT_LT(std::chrono::steady_clock::now() - t1, 500ms);
+  drivers::ReplayOptions wait_a_minute;
+  wait_a_minute.max_gap_s = 120;  // the minute is waited for, not shortened to a gap
+  auto paced = drivers::make_replay_source("far", far, wait_a_minute);
+  SampleQueue far_queue(8);
+  ASSERT_EQ(paced->start(far_queue, 0), "");
+  for (std::size_t i = 0; i + 1 < far.size(); ++i) ASSERT_TRUE(far_queue.pop(s, 2s)) << i;
+  EXPECT_TRUE(test::returns_within([&] { paced->stop(); }, 10s));
+  EXPECT_FALSE(far_queue.pop(s, 0ms));
 }
 
 // Issue 11, item 6: a jump forward in a paced replay's log time is replayed as a short gap,

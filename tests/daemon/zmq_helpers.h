@@ -1,14 +1,18 @@
-// Small helpers for daemon tests: a pose subscriber, control requests, child processes.
+// Small helpers for daemon tests: a pose subscriber, control requests, the daemon as a child
+// process (on the test-support library's Process, TempDir and read_file).
 #pragma once
 
 #include "bodyd/protocol/pose_message.h"
+#include "bodyd/test/files.h"
+#include "bodyd/test/process.h"
+#include "bodyd/test/temp_dir.h"
 
+#include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <zmq.hpp>
 
 #include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -20,8 +24,6 @@
 #include <string>
 #include <thread>
 #include <vector>
-
-extern char** environ;
 
 namespace bodyd::test {
 
@@ -75,88 +77,60 @@ inline std::optional<nlohmann::json> control_request(zmq::context_t& ctx, const 
   return nlohmann::json::parse(reply.to_string());
 }
 
-// A child process with its stderr in a file.
-class Child {
- public:
-  Child(const std::vector<std::string>& args, const std::filesystem::path& stderr_path) {
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 2, stderr_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
-    std::vector<char*> argv;
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    if (posix_spawn(&pid_, argv[0], &actions, nullptr, argv.data(), environ) != 0) pid_ = -1;
-    posix_spawn_file_actions_destroy(&actions);
-    stderr_path_ = stderr_path;
-  }
-  ~Child() {
-    if (pid_ > 0 && !exit_code_) {
-      kill(pid_, SIGKILL);
-      int status = 0;
-      waitpid(pid_, &status, 0);
+// Receives skeleton and poses until `done` says so (checked after each message and when
+// nothing arrives for 100 ms).
+template <typename Done>
+void collect(zmq::socket_t& sub, protocol::SkeletonMessage& skeleton, std::vector<protocol::PoseMessage>& poses, Done done) {
+  for (bool first = true;; first = false) {
+    if (!first && done()) return;
+    zmq::pollitem_t item{sub.handle(), 0, ZMQ_POLLIN, 0};
+    if (zmq::poll(&item, 1, std::chrono::milliseconds(100)) == 0) {
+      if (done()) return;
+      continue;
+    }
+    zmq::message_t topic, payload;
+    if (!sub.recv(topic, zmq::recv_flags::dontwait) || !topic.more()) continue;
+    (void)sub.recv(payload);
+    const auto* p = static_cast<const std::uint8_t*>(payload.data());
+    const std::vector<std::uint8_t> bytes(p, p + payload.size());
+    if (topic.to_string_view() == protocol::kSkeletonTopic) {
+      ASSERT_TRUE(protocol::decode_skeleton(bytes, skeleton).ok());
+    } else if (topic.to_string_view() == protocol::kPoseTopic) {
+      protocol::PoseMessage pose;
+      ASSERT_TRUE(protocol::decode_pose(bytes, pose).ok());
+      poses.push_back(pose);
     }
   }
-  bool running() const { return pid_ > 0 && !exit_code_; }
-  pid_t pid() const { return pid_; }
-  void signal(int sig) const {
-    if (pid_ > 0 && !exit_code_) kill(pid_, sig);
-  }
-  // Exit code (128+signal when killed), or nullopt if still running after timeout_ms.
-  std::optional<int> wait(int timeout_ms) {
-    if (exit_code_) return exit_code_;
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
-    for (;;) {
-      int status = 0;
-      const pid_t r = waitpid(pid_, &status, WNOHANG);
-      if (r == pid_) {
-        exit_code_ = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-        return exit_code_;
-      }
-      if (std::chrono::steady_clock::now() > deadline) return std::nullopt;
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-  }
-  std::string log() const {
-    std::ifstream in(stderr_path_);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return ss.str();
-  }
+}
 
- private:
-  pid_t pid_ = -1;
-  std::optional<int> exit_code_;
-  std::filesystem::path stderr_path_;
+// collect() until `feeder` has exited and no pose came for 500 ms.
+inline void collect_until_quiet(zmq::socket_t& sub, protocol::SkeletonMessage& skeleton,
+                                std::vector<protocol::PoseMessage>& poses, Process& feeder) {
+  auto quiet_since = std::chrono::steady_clock::now();
+  std::size_t last = 0;
+  collect(sub, skeleton, poses, [&] {
+    if (poses.size() != last) last = poses.size(), quiet_since = std::chrono::steady_clock::now();
+    return feeder.wait(0).has_value() && std::chrono::steady_clock::now() - quiet_since > std::chrono::milliseconds(500);
+  });
+}
+
+// A child process with its stderr in a file (stdout dropped); log() is its stderr.
+class Child : public Process {
+ public:
+  Child(const std::vector<std::string>& args, const std::filesystem::path& stderr_path)
+      : Process(args, {.stdout_path = "/dev/null", .stderr_path = stderr_path}) {}
+  std::string log() const { return err(); }
 };
 
 // Waits for the daemon's --endpoints-file; nullopt after timeout_ms.
 inline std::optional<nlohmann::json> wait_endpoints(const std::filesystem::path& file, int timeout_ms) {
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
   while (std::chrono::steady_clock::now() < deadline) {
-    std::ifstream in(file);
-    if (in) {
-      std::stringstream ss;
-      ss << in.rdbuf();
-      auto j = nlohmann::json::parse(ss.str(), nullptr, false);
-      if (!j.is_discarded()) return j;
-    }
+    auto j = nlohmann::json::parse(read_file(file), nullptr, false);
+    if (!j.is_discarded()) return j;
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   return std::nullopt;
 }
-
-// A fresh temporary directory, removed at destruction.
-struct TempDir {
-  std::filesystem::path path;
-  TempDir() {
-    std::string tmpl = (std::filesystem::temp_directory_path() / "bodyd-test-XXXXXX").string();
-    path = mkdtemp(tmpl.data());
-  }
-  ~TempDir() {
-    std::error_code ec;
-    std::filesystem::remove_all(path, ec);
-  }
-};
 
 }  // namespace bodyd::test

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "../test_paths.h"
+#include "bodyd/test/files.h"
 
 namespace fs = std::filesystem;
 
@@ -26,12 +27,7 @@ std::vector<fs::path> markdown_files() {
   return files;
 }
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using bodyd::test::read_file;
 
 // Links and paths that are not files of the repository: URLs, anchors, build outputs, things a
 // command makes, and the data that docs/conventions.md says lives beside the checkout.
@@ -50,7 +46,7 @@ TEST(Docs, EveryLinkedFileExists) {
   const std::regex md_path("`((?:[A-Za-z0-9_.-]+/)*[A-Za-z0-9_.-]+\\.md)`");
   int checked = 0;
   for (const auto& file : markdown_files()) {
-    const std::string text = slurp(file);
+    const std::string text = read_file(file);
     for (std::sregex_iterator it(text.begin(), text.end(), md_link), end; it != end; ++it) {
       std::string target = (*it)[1].str();
       if (const auto hash = target.find('#'); hash != std::string::npos && hash > 0) target.resize(hash);
@@ -88,7 +84,7 @@ TEST(Docs, ConventionsAreCitedFromTheRepository) {
       if (ext != ".md" && ext != ".h" && ext != ".cpp" && ext != ".py" && ext != ".js" && ext != ".html" &&
           ext != "")
         continue;
-      const std::string text = slurp(entry.path());
+      const std::string text = read_file(entry.path());
       EXPECT_EQ(text.find("CONVENTIONS.md"), std::string::npos)
           << fs::relative(entry.path(), root).string()
           << " cites CONVENTIONS.md, which is not in the repository; cite docs/conventions.md";
@@ -104,14 +100,14 @@ TEST(Docs, ConventionsAreCitedFromTheRepository) {
 TEST(Docs, AptInstallNamesTheFileMakePackageWrites) {
   const fs::path root = bodyd::test::source_dir();
   std::smatch m;
-  const std::string makefile = slurp(root / "Makefile");
+  const std::string makefile = read_file(root / "Makefile");
   ASSERT_TRUE(std::regex_search(makefile, m, std::regex(R"(\nPACKAGE_BUILD \?= (\S+))")))
       << "the Makefile does not say where make package builds (PACKAGE_BUILD ?= DIR)";
   const std::string dir = m[1].str();
   const std::regex install(R"(apt install (\S*bodyd_\S*\.deb))");
   int found = 0;
   for (const char* page : {"README.md", "docs/install.md"}) {
-    const std::string text = slurp(root / page);
+    const std::string text = read_file(root / page);
     for (std::sregex_iterator it(text.begin(), text.end(), install), end; it != end; ++it) {
       ++found;
       EXPECT_TRUE((*it)[1].str().starts_with("./" + dir + "/bodyd_"))
@@ -123,7 +119,7 @@ TEST(Docs, AptInstallNamesTheFileMakePackageWrites) {
 
 // Issue 20 item 8: what a missing user session bus means for `systemctl --user`, and what to do.
 TEST(Docs, InstallExplainsAMissingUserBus) {
-  const std::string text = slurp(bodyd::test::source_dir() / "docs/install.md");
+  const std::string text = read_file(bodyd::test::source_dir() / "docs/install.md");
   for (const char* part : {"Failed to connect to bus: No medium found", "desktop session", "loginctl enable-linger"})
     EXPECT_NE(text.find(part), std::string::npos) << "docs/install.md does not mention \"" << part << "\"";
 }
@@ -133,8 +129,8 @@ TEST(Docs, InstallExplainsAMissingUserBus) {
 // is not there.
 TEST(Docs, CSharpSectionDeclaresEveryCAbiFunction) {
   const fs::path root = bodyd::test::source_dir();
-  const std::string header = slurp(root / "client/include/bodyd_client.h");
-  const std::string doc = slurp(root / "docs/protocol.md");
+  const std::string header = read_file(root / "client/include/bodyd_client.h");
+  const std::string doc = read_file(root / "docs/protocol.md");
   const std::regex declared(R"(BODYD_API[^;(]*\b(bodyd_client_\w+)\s*\()");
   int functions = 0;
   for (std::sregex_iterator it(header.begin(), header.end(), declared), end; it != end; ++it) {

@@ -4,6 +4,7 @@
 #include "bodyd/simulators/tracker_sim.h"
 
 #include "../test_paths.h"
+#include "bodyd/test/files.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -20,12 +21,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using bodyd::test::read_file;
 
 std::string shell_quote(const std::string& s) {
   std::string out = "'";
@@ -58,8 +54,8 @@ class ToolsTest : public ::testing::Test {
     const int status = std::system(cmd.c_str());
     ProcessResult r;
     r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    r.out = slurp(out);
-    r.err = slurp(err);
+    r.out = read_file(out);
+    r.err = read_file(err);
     return r;
   }
   fs::path dir_;
@@ -107,7 +103,7 @@ TEST_F(ToolsTest, BvhJson) {
 
 TEST_F(ToolsTest, BvhReportsADamagedFileWithItsLineAndStillTheGoodOnes) {
   // Line 140 of the fixture is frame 5; put a word in the middle of it.
-  std::string text = slurp(kWalk);
+  std::string text = read_file(kWalk);
   size_t pos = 0;
   for (int line = 1; line < 140; ++line) pos = text.find('\n', pos) + 1;
   const size_t space = text.find(' ', pos + 10);
@@ -141,7 +137,7 @@ TEST_F(ToolsTest, BvhReportsADamagedFileWithItsLineAndStillTheGoodOnes) {
 // Issue 11: a clip with a finite absurd value (1e300) loaded, and bodyd-sim wrote 9e292 positions.
 // Now bodyd-bvh and bodyd-sim refuse it with the file and line, and write nothing.
 TEST_F(ToolsTest, AbsurdBvhValuesAreRefusedWithTheLine) {
-  std::string text = slurp(kWalk);
+  std::string text = read_file(kWalk);
   size_t pos = 0;
   for (int line = 1; line < 140; ++line) pos = text.find('\n', pos) + 1;
   text.replace(pos, text.find(' ', pos) - pos, "1e300");  // frame 5's root Xposition
@@ -161,7 +157,7 @@ TEST_F(ToolsTest, AbsurdBvhValuesAreRefusedWithTheLine) {
 
 // bodyd-bvh never passes raw control bytes from a file (or a file name) to the terminal.
 TEST_F(ToolsTest, BvhEscapesControlBytesFromTheFile) {
-  std::string text = slurp(kWalk);
+  std::string text = read_file(kWalk);
   const size_t motion = text.find("MOTION");
   ASSERT_NE(motion, std::string::npos);
   text.replace(motion, 6, "\x1b]0;owned\x07\x1b[2J\x9b");
@@ -203,7 +199,7 @@ TEST_F(ToolsTest, BvhOnEveryBandaiFile) {
   for (size_t i = 0; i < files.size(); ++i) {
     SCOPED_TRACE(files[i]);
     ASSERT_EQ(arr[i]["path"], files[i]);
-    const std::string text = slurp(files[i]);
+    const std::string text = read_file(files[i]);
     const size_t at = text.find("Frames:");
     ASSERT_NE(at, std::string::npos);
     std::smatch m;

@@ -1,6 +1,7 @@
 #include "bodyd/motion/tracker_log.h"
 
 #include "../test_paths.h"
+#include "bodyd/test/temp_dir.h"
 
 #include <gtest/gtest.h>
 
@@ -65,19 +66,7 @@ void expect_same(const std::vector<TrackerSample>& a, const std::vector<TrackerS
   }
 }
 
-struct TempDir {
-  std::filesystem::path path;
-  TempDir() {
-    path = std::filesystem::temp_directory_path() /
-           ("bodyd-tracker-log-test-" + std::to_string(::getpid()) + "-" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    std::filesystem::create_directories(path);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    std::filesystem::remove_all(path, ec);
-  }
-};
+using bodyd::test::TempDir;
 
 const std::string kGood =
     "# bodyd-tracker-log v1\n"

@@ -2,7 +2,9 @@
 // for the prefix (systemd unit, pkg-config), and the installed bodyd running the bundled
 // recording to a subscriber without touching the source or build trees (strace).
 #include "../test_paths.h"
-#include "process.h"
+#include "bodyd/test/files.h"
+#include "bodyd/test/process.h"
+#include "bodyd/test/temp_dir.h"
 
 #include <gtest/gtest.h>
 
@@ -24,7 +26,7 @@ const fs::path kCmake = BODYD_CMAKE_COMMAND;
 class InstallTree : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    scratch_ = new ScratchDir("bodyd-install");
+    scratch_ = new TempDir("bodyd-install");
     prefix_ = scratch_->path / "prefix";
     const RunResult r =
         run({kCmake.string(), "--install", kBuildDir.string(), "--prefix", prefix_.string()},
@@ -38,7 +40,7 @@ class InstallTree : public ::testing::Test {
   }
   void SetUp() override { ASSERT_TRUE(install_ok_) << "cmake --install failed:\n" << install_log_; }
 
-  static inline ScratchDir* scratch_ = nullptr;
+  static inline TempDir* scratch_ = nullptr;
   static inline fs::path prefix_;
   static inline std::string install_log_;
   static inline bool install_ok_ = false;
@@ -94,7 +96,7 @@ TEST_F(InstallTree, CExampleBuildsWithPkgConfigAndReceivesPoses) {
                               {.env = {{"PKG_CONFIG_PATH", pc_dir.string()}}, .output_dir = scratch_->path, .name = "pc"});
   if (flags.exit_code != 0 && !fs::exists("/usr/bin/pkg-config")) GTEST_SKIP() << "pkg-config is not installed";
   ASSERT_EQ(flags.exit_code, 0) << flags.err;
-  ScratchDir dir("bodyd-cexample");
+  TempDir dir("bodyd-cexample");
   // Split the flags on spaces (no path here holds one: mkdtemp under the temp directory).
   std::vector<std::string> cc{"/bin/sh", "-c",
                               "cc -std=c11 -o " + (dir.path / "sub").string() + " " +
@@ -155,7 +157,7 @@ TEST_F(InstallTree, InstalledBodydTouchesNothingInTheSourceOrBuildTree) {
           .exit_code != 0)
     GTEST_SKIP() << "strace cannot trace here (not installed, or ptrace is not permitted, e.g. a container without "
                     "CAP_SYS_PTRACE)";
-  ScratchDir dir("bodyd-traced");
+  TempDir dir("bodyd-traced");
   const std::string pub = "ipc://" + (dir.path / "pose").string();
   const fs::path trace = dir.path / "trace.txt", endpoints = dir.path / "endpoints.json";
   // Every file-related system call (open, stat, access, readlink, exec...), not only openat:
@@ -197,7 +199,7 @@ TEST_F(InstallTree, InstalledBodydTouchesNothingInTheSourceOrBuildTree) {
 // BODYD_BUILD_TESTS=OFF the build has the programs but no test, fuzz target or test tool
 // (configure only: no compiler runs).
 TEST(PackageBuild, WithoutTestsConfiguresOnlyWhatShips) {
-  ScratchDir dir("bodyd-package-build");
+  TempDir dir("bodyd-package-build");
   const fs::path tree = dir.path / "build-package";
   const RunResult configure = run({kCmake.string(), "-S", source_dir().string(), "-B", tree.string(),
                                    "-DBODYD_BUILD_TESTS=OFF", "-DCMAKE_BUILD_TYPE=RelWithDebInfo"},
@@ -224,7 +226,7 @@ TEST(PackageBuild, WithoutTestsConfiguresOnlyWhatShips) {
 // tests off, setup told it is a package build.
 TEST(PackageBuild, MakePackageUsesItsOwnTreeWithoutTests) {
   if (!fs::exists("/usr/bin/make")) GTEST_SKIP() << "make is not installed";
-  ScratchDir dir("bodyd-make-n");
+  TempDir dir("bodyd-make-n");
   const RunResult r = run({"/usr/bin/make", "-n", "-C", source_dir().string(), "package"},
                           {.output_dir = dir.path, .name = "make"}, 30000);
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -237,7 +239,7 @@ TEST(PackageBuild, MakePackageUsesItsOwnTreeWithoutTests) {
 // dpkg-query and npm are replaced by fakes on PATH that log their arguments (the fake
 // dpkg-query says every package is installed, so nothing is installed).
 TEST(PackageBuild, SetupForAPackageSkipsTestPackagesAndNpm) {
-  ScratchDir dir("bodyd-setup");
+  TempDir dir("bodyd-setup");
   const fs::path bin = dir.path / "bin", log = dir.path / "calls.log";
   fs::create_directories(bin);
   for (const char* name : {"dpkg-query", "npm", "chromium"}) {

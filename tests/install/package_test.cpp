@@ -2,7 +2,9 @@
 // the packaged bodyd running from a scratch root (dpkg -x) on its own bundled files. One cpack
 // run serves every test of the suite.
 #include "../test_paths.h"
-#include "process.h"
+#include "bodyd/test/files.h"
+#include "bodyd/test/process.h"
+#include "bodyd/test/temp_dir.h"
 
 #include <gtest/gtest.h>
 
@@ -29,7 +31,7 @@ class DebianPackage : public ::testing::Test {
         skip_ = std::string(tool) + " is not installed (package dpkg-dev; scripts/setup installs it)";
         return;
       }
-    scratch_ = new ScratchDir("bodyd-package");
+    scratch_ = new TempDir("bodyd-package");
     const RunResult arch = run({"/usr/bin/dpkg", "--print-architecture"}, {.output_dir = scratch_->path, .name = "arch"});
     arch_ = trim(arch.out);
     // -B: the package and cpack's staging tree go to the scratch directory, not the build tree.
@@ -53,7 +55,7 @@ class DebianPackage : public ::testing::Test {
     return trim(run({"/usr/bin/dpkg-deb", "--field", deb_.string(), name}, {.output_dir = scratch_->path, .name = "field"}).out);
   }
 
-  static inline ScratchDir* scratch_ = nullptr;
+  static inline TempDir* scratch_ = nullptr;
   static inline fs::path deb_;
   static inline std::string arch_, log_, skip_;
   static inline bool ok_ = false;
@@ -108,7 +110,7 @@ TEST_F(DebianPackage, UnpackedBodydRunsOnItsOwnFiles) {
   ASSERT_EQ(x.exit_code, 0) << x.err;
   EXPECT_NE(read_file(root / "usr/lib/systemd/user/bodyd.service").find("ExecStart=/usr/bin/bodyd --user-config\n"),
             std::string::npos);
-  ScratchDir dir("bodyd-unpacked");
+  TempDir dir("bodyd-unpacked");
   const RunResult r = run({(root / "usr/bin/bodyd").string(), "--exit-at-end", "--fast", "--pub",
                            "ipc://" + (dir.path / "pose").string(), "--control", "none"},
                           {.env = {{"XDG_DATA_HOME", (dir.path / "xdg").string()}}, .cwd = dir.path,
@@ -139,7 +141,7 @@ TEST_F(DebianPackage, PostrmRemovesDanglingUserEnableLinksOnly) {
   ASSERT_TRUE(fs::is_regular_file(postrm)) << "the package has no postrm";
   EXPECT_NE(fs::status(postrm).permissions() & fs::perms::owner_exec, fs::perms::none);
 
-  ScratchDir dir("bodyd-postrm");
+  TempDir dir("bodyd-postrm");
   const fs::path alice = dir.path / "alice", bob = dir.path / "bob", bin = dir.path / "bin";
   const fs::path wants = alice / ".config/systemd/user/default.target.wants";
   const fs::path bob_wants = bob / ".config/systemd/user/default.target.wants";

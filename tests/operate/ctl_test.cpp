@@ -1,6 +1,8 @@
 // bodyd-ctl against a running bodyd (docs/ctl.md): every control request, the human-readable
 // and JSON output, usage errors, and the message when no daemon answers.
-#include "../install/process.h"
+#include "bodyd/test/files.h"
+#include "bodyd/test/process.h"
+#include "bodyd/test/temp_dir.h"
 #include "operate_helpers.h"
 #include "../test_paths.h"
 
@@ -10,9 +12,15 @@
 #include <nlohmann/json.hpp>
 #include <zmq.hpp>
 
-#include <algorithm>
+#include <signal.h>
+#include <unistd.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <fstream>
+#include <sstream>
+#include <thread>
 
 namespace bodyd::test {
 namespace {
@@ -24,7 +32,7 @@ using nlohmann::json;
 class Ctl : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = new ScratchDir("bodyd-ctl");
+    dir_ = new TempDir("bodyd-ctl");
     control_ = "ipc://" + (dir_->path / "control").string();
     bodyd_ = new Process({kBodyd, "--method", "ik", "--pub", "ipc://" + (dir_->path / "pose").string(), "--control",
                           control_, "--endpoints-file", (dir_->path / "endpoints.json").string()},
@@ -47,7 +55,7 @@ class Ctl : public ::testing::Test {
     return json::parse(r.out);
   }
 
-  static inline ScratchDir* dir_ = nullptr;
+  static inline TempDir* dir_ = nullptr;
   static inline Process* bodyd_ = nullptr;
   static inline std::string control_;
   static inline bool ready_ = false;
@@ -184,7 +192,7 @@ TEST_F(Ctl, EndpointFromEndpointsFileOrUserConfig) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(json::parse(r.out)["control"], control_);
   // The service's config names the endpoint: bodyd-ctl finds it there.
-  ScratchDir config;
+  TempDir config;
   fs::create_directories(config.path / "bodyd");
   std::ofstream(config.path / "bodyd/config.json") << "{\"control\": \"" << control_ << "\"}\n";
   r = run({kCtl, "status"}, {.env = {{"XDG_CONFIG_HOME", config.path.string()}}, .output_dir = dir_->path, .name = "ctl"});
@@ -192,21 +200,19 @@ TEST_F(Ctl, EndpointFromEndpointsFileOrUserConfig) {
 }
 
 TEST(CtlNoDaemon, SaysWhichEndpointAndHowToStartOne) {
-  ScratchDir dir;
+  TempDir dir;
   const std::string endpoint = "ipc://" + (dir.path / "control").string();
-  const auto start = std::chrono::steady_clock::now();
-  const RunResult r = run({kCtl, "--control", endpoint, "--timeout-s", "0.5", "status"}, {.output_dir = dir.path}, 20000);
-  const auto took = std::chrono::steady_clock::now() - start;
+  // It gives up on its own (a bodyd-ctl still waiting after 10 s is killed: exit code -1).
+  const RunResult r = run({kCtl, "--control", endpoint, "--timeout-s", "0.5", "status"}, {.output_dir = dir.path}, 10000);
   EXPECT_EQ(r.exit_code, 3);
   EXPECT_NE(r.err.find("no answer from bodyd on " + endpoint), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("does not exist"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("systemctl --user start bodyd"), std::string::npos) << r.err;
-  EXPECT_LT(took, std::chrono::seconds(10));
 }
 
 // Last: stops a bodyd of its own.
 TEST(CtlShutdown, StopsTheDaemon) {
-  ScratchDir dir;
+  TempDir dir;
   const std::string control = "ipc://" + (dir.path / "control").string();
   Process bodyd({kBodyd, "--method", "ik", "--pub", "ipc://" + (dir.path / "pose").string(), "--control", control,
                  "--endpoints-file", (dir.path / "endpoints.json").string()},

@@ -4,7 +4,9 @@
 #include "bodyd/daemon/curve_allow.h"
 #include "bodyd/daemon/endpoint.h"
 #include "bodyd/protocol/pose_message.h"
-#include "../install/process.h"
+#include "bodyd/test/files.h"
+#include "bodyd/test/process.h"
+#include "bodyd/test/temp_dir.h"
 #include "operate_helpers.h"
 #include "../test_paths.h"
 
@@ -12,6 +14,12 @@
 #include <nlohmann/json.hpp>
 #include <zmq.hpp>
 
+#include <signal.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <fstream>
+#include <sstream>
 #include <thread>
 
 namespace bodyd::test {
@@ -47,7 +55,7 @@ bool receives_pose(const std::string& endpoint, const std::string& server_public
 }
 
 TEST(CurveAllowList, ListedKeyGetsPosesUnknownKeyGetsNothing) {
-  ScratchDir dir;
+  TempDir dir;
   ASSERT_EQ(run({kBodyd, "--gen-keys", (dir.path / "server").string()}, {.output_dir = dir.path}).exit_code, 0);
   const RunResult alice = run({kBodyd, "--gen-keys", (dir.path / "clients").string(), "--client", "alice"},
                               {.output_dir = dir.path});
@@ -101,7 +109,7 @@ TEST(CurveAllowList, ListedKeyGetsPosesUnknownKeyGetsNothing) {
 }
 
 TEST(CurveAllowList, BadSetupsAreClearErrors) {
-  ScratchDir dir;
+  TempDir dir;
   ASSERT_EQ(run({kBodyd, "--gen-keys", (dir.path / "server").string()}, {.output_dir = dir.path}).exit_code, 0);
   fs::create_directories(dir.path / "empty");
   // An allow-list without a server key.
@@ -120,7 +128,7 @@ TEST(CurveAllowList, BadSetupsAreClearErrors) {
 }
 
 TEST(CurveAllowList, LoaderReadsPublicFilesAndNamesABadOne) {
-  ScratchDir dir;
+  TempDir dir;
   daemon::CurveKeyPair a, b;
   ASSERT_EQ(daemon::generate_curve_keys(dir.path, a, "a"), "");
   ASSERT_EQ(daemon::generate_curve_keys(dir.path, b, "b"), "");
@@ -138,7 +146,7 @@ TEST(CurveAllowList, LoaderReadsPublicFilesAndNamesABadOne) {
 // Issue 20 item 7: a NAME.public that is a symbolic link is refused, saying so (it would admit a
 // key kept anywhere).
 TEST(CurveAllowList, APublicSymlinkIsRefused) {
-  ScratchDir dir;
+  TempDir dir;
   daemon::CurveKeyPair a, elsewhere;
   fs::create_directories(dir.path / "allow");
   fs::create_directories(dir.path / "other");
@@ -157,7 +165,7 @@ TEST(CurveAllowList, APublicSymlinkIsRefused) {
 // refused handshakes logged at a limited rate: 200 clients with made-up keys give a handful of
 // lines, not one each.
 TEST(CurveAllowList, WarningsOnceAndRefusalsAtALimitedRate) {
-  ScratchDir dir;
+  TempDir dir;
   ASSERT_EQ(run({kBodyd, "--gen-keys", (dir.path / "server").string()}, {.output_dir = dir.path}).exit_code, 0);
   ASSERT_EQ(run({kBodyd, "--gen-keys", (dir.path / "allow").string(), "--client", "alice"}, {.output_dir = dir.path})
                 .exit_code,

@@ -2,7 +2,10 @@
 // recorded and replayed with --replay --fast gives bit-identical poses.
 #include "bodyd/motion/tracker_log.h"
 #include "bodyd/protocol/pose_message.h"
-#include "../install/process.h"
+#include "bodyd/test/files.h"
+#include "bodyd/test/net.h"
+#include "bodyd/test/process.h"
+#include "bodyd/test/temp_dir.h"
 #include "operate_helpers.h"
 #include "../test_paths.h"
 
@@ -15,10 +18,16 @@
 #include <sys/socket.h>
 #include <sys/stat.h>
 
+#include <signal.h>
+#include <unistd.h>
+
+#include <chrono>
 #include <cstring>
+#include <fstream>
 #include <map>
 #include <memory>
 #include <sstream>
+#include <thread>
 
 namespace bodyd::test {
 namespace {
@@ -62,7 +71,7 @@ std::vector<protocol::PoseMessage> run_and_collect(std::vector<std::string> args
 }
 
 TEST(RecordTrackers, LiveSessionReplaysToBitIdenticalPoses) {
-  ScratchDir dir;
+  TempDir dir;
   const fs::path recording = dir.path / "session.csv";
   std::string live_log, replay_log;
   // A live-like session: simulated trackers from a BVH clip, paced, stamped with host time,
@@ -103,7 +112,7 @@ TEST(RecordTrackers, LiveSessionReplaysToBitIdenticalPoses) {
 // The same over the network: a sender streams tracker-log lines over UDP at their recorded pace
 // (--source udp:, docs/vr-apps.md), bodyd stamps them on arrival and records them.
 TEST(RecordTrackers, LiveUdpSessionReplaysToBitIdenticalPoses) {
-  ScratchDir dir;
+  TempDir dir;
   const fs::path recording = dir.path / "udp-session.csv";
   // A free UDP port (released just before bodyd binds it).
   int port = 0;
@@ -193,7 +202,7 @@ class UdpRecording {
   UdpRecording(const fs::path& dir, const fs::path& recording, std::vector<std::string> prefix = {},
                std::vector<std::string> extra = {})
       : dir_(dir), control_("ipc://" + (dir / "rec.control").string()) {
-    port_ = free_udp_port();
+    port_ = free_loopback_port();
     std::vector<std::string> args = prefix;
     for (const std::string& a : {kBodyd, std::string("--method"), std::string("ik"), std::string("--source"),
                                  "udp:127.0.0.1:" + std::to_string(port_), std::string("--record-trackers"),
@@ -208,18 +217,6 @@ class UdpRecording {
   }
   bool started() const { return started_; }
   Process& bodyd() { return *bodyd_; }
-
-  static int free_udp_port() {
-    const int fd = socket(AF_INET, SOCK_DGRAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    socklen_t len = sizeof(a);
-    bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a));
-    getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
-    close(fd);
-    return ntohs(a.sin_port);
-  }
 
   // Sends the bundled recording's first `n` samples, one line per datagram, 8 at a time (the
   // head times increase; a burst stays well within the socket's receive buffer).
@@ -276,7 +273,7 @@ std::size_t samples_on_disk(const fs::path& p) {
 // Issue 20 item 3: closing the terminal (SIGHUP) stops bodyd as SIGTERM does, with the
 // recording written and the "stopped" line logged.
 TEST(RecordTrackers, SighupStopsCleanlyWithTheRecordingWritten) {
-  ScratchDir dir;
+  TempDir dir;
   const fs::path recording = dir.path / "r.csv";
   UdpRecording session(dir.path, recording);
   ASSERT_TRUE(session.started()) << session.bodyd().log();
@@ -294,7 +291,7 @@ TEST(RecordTrackers, SighupStopsCleanlyWithTheRecordingWritten) {
 // Issue 20 item 3: the recording reaches the file within about half a second, so a kill -9
 // loses at most that; what is on disk reads back as a tracker log.
 TEST(RecordTrackers, AKillLosesAtMostTheLastSecond) {
-  ScratchDir dir;
+  TempDir dir;
   const fs::path recording = dir.path / "r.csv";
   UdpRecording session(dir.path, recording);
   ASSERT_TRUE(session.started()) << session.bodyd().log();
@@ -314,7 +311,7 @@ TEST(RecordTrackers, AKillLosesAtMostTheLastSecond) {
 // and the file is cut back to whole lines.
 TEST(RecordTrackers, AWriteErrorReportsWhatWasReallyWritten) {
   if (!fs::exists("/usr/bin/prlimit")) GTEST_SKIP() << "prlimit (util-linux) is not installed";
-  ScratchDir dir;
+  TempDir dir;
   const fs::path recording = dir.path / "r.csv";
   // 24 KiB for every file bodyd writes: the recording, and its own log (which stays smaller).
   UdpRecording session(dir.path, recording, {"/usr/bin/prlimit", "--fsize=24576", "--"});
@@ -338,7 +335,7 @@ TEST(RecordTrackers, AWriteErrorReportsWhatWasReallyWritten) {
 // Issue 20 item 5: an existing file, a symbolic link (even with --overwrite) and a FIFO are
 // refused before anything else starts; --overwrite (or config "overwrite") replaces a file.
 TEST(RecordTrackers, ExistingFilesLinksAndFifosAreRefused) {
-  ScratchDir dir;
+  TempDir dir;
   const std::vector<std::string> base{kBodyd, "--method", "ik", "--pub", "ipc://" + (dir.path / "pose").string(),
                                       "--control", "none", "--record-trackers"};
   auto bodyd_recording = [&](const fs::path& file, std::vector<std::string> extra = {}) {
@@ -382,7 +379,7 @@ TEST(RecordTrackers, ExistingFilesLinksAndFifosAreRefused) {
 // Issue 20 item 3: USR1, USR2 and ALRM are ignored (bodyd keeps running and answering); QUIT
 // stops it cleanly like TERM.
 TEST(Signals, UsrAndAlrmAreIgnoredQuitStopsCleanly) {
-  ScratchDir dir;
+  TempDir dir;
   const std::string control = "ipc://" + (dir.path / "control").string();
   Process bodyd({kBodyd, "--method", "ik", "--pub", "ipc://" + (dir.path / "pose").string(), "--control", control,
                  "--endpoints-file", (dir.path / "e.json").string()},
@@ -404,7 +401,7 @@ TEST(Signals, UsrAndAlrmAreIgnoredQuitStopsCleanly) {
 }
 
 TEST(RecordTrackers, UnwritableFileIsAStartError) {
-  ScratchDir dir;
+  TempDir dir;
   const RunResult r = run({kBodyd, "--method", "ik", "--pub", "ipc://" + (dir.path / "pose").string(), "--control",
                            "none", "--record-trackers", (dir.path / "no/such/dir/rec.csv").string()},
                           {.output_dir = dir.path}, 20000);

@@ -1,7 +1,9 @@
 // bodyd under systemd, without systemd (docs/install.md): the test binds the NOTIFY_SOCKET
 // datagram socket itself and checks READY=1, the watchdog pings and STOPPING=1; the user
 // config read by --user-config (what the unit runs).
-#include "../install/process.h"
+#include "bodyd/test/files.h"
+#include "bodyd/test/process.h"
+#include "bodyd/test/temp_dir.h"
 #include "operate_helpers.h"
 #include "../test_paths.h"
 
@@ -10,6 +12,14 @@
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <poll.h>
+
+#include <signal.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <fstream>
+#include <sstream>
+#include <thread>
 
 namespace bodyd::test {
 namespace {
@@ -59,7 +69,7 @@ std::vector<std::string> bodyd_args(const fs::path& dir) {
 }
 
 TEST(SystemdNotify, ReadyThenWatchdogPingsThenStopping) {
-  ScratchDir dir;
+  TempDir dir;
   NotifySocket notify(dir.path / "notify");
   // 200 ms watchdog: bodyd pings every 100 ms.
   Process bodyd(bodyd_args(dir.path), {.env = {{"NOTIFY_SOCKET", notify.path().string()}, {"WATCHDOG_USEC", "200000"},
@@ -95,7 +105,7 @@ TEST(SystemdNotify, ReadyThenWatchdogPingsThenStopping) {
 }
 
 TEST(SystemdNotify, NoWatchdogPingsWithoutWatchdogUsec) {
-  ScratchDir dir;
+  TempDir dir;
   NotifySocket notify(dir.path / "notify");
   Process bodyd(bodyd_args(dir.path), {.env = {{"NOTIFY_SOCKET", notify.path().string()}, {"WATCHDOG_USEC", kUnset}},
                                        .output_dir = dir.path, .name = "bodyd"});
@@ -109,7 +119,7 @@ TEST(SystemdNotify, NoWatchdogPingsWithoutWatchdogUsec) {
 }
 
 TEST(SystemdNotify, StartFailureIsReportedAndNotReady) {
-  ScratchDir dir;
+  TempDir dir;
   NotifySocket notify(dir.path / "notify");
   const RunResult r = run({kBodyd, "--method", "diffusion", "--model", (dir.path / "missing.safetensors").string(),
                            "--pub", "ipc://" + (dir.path / "pose").string(), "--control", "none"},
@@ -123,7 +133,7 @@ TEST(SystemdNotify, StartFailureIsReportedAndNotReady) {
 
 // --user-config reads $XDG_CONFIG_HOME/bodyd/config.json; flags still override it.
 TEST(UserConfig, ReadFromXdgConfigHomeAndOverriddenByFlags) {
-  ScratchDir dir;
+  TempDir dir;
   fs::create_directories(dir.path / "config/bodyd");
   std::ofstream(dir.path / "config/bodyd/config.json") << "// a user's config\n{\"method\": \"ik\", \"rate_hz\": 30}\n";
   const ProcessOptions env{.env = {{"XDG_CONFIG_HOME", (dir.path / "config").string()}}, .output_dir = dir.path};
@@ -141,7 +151,7 @@ TEST(UserConfig, ReadFromXdgConfigHomeAndOverriddenByFlags) {
 }
 
 TEST(UserConfig, MissingFileMeansDefaultsAndABadOneIsAnError) {
-  ScratchDir dir;
+  TempDir dir;
   ProcessOptions env{.env = {{"XDG_CONFIG_HOME", (dir.path / "config").string()}}, .output_dir = dir.path};
   RunResult r = run({kBodyd, "--user-config", "--print-config"}, env);
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -162,7 +172,7 @@ TEST(UserConfig, MissingFileMeansDefaultsAndABadOneIsAnError) {
 
 // The example config shipped in share/doc/bodyd loads as it is.
 TEST(UserConfig, ShippedExampleLoads) {
-  ScratchDir dir;
+  TempDir dir;
   const RunResult r = run({kBodyd, "--config", (source_dir() / "packaging/config.example.json").string(), "--print-config"},
                           {.output_dir = dir.path});
   ASSERT_EQ(r.exit_code, 0) << r.err;

@@ -279,7 +279,7 @@ TEST(ClientCApi, RestRotationsOfTheSkeleton) {
 TEST(ClientCApi, UsedFromC) {
   TestControlServer control;
   TestPublisher pub;
-  const auto r = run_command(fmt::format("timeout 60 {} {} {} 25", BODYD_CLIENT_C_TEST, quoted(pub.endpoint()),
+  const auto r = shell(fmt::format("timeout 60 {} {} {} 25", BODYD_CLIENT_C_TEST, quoted(pub.endpoint()),
                                          quoted(control.endpoint())));
   ASSERT_EQ(r.status, 0) << r.out;
   int poses = 0;
@@ -312,7 +312,7 @@ TEST(ClientCApi, UsedFromC) {
 TEST(PythonSubscriber, DecodesEveryField) {
   TestPublisher pub;
   const std::string script = (source_dir() / "examples/python/bodyd_sub.py").string();
-  const auto r = run_command(fmt::format("timeout 60 {} {} --endpoint {} --count 40 --json --timeout-s 20", kPython,
+  const auto r = shell(fmt::format("timeout 60 {} {} --endpoint {} --count 40 --json --timeout-s 20", kPython,
                                          script, quoted(pub.endpoint())));
   ASSERT_EQ(r.status, 0) << "is python3-zmq installed (scripts/setup)?\n" << r.out;
   const auto lines = lines_of(r.out);
@@ -352,7 +352,7 @@ TEST(PythonSubscriber, DecodesEveryField) {
 // ---- bodyd-sub -----------------------------------------------------------------------------
 
 void check_bodyd_sub_json(const std::string& endpoint) {
-  const auto r = run_command(fmt::format("timeout 60 {} --endpoint {} --count 30 --json --rotations --wait-skeleton "
+  const auto r = shell(fmt::format("timeout 60 {} --endpoint {} --count 30 --json --rotations --wait-skeleton "
                                          "--timeout-s 20", BODYD_SUB, quoted(endpoint)));
   ASSERT_EQ(r.status, 0) << r.out;
   const auto lines = lines_of(r.out);
@@ -393,7 +393,7 @@ TEST(BodydSub, JsonOverIpc) {
 
 TEST(BodydSub, SummaryLine) {
   TestPublisher pub;
-  const auto r = run_command(fmt::format("timeout 60 {} --endpoint {} --count 50 --timeout-s 20 2>&1", BODYD_SUB,
+  const auto r = shell(fmt::format("timeout 60 {} --endpoint {} --count 50 --timeout-s 20 2>&1", BODYD_SUB,
                                          quoted(pub.endpoint())));
   ASSERT_EQ(r.status, 0) << r.out;
   EXPECT_THAT(r.out, HasSubstr(" Hz | publish-sample p50 "));
@@ -401,7 +401,7 @@ TEST(BodydSub, SummaryLine) {
 }
 
 TEST(BodydSub, NoPublisherTimesOutWithStatus2) {
-  const auto r = run_command(fmt::format("timeout 60 {} --endpoint {} --timeout-s 0.3 2>&1", BODYD_SUB,
+  const auto r = shell(fmt::format("timeout 60 {} --endpoint {} --timeout-s 0.3 2>&1", BODYD_SUB,
                                          quoted(ipc_endpoint("nobody"))));
   EXPECT_EQ(r.status, 2) << r.out;
   EXPECT_THAT(r.out, HasSubstr("no pose from"));
@@ -412,7 +412,7 @@ TEST(BodydSub, NoPublisherTimesOutWithStatus2) {
 TEST(BodydRecord, RecordsAndLoadsBack) {
   TestPublisher pub;
   const auto path = std::filesystem::temp_directory_path() / fmt::format("bodyd-record-{}.bdrec", ::getpid());
-  const auto r = run_command(fmt::format("timeout 60 {} --endpoint {} --out {} --count 60 --timeout-s 20 2>&1",
+  const auto r = shell(fmt::format("timeout 60 {} --endpoint {} --out {} --count 60 --timeout-s 20 2>&1",
                                          BODYD_RECORD, quoted(pub.endpoint()), quoted(path.string())));
   ASSERT_EQ(r.status, 0) << r.out;
   EXPECT_THAT(r.out, HasSubstr("bodyd-record: 60 poses"));
@@ -435,7 +435,7 @@ TEST(BodydRecord, RecordsAndLoadsBack) {
 
 TEST(BodydRecord, DurationLimitWithoutPublisher) {
   const auto path = std::filesystem::temp_directory_path() / fmt::format("bodyd-record-empty-{}.bdrec", ::getpid());
-  const auto r = run_command(fmt::format("timeout 60 {} --endpoint {} --out {} --duration-s 0.3 2>&1", BODYD_RECORD,
+  const auto r = shell(fmt::format("timeout 60 {} --endpoint {} --out {} --duration-s 0.3 2>&1", BODYD_RECORD,
                                          quoted(ipc_endpoint("nobody")), quoted(path.string())));
   ASSERT_EQ(r.status, 0) << r.out;
   protocol::PoseRecording rec;
@@ -446,7 +446,7 @@ TEST(BodydRecord, DurationLimitWithoutPublisher) {
 }
 
 TEST(BodydRecord, UnwritableOutputIsAnError) {
-  const auto r = run_command(fmt::format("timeout 60 {} --endpoint {} --out /nonexistent-dir/x.bdrec 2>&1",
+  const auto r = shell(fmt::format("timeout 60 {} --endpoint {} --out /nonexistent-dir/x.bdrec 2>&1",
                                          BODYD_RECORD, quoted(ipc_endpoint("nobody"))));
   EXPECT_EQ(r.status, 1);
   EXPECT_THAT(r.out, HasSubstr("cannot create /nonexistent-dir/x.bdrec"));

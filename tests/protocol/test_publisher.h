@@ -4,6 +4,8 @@
 
 #include "bodyd/client/client.h"
 #include "bodyd/protocol/synthetic.h"
+#include "bodyd/test/process.h"
+#include "bodyd/test/temp_dir.h"
 
 #include <zmq.hpp>
 
@@ -12,6 +14,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <string>
 #include <thread>
 #include <vector>
@@ -20,23 +23,11 @@
 
 namespace bodyd::test {
 
-// Directories made by ipc_endpoint(), removed when the test process exits.
-struct TempDirs {
-  std::vector<std::filesystem::path> dirs;
-  ~TempDirs() {
-    std::error_code ec;
-    for (const auto& d : dirs) std::filesystem::remove_all(d, ec);
-  }
-};
-
-// A fresh ipc:// endpoint in the temporary directory (unique per process and call).
+// A fresh ipc:// endpoint in a directory of its own, removed when the test process exits.
 inline std::string ipc_endpoint(const std::string& name) {
-  static TempDirs temp_dirs;
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("bodyd-test-" + std::to_string(::getpid()) + "-" + std::to_string(temp_dirs.dirs.size()));
-  std::filesystem::create_directories(dir);
-  temp_dirs.dirs.push_back(dir);
-  return "ipc://" + (dir / name).string();
+  static std::vector<std::unique_ptr<TempDir>> dirs;
+  dirs.push_back(std::make_unique<TempDir>("bodyd-test"));
+  return "ipc://" + (dirs.back()->path / name).string();
 }
 
 // Binds an XPUB socket (tcp://127.0.0.1:* unless told otherwise), waits until a subscriber
@@ -154,23 +145,6 @@ class TestControlServer {
   std::atomic<bool> stop_{false};
   std::atomic<int> requests_{0};
 };
-
-// Runs a shell command, returns its exit status and stdout.
-struct CommandResult {
-  int status = -1;
-  std::string out;
-};
-inline CommandResult run_command(const std::string& command) {
-  CommandResult r;
-  FILE* pipe = ::popen(command.c_str(), "r");
-  if (pipe == nullptr) return r;
-  char buf[4096];
-  std::size_t n;
-  while ((n = std::fread(buf, 1, sizeof buf, pipe)) > 0) r.out.append(buf, n);
-  const int status = ::pclose(pipe);
-  r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
 
 inline std::vector<std::string> lines_of(const std::string& text) {
   std::vector<std::string> lines;
