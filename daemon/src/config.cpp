@@ -1,19 +1,27 @@
+// The config file's parser, the validator, the printer and the command-line flags, each driven by
+// the config key table (config_keys.cpp; bodyd/daemon/config_keys.h).
 #include "bodyd/daemon/config.h"
 
+#include "bodyd/daemon/config_keys.h"
 #include "bodyd/daemon/output.h"
 #include "bodyd/drivers/open_source.h"
 #include "bodyd/motion/limits.h"
 #include "bodyd/paths/data_files.h"
+#include "config_readers.h"
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <deque>
 #include <limits>
 #include <fstream>
 #include <iostream>
 #include <sstream>
+#include <type_traits>
+#include <variant>
 
 
 namespace bodyd::daemon {
@@ -102,7 +110,161 @@ std::string offset_from_values(const std::vector<double>& v, const std::string& 
   return {};
 }
 
-std::string apply_offsets(const json& j, const std::string& where, DaemonConfig& config) {
+// "{keys}" in a group's unknown-key message: its keys, in the table's order.
+std::string group_keys(std::string_view group) {
+  std::string keys;
+  for (const ConfigKey& row : config_keys())
+    if (row.group == group) keys += (keys.empty() ? "" : ", ") + std::string(row.name);
+  return keys;
+}
+
+const ConfigKey* find_key(std::string_view group, std::string_view name) {
+  for (const ConfigKey& row : config_keys())
+    if (row.group == group && row.name == name) return &row;
+  return nullptr;
+}
+
+const ConfigGroup* find_group(std::string_view name) {
+  for (const ConfigGroup& group : config_groups())
+    if (group.name == name) return &group;
+  return nullptr;
+}
+
+// Reads one key's value from the file into its member.
+std::string read_key(const ConfigKey& row, const json& value, const std::string& where, DaemonConfig& config) {
+  if (row.read) return row.read(value, where, config);
+  std::string error;
+  const bool ok = std::visit(
+      [&](auto field) -> bool {
+        if constexpr (std::is_same_v<decltype(field), const SimOptionKey*>) {
+          return std::visit([&](auto sim_field) { return get_value(value, where, sim_field(config.sim), error); },
+                            field->field);
+        } else {
+          auto& member = field(config);
+          using T = std::remove_reference_t<decltype(member)>;
+          if constexpr (std::is_same_v<T, std::vector<std::string>>) {
+            if (!value.is_array()) {
+              error = where + ": expected an array of strings";
+              return false;
+            }
+            member.clear();
+            for (const auto& item : value) {
+              std::string text;
+              if (!get_value(item, where, text, error)) return false;
+              member.push_back(text);
+            }
+            return true;
+          } else if constexpr (std::is_same_v<T, DeviceOffsets>) {
+            error = where + ": this key has no reader (config_keys.cpp)";  // its row names one
+            return false;
+          } else {
+            return get_value(value, where, member, error);
+          }
+        }
+      },
+      row.field);
+  return ok ? std::string() : error;
+}
+
+// The value of one key as the file writes it.
+json print_key(const ConfigKey& row, const DaemonConfig& config) {
+  if (row.print) return row.print(config);
+  DaemonConfig copy = config;  // the rows' accessors take a mutable configuration; this only reads
+  return std::visit(
+      [&](auto field) -> json {
+        if constexpr (std::is_same_v<decltype(field), const SimOptionKey*>) {
+          return std::visit([&](auto sim_field) { return json(sim_field(copy.sim)); }, field->field);
+        } else if constexpr (std::is_same_v<std::remove_reference_t<decltype(field(copy))>, DeviceOffsets>) {
+          return json();  // its row names a printer
+        } else {
+          return json(field(copy));
+        }
+      },
+      row.field);
+}
+
+// {key}, {flag}, {min}, {max}, {value} in a range's message.
+std::string range_message(const ConfigKey& row, double value, bool integer) {
+  const auto number = [](double x) {
+    return std::floor(x) == x && std::fabs(x) < 1e15 ? std::to_string(static_cast<long long>(x)) : fmt_number(x);
+  };
+  std::string text(row.range.error);
+  const std::pair<std::string_view, std::string> fields[] = {
+      {"{key}", row.full_name()},
+      {"{flag}", row.flag.starts_with('!') ? row.flag.substr(1) : row.flag},
+      {"{min}", number(row.range.min)},
+      {"{max}", number(row.range.max)},
+      {"{value}", integer ? number(value) : fmt_number(value)}};
+  for (const auto& [name, replacement] : fields)
+    for (std::size_t at = text.find(name); at != std::string::npos; at = text.find(name, at + replacement.size()))
+      text.replace(at, name.size(), replacement);
+  return text;
+}
+
+// A key's own check: its range or its choices. Empty when fine.
+std::string check_key(const ConfigKey& row, const DaemonConfig& config) {
+  DaemonConfig copy = config;
+  std::string error;
+  std::visit(
+      [&](auto field) {
+        if constexpr (!std::is_same_v<decltype(field), const SimOptionKey*>) {
+          const auto& member = field(copy);
+          using T = std::remove_cvref_t<decltype(member)>;
+          if constexpr (std::is_arithmetic_v<T> && !std::is_same_v<T, bool>) {
+            if (row.range.error.empty()) return;
+            const double v = static_cast<double>(member);
+            const bool in_range = std::isfinite(v) && (row.range.min_exclusive ? v > row.range.min : v >= row.range.min) &&
+                                  v <= row.range.max;
+            if (!in_range && !(row.range.zero_allowed && v == 0.0))
+              error = range_message(row, v, std::is_integral_v<T>);
+          } else if constexpr (std::is_same_v<T, std::string>) {
+            if (row.choices.empty()) return;
+            std::vector<std::string_view> choices;
+            for (std::size_t start = 0; start <= row.choices.size();) {
+              const std::size_t comma = std::min(row.choices.find(',', start), row.choices.size());
+              choices.push_back(row.choices.substr(start, comma - start));
+              start = comma + 1;
+            }
+            if (std::find(choices.begin(), choices.end(), member) != choices.end()) return;
+            std::string expected;
+            for (std::size_t i = 0; i < choices.size(); ++i)
+              expected += (i == 0 ? "" : i + 1 == choices.size() ? " or " : ", ") + std::string(choices[i]);
+            error = row.full_name() + " \"" + member + "\": expected " + expected;
+          }
+        }
+      },
+      row.field);
+  return error;
+}
+
+}  // namespace
+
+// "sources": ["replay:FILE", ...].
+std::string read_sources(const json& j, const std::string& where, DaemonConfig& config) {
+  if (!j.is_array()) return where + ": expected an array of strings like \"replay:FILE\"";
+  config.sources.clear();
+  std::string error;
+  for (const auto& s : j) {
+    std::string spec;
+    if (!get_value(s, where, spec, error)) return error;
+    config.sources.push_back(spec);
+  }
+  return {};
+}
+
+json print_offsets(const DaemonConfig& c) {
+  json offsets = json::object();
+  for (Role r : kRoles) {
+    const auto& o = c.offsets[static_cast<int>(r)];
+    if (!o) continue;
+    offsets[std::string(role_name(r))] = {
+        {"position_m", {o->position_m.x(), o->position_m.y(), o->position_m.z()}},
+        {"rotation_xyzw", {o->rotation.x(), o->rotation.y(), o->rotation.z(), o->rotation.w()}}};
+  }
+  return offsets;
+}
+
+std::string read_offsets(const json& j, const std::string& where, DaemonConfig& config) {
   if (!j.is_object()) return where + ": expected an object with keys head, left_hand, right_hand";
   for (const auto& [key, value] : j.items()) {
     const std::string w = where + "." + key;
@@ -132,55 +294,10 @@ std::string apply_offsets(const json& j, const std::string& where, DaemonConfig&
   return {};
 }
 
-// "filter": {"enabled": true, "min_cutoff_hz": 1.0, ...}: the diffusion's tracker filter.
-// Values are checked by validate_config (validate(OneEuroOptions)).
-std::string apply_filter(const json& j, const std::string& where, OneEuroOptions& filter) {
-  if (!j.is_object()) return where + ": expected an object like {\"enabled\": true, \"min_cutoff_hz\": 1.0}";
-  std::string error;
-  for (const auto& [key, value] : j.items()) {
-    const std::string w = where + "." + key;
-    bool ok = true;
-    if (key == "enabled") ok = get_value(value, w, filter.enabled, error);
-    else if (key == "min_cutoff_hz") ok = get_value(value, w, filter.min_cutoff_hz, error);
-    else if (key == "beta_per_m_s") ok = get_value(value, w, filter.beta_per_m_s, error);
-    else if (key == "d_cutoff_hz") ok = get_value(value, w, filter.d_cutoff_hz, error);
-    else if (key == "rot_min_cutoff_hz") ok = get_value(value, w, filter.rot_min_cutoff_hz, error);
-    else if (key == "rot_beta_per_rad_s") ok = get_value(value, w, filter.rot_beta_per_rad_s, error);
-    else
-      return w + ": unknown key (expected enabled, min_cutoff_hz, beta_per_m_s, d_cutoff_hz, rot_min_cutoff_hz, "
-                 "rot_beta_per_rad_s; docs/daemon.md, \"Tracker filter\")";
-    if (!ok) return error;
-  }
-  return {};
-}
-
-std::string apply_sim(const json& j, const std::string& where, SimOptions& sim) {
-  if (!j.is_object()) return where + ": expected an object";
-  std::string error;
-  for (const auto& [key, value] : j.items()) {
-    const std::string w = where + "." + key;
-    bool ok = true;
-    if (key == "rate_hz") ok = get_value(value, w, sim.rate_hz, error);
-    else if (key == "head_rate_hz") ok = get_value(value, w, sim.role_rate_hz[0], error);
-    else if (key == "left_hand_rate_hz") ok = get_value(value, w, sim.role_rate_hz[1], error);
-    else if (key == "right_hand_rate_hz") ok = get_value(value, w, sim.role_rate_hz[2], error);
-    else if (key == "position_noise_mm") ok = get_value(value, w, sim.position_noise_mm, error);
-    else if (key == "rotation_noise_deg") ok = get_value(value, w, sim.rotation_noise_deg, error);
-    else if (key == "latency_ms") ok = get_value(value, w, sim.latency_ms, error);
-    else if (key == "jitter_ms") ok = get_value(value, w, sim.jitter_ms, error);
-    else if (key == "dropout_rate_hz") ok = get_value(value, w, sim.dropout_rate_hz, error);
-    else if (key == "dropout_mean_ms") ok = get_value(value, w, sim.dropout_mean_ms, error);
-    else if (key == "seed") ok = get_value(value, w, sim.seed, error);
-    else return w + ": unknown key (see docs/daemon.md, \"sim\")";
-    if (!ok) return error;
-  }
-  return {};
-}
-
 // "outputs": a list of specs ("vrchat:127.0.0.1:9000?slots=hip,feet") or objects
 // {"type": "vrchat", "target": "127.0.0.1:9000", "slots": ["hip", "feet"], "rate": 60}
 // (docs/outputs.md). Objects become specs; the output checks its options when it is made.
-std::string apply_outputs(const json& j, const std::string& where, DaemonConfig& config) {
+std::string read_outputs(const json& j, const std::string& where, DaemonConfig& config) {
   if (!j.is_array()) return where + ": expected an array of output specs (\"vrchat:127.0.0.1:9000\") or objects";
   config.outputs.clear();
   for (std::size_t i = 0; i < j.size(); ++i) {
@@ -215,8 +332,6 @@ std::string apply_outputs(const json& j, const std::string& where, DaemonConfig&
   return {};
 }
 
-}  // namespace
-
 // Searched at run time (bodyd/paths/data_files.h): installed, user's, or the build's source tree.
 std::filesystem::path bundled_recording_path() { return paths::find_data_file("data/demo/walk.csv").path; }
 std::filesystem::path bundled_skeleton_path() { return paths::find_data_file("data/demo/skeleton.bvh").path; }
@@ -228,55 +343,26 @@ std::filesystem::path default_model_path() { return paths::find_data_file("model
 
 std::string apply_config_json(const json& j, const std::string& source, DaemonConfig& config) {
   if (!j.is_object()) return source + ": the config must be a JSON object {\"key\": value, ...}";
-  std::string error;
   for (const auto& [key, value] : j.items()) {
     const std::string w = source + ": " + key;
-    bool ok = true;
-    if (key == "sources") {
-      if (!value.is_array()) return w + ": expected an array of strings like \"replay:FILE\"";
-      config.sources.clear();
-      for (const auto& s : value) {
-        std::string spec;
-        if (!get_value(s, w, spec, error)) return error;
-        config.sources.push_back(spec);
+    if (const ConfigKey* row = find_key("", key)) {
+      if (std::string e = read_key(*row, value, w, config); !e.empty()) return e;
+    } else if (const ConfigGroup* group = find_group(key)) {
+      if (!value.is_object()) return w + ": " + std::string(group->not_object);
+      for (const auto& [inner, inner_value] : value.items()) {
+        const std::string wi = w + "." + inner;
+        const ConfigKey* inner_row = find_key(group->name, inner);
+        if (!inner_row) {
+          std::string message(group->unknown_key);
+          if (const auto at = message.find("{keys}"); at != std::string::npos)
+            message.replace(at, 6, group_keys(group->name));
+          return wi + ": " + message;
+        }
+        if (std::string e = read_key(*inner_row, inner_value, wi, config); !e.empty()) return e;
       }
-    } else if (key == "outputs") {
-      if (std::string e = apply_outputs(value, w, config); !e.empty()) return e;
-    } else if (key == "fast") ok = get_value(value, w, config.fast, error);
-    else if (key == "replay_speed") ok = get_value(value, w, config.replay_speed, error);
-    else if (key == "loop") ok = get_value(value, w, config.loop, error);
-    else if (key == "exit_at_end") ok = get_value(value, w, config.exit_at_end, error);
-    else if (key == "sim") {
-      if (std::string e = apply_sim(value, w, config.sim); !e.empty()) return e;
-    } else if (key == "pub") ok = get_value(value, w, config.pub_endpoint, error);
-    else if (key == "control") ok = get_value(value, w, config.control_endpoint, error);
-    else if (key == "allow_remote") ok = get_value(value, w, config.allow_remote, error);
-    else if (key == "curve_secret_key") ok = get_value(value, w, config.curve_secret_key_file, error);
-    else if (key == "curve_allow") ok = get_value(value, w, config.curve_allow_dir, error);
-    else if (key == "send_hwm") ok = get_value(value, w, config.send_hwm, error);
-    else if (key == "wait_for_subscriber") ok = get_value(value, w, config.wait_for_subscriber, error);
-    else if (key == "endpoints_file") ok = get_value(value, w, config.endpoints_file, error);
-    else if (key == "record_trackers") ok = get_value(value, w, config.record_trackers_file, error);
-    else if (key == "mounting_file") ok = get_value(value, w, config.mounting_file, error);
-    else if (key == "overwrite") ok = get_value(value, w, config.record_trackers_overwrite, error);
-    else if (key == "rate_hz") ok = get_value(value, w, config.rate_hz, error);
-    else if (key == "queue_capacity") ok = get_value(value, w, config.queue_capacity, error);
-    else if (key == "queue_max_age_ms") ok = get_value(value, w, config.queue_max_age_ms, error);
-    else if (key == "method") ok = get_value(value, w, config.method, error);
-    else if (key == "model") ok = get_value(value, w, config.model_path, error);
-    else if (key == "models_dir") ok = get_value(value, w, config.models_dir, error);
-    else if (key == "user_height_m") ok = get_value(value, w, config.user_height_m, error);
-    else if (key == "head_height_m") ok = get_value(value, w, config.head_height_m, error);
-    else if (key == "auto_calibrate") ok = get_value(value, w, config.auto_calibrate, error);
-    else if (key == "filter") {
-      if (std::string e = apply_filter(value, w, config.filter); !e.empty()) return e;
+    } else {
+      return w + ": unknown key (the keys are listed in docs/daemon.md)";
     }
-    else if (key == "skeleton") ok = get_value(value, w, config.skeleton_path, error);
-    else if (key == "offsets") {
-      if (std::string e = apply_offsets(value, w, config); !e.empty()) return e;
-    } else if (key == "log_level") ok = get_value(value, w, config.log_level, error);
-    else return w + ": unknown key (the keys are listed in docs/daemon.md)";
-    if (!ok) return error;
   }
   return {};
 }
@@ -356,37 +442,18 @@ std::string parse_offset_flag(const std::string& text, DaemonConfig& config) {
 }
 
 std::string validate_config(const DaemonConfig& c) {
+  // Each key's own range or choices (its row), then what concerns several keys.
+  for (const ConfigKey& row : config_keys())
+    if (std::string e = check_key(row, c); !e.empty()) return e;
   if (!c.curve_allow_dir.empty() && c.curve_secret_key_file.empty())
     return "curve_allow (--curve-allow) needs curve_secret_key (--curve-secret-key): the allow-list is of CURVE clients";
-  if (!(c.replay_speed > 0.0) || !(c.replay_speed <= limits::kMaxReplaySpeed))
-    return "replay_speed (--speed) must be > 0 and at most " + fmt_number(limits::kMaxReplaySpeed) + ", not " +
-           fmt_number(c.replay_speed) + " (use --fast to replay as fast as possible)";
-  if (!(c.rate_hz >= 0.0) || !(c.rate_hz <= limits::kMaxRateHz))
-    return "rate_hz must be between 0 (one pose per head sample) and " + fmt_number(limits::kMaxRateHz) + ", not " +
-           fmt_number(c.rate_hz);
-  if (c.queue_capacity < 16 || c.queue_capacity > (1u << 20)) return "queue_capacity must be in 16 .. 1048576";
-  if (!(c.queue_max_age_ms >= 0.0) || !(c.queue_max_age_ms <= 60000.0))
-    return "queue_max_age_ms (--queue-max-age-ms) must be between 0 (never drop for age) and 60000, not " +
-           fmt_number(c.queue_max_age_ms);
-  if (c.send_hwm < 1) return "send_hwm must be >= 1";
   // A wildcard port (tcp://127.0.0.1:*) gives each socket its own ephemeral port.
   if (c.pub_endpoint == c.control_endpoint && !c.pub_endpoint.ends_with(":*") && !c.pub_endpoint.ends_with(":0"))
     return "pub and control are the same endpoint (" + c.pub_endpoint + "): give each socket its own";
-  if (c.method != "diffusion" && c.method != "ik") return "method \"" + c.method + "\": expected diffusion or ik";
-  for (auto [name, h] : {std::pair{"user_height_m", c.user_height_m}, std::pair{"head_height_m", c.head_height_m}}) {
-    if (!std::isfinite(h) || h < 0.0 || h > limits::kMaxUserHeightM || (h > 0.0 && h < limits::kMinUserHeightM))
-      return std::string(name) + " must be 0 (the model's size) or a height in metres between " +
-             fmt_number(limits::kMinUserHeightM) + " and " + fmt_number(limits::kMaxUserHeightM) + " (e.g. 1.75), not " +
-             fmt_number(h);
-  }
   if (c.user_height_m > 0.0 && c.head_height_m > 0.0)
     return "give user_height_m (body height) or head_height_m (standing head height), not both";
   if (std::string e = validate(c.filter); !e.empty())
     return e + " (the \"filter\" keys: docs/daemon.md, \"Tracker filter\")";
-  static const char* kLevels[] = {"trace", "debug", "info", "warn", "error", "critical", "off"};
-  bool level_ok = false;
-  for (const char* l : kLevels) level_ok |= c.log_level == l;
-  if (!level_ok) return "log_level \"" + c.log_level + "\": expected trace, debug, info, warn, error, critical or off";
   if (c.exit_at_end && c.loop) return "exit_at_end and loop contradict each other: a looped replay never ends";
   if (const std::string e = c.sim.validate(); !e.empty()) return "sim: " + e;
   return {};
@@ -408,64 +475,12 @@ std::string check_specs(const DaemonConfig& c) {
 }
 
 json config_to_json(const DaemonConfig& c) {
-  json offsets = json::object();
-  for (Role r : kRoles) {
-    const auto& o = c.offsets[static_cast<int>(r)];
-    if (!o) continue;
-    offsets[std::string(role_name(r))] = {
-        {"position_m", {o->position_m.x(), o->position_m.y(), o->position_m.z()}},
-        {"rotation_xyzw", {o->rotation.x(), o->rotation.y(), o->rotation.z(), o->rotation.w()}}};
+  json out = json::object();
+  for (const ConfigKey& row : config_keys()) {
+    json& slot = row.group.empty() ? out[std::string(row.name)] : out[std::string(row.group)][std::string(row.name)];
+    slot = print_key(row, c);
   }
-  return json{
-      {"sources", c.sources},
-      {"fast", c.fast},
-      {"replay_speed", c.replay_speed},
-      {"loop", c.loop},
-      {"exit_at_end", c.exit_at_end},
-      {"sim",
-       {{"rate_hz", c.sim.rate_hz},
-        {"head_rate_hz", c.sim.role_rate_hz[0]},
-        {"left_hand_rate_hz", c.sim.role_rate_hz[1]},
-        {"right_hand_rate_hz", c.sim.role_rate_hz[2]},
-        {"position_noise_mm", c.sim.position_noise_mm},
-        {"rotation_noise_deg", c.sim.rotation_noise_deg},
-        {"latency_ms", c.sim.latency_ms},
-        {"jitter_ms", c.sim.jitter_ms},
-        {"dropout_rate_hz", c.sim.dropout_rate_hz},
-        {"dropout_mean_ms", c.sim.dropout_mean_ms},
-        {"seed", c.sim.seed}}},
-      {"pub", c.pub_endpoint},
-      {"control", c.control_endpoint},
-      {"allow_remote", c.allow_remote},
-      {"curve_secret_key", c.curve_secret_key_file},
-      {"curve_allow", c.curve_allow_dir},
-      {"send_hwm", c.send_hwm},
-      {"wait_for_subscriber", c.wait_for_subscriber},
-      {"endpoints_file", c.endpoints_file},
-      {"record_trackers", c.record_trackers_file},
-      {"mounting_file", c.mounting_file},
-      {"overwrite", c.record_trackers_overwrite},
-      {"outputs", c.outputs},
-      {"rate_hz", c.rate_hz},
-      {"queue_capacity", c.queue_capacity},
-      {"queue_max_age_ms", c.queue_max_age_ms},
-      {"method", c.method},
-      {"model", c.model_path},
-      {"models_dir", c.models_dir},
-      {"skeleton", c.skeleton_path},
-      {"user_height_m", c.user_height_m},
-      {"head_height_m", c.head_height_m},
-      {"auto_calibrate", c.auto_calibrate},
-      {"filter",
-       {{"enabled", c.filter.enabled},
-        {"min_cutoff_hz", c.filter.min_cutoff_hz},
-        {"beta_per_m_s", c.filter.beta_per_m_s},
-        {"d_cutoff_hz", c.filter.d_cutoff_hz},
-        {"rot_min_cutoff_hz", c.filter.rot_min_cutoff_hz},
-        {"rot_beta_per_rad_s", c.filter.rot_beta_per_rad_s}}},
-      {"offsets", offsets},
-      {"log_level", c.log_level},
-  };
+  return out;
 }
 
 CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& config) {
@@ -512,61 +527,35 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
   app.add_flag("--user-config", user_config,
                "read $XDG_CONFIG_HOME/bodyd/config.json (~/.config/bodyd/config.json) when it exists, before --config");
 
-  std::vector<std::string> source_flags, replay_flags, sim_flags, offset_flags;
-  app.add_option("--source", source_flags,
-                 "tracker source: " + drivers::source_syntax_list(", ") +
-                     " (docs/drivers.md, docs/vr-apps.md); repeatable. Default: the bundled recording, looped");
+  // One flag per key that has one (its row); a list key's values are collected here and
+  // replace the file's list when given.
+  std::deque<std::pair<const ConfigKey*, std::vector<std::string>>> list_flags;
+  for (const ConfigKey& row : config_keys()) {
+    if (row.flag.empty()) continue;
+    CLI::Option* option = std::visit(
+        [&](auto field) -> CLI::Option* {
+          if constexpr (std::is_same_v<decltype(field), const SimOptionKey*>) {
+            return std::visit([&](auto sim_field) { return app.add_option(row.flag, sim_field(config.sim), row.help); },
+                              field->field);
+          } else {
+            auto& member = field(config);
+            using T = std::remove_reference_t<decltype(member)>;
+            if constexpr (std::is_same_v<T, bool>) {
+              return app.add_flag(row.flag, member, row.help);
+            } else if constexpr (std::is_same_v<T, std::vector<std::string>> || std::is_same_v<T, DeviceOffsets>) {
+              return app.add_option(row.flag, list_flags.emplace_back(&row, std::vector<std::string>{}).second, row.help);
+            } else {
+              return app.add_option(row.flag, member, row.help);
+            }
+          }
+        },
+        row.field);
+    if (row.flag_check == FlagCheck::Positive) option->check(CLI::PositiveNumber);
+    if (row.flag_check == FlagCheck::NonNegative) option->check(CLI::NonNegativeNumber);
+  }
+  std::vector<std::string> replay_flags, sim_flags;
   app.add_option("--replay", replay_flags, "replay a tracker log (same as --source replay:LOG)");
   app.add_option("--sim", sim_flags, "simulated trackers from a BVH clip (same as --source sim:FILE.bvh)");
-  app.add_flag("--fast", config.fast, "replay as fast as possible (lossless) instead of at the log's pace");
-  app.add_option("--speed", config.replay_speed, "paced replay speed factor")->check(CLI::PositiveNumber);
-  app.add_flag("--loop", config.loop, "start replays again at the end");
-  app.add_flag("--exit-at-end", config.exit_at_end, "exit when every replay has been published");
-  app.add_option("--sim-seed", config.sim.seed, "random seed of the simulated trackers");
-  app.add_option("--pub", config.pub_endpoint, "pose stream endpoint (PUB), e.g. tcp://127.0.0.1:5570");
-  std::vector<std::string> output_flags;
-  app.add_option("--output", output_flags,
-                 "another output, SCHEME:TARGET[?KEY=VALUE&...], e.g. vrchat:127.0.0.1:9000?slots=hip,feet "
-                 "(docs/outputs.md); repeatable");
-  app.add_option("--control", config.control_endpoint, "control endpoint (REP, JSON), or \"none\"");
-  app.add_flag("--allow-remote", config.allow_remote,
-               "allow binding to non-loopback addresses: ZeroMQ sockets (use CURVE!) and the vrchat:/vmc:/udp: "
-               "inputs (OSC and UDP have no authentication)");
-  app.add_option("--curve-secret-key", config.curve_secret_key_file,
-                 "CURVE server secret key file (from --gen-keys): encrypt and authenticate both sockets");
-  app.add_option("--send-hwm", config.send_hwm, "poses queued per subscriber before dropping")->check(CLI::PositiveNumber);
-  app.add_flag("--wait-for-subscriber", config.wait_for_subscriber,
-               "start the sources only when a subscriber has subscribed");
-  app.add_option("--endpoints-file", config.endpoints_file, "write the bound endpoints here as JSON");
-  app.add_option("--curve-allow", config.curve_allow_dir,
-                 "only clients whose public key is in DIR (NAME.public files) may connect (needs --curve-secret-key)");
-  app.add_option("--mounting-file", config.mounting_file,
-                 "keep the calibration pose's device mountings in this JSON file across restarts (docs/daemon.md)");
-  app.add_option("--record-trackers", config.record_trackers_file,
-                 "write every tracker sample received to FILE (tracker log v1; replay it with --replay FILE --fast)");
-  app.add_flag("--overwrite", config.record_trackers_overwrite,
-               "--record-trackers may replace an existing file (without it an existing file is refused)");
-  app.add_option("--rate-hz", config.rate_hz, "output rate limit; 0: one pose per head sample")->check(CLI::NonNegativeNumber);
-  app.add_option("--queue-capacity", config.queue_capacity, "tracker samples the queue holds");
-  app.add_option("--queue-max-age-ms", config.queue_max_age_ms,
-                 "drop queued samples that arrived more than this before the newest (0: never)");
-  app.add_option("--method", config.method, "reconstruction: diffusion (default) or ik");
-  app.add_option("--model", config.model_path, "model file (default models/bodyd-default.safetensors)");
-  app.add_option("--models-dir", config.models_dir,
-                 "reload-model loads only --model or files under this directory (default: the default model's)");
-  app.add_option("--skeleton", config.skeleton_path, "BVH file whose skeleton the ik method uses (default: bundled)");
-  app.add_option("--user-height-m", config.user_height_m,
-                 "user's body height in metres (approximate scaling; 0: the model's size)");
-  app.add_option("--head-height-m", config.head_height_m,
-                 "user's standing head height in metres (exact scaling; 0: the model's size)");
-  app.add_flag("!--no-auto-calibrate", config.auto_calibrate,
-               "do not calibrate the user's size from the head's first still half second (docs/daemon.md, "
-               "\"Calibration\")");
-  bool no_filter = false;
-  app.add_flag("--no-filter", no_filter, "no One Euro filter on the tracker samples (config \"filter\": {\"enabled\": false})");
-  app.add_option("--offset", offset_flags,
-                 "device offset ROLE=x,y,z[,qx,qy,qz,qw] (metres; rotation x,y,z,w), repeatable");
-  app.add_option("--log-level", config.log_level, "trace, debug, info, warn, error, off");
   std::string gen_keys_dir;
   app.add_option("--gen-keys", gen_keys_dir, "write a CURVE key pair to DIR (server.public, server.secret) and exit");
   std::string gen_keys_client;
@@ -586,22 +575,26 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
     result.exit_code = app.exit(e) == 0 ? 0 : 2;
     return result;
   }
-  std::vector<std::string> sources = source_flags;
-  for (const auto& r : replay_flags) sources.push_back("replay:" + r);
-  for (const auto& s : sim_flags) sources.push_back("sim:" + s);
-  if (!sources.empty()) config.sources = sources;
-  if (!output_flags.empty()) config.outputs = output_flags;
-  if (no_filter) config.filter.enabled = false;
-  // The systemd unit's daemon keeps its calibration pose across restarts by default.
-  if (user_config && config.mounting_file.empty()) config.mounting_file = paths::user_state_file("mounting.json").string();
-  for (const auto& o : offset_flags) {
-    if (std::string e = parse_offset_flag(o, config); !e.empty()) {
-      std::cerr << "bodyd: " << e << "\n";
-      result.action = CliResult::Action::Exit;
-      result.exit_code = 2;
-      return result;
+  for (auto& [row, values] : list_flags) {
+    if (row->name == "sources") {  // --replay LOG and --sim FILE are --source replay:LOG, sim:FILE
+      for (const auto& r : replay_flags) values.push_back("replay:" + r);
+      for (const auto& s : sim_flags) values.push_back("sim:" + s);
+    }
+    if (std::holds_alternative<ConfigRef<DeviceOffsets>>(row->field)) {
+      for (const auto& o : values) {
+        if (std::string e = parse_offset_flag(o, config); !e.empty()) {
+          std::cerr << "bodyd: " << e << "\n";
+          result.action = CliResult::Action::Exit;
+          result.exit_code = 2;
+          return result;
+        }
+      }
+    } else if (!values.empty()) {
+      std::get<ConfigRef<std::vector<std::string>>>(row->field)(config) = values;
     }
   }
+  // The systemd unit's daemon keeps its calibration pose across restarts by default.
+  if (user_config && config.mounting_file.empty()) config.mounting_file = paths::user_state_file("mounting.json").string();
   if (list_devices) {
     result.action = CliResult::Action::ListDevices;
     return result;

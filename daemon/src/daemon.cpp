@@ -62,10 +62,11 @@ namespace {
 constexpr auto kPopTimeout = std::chrono::milliseconds(20);
 constexpr std::int64_t kOutputErrorLogPeriodNs = 10'000'000'000;  // one log line per output per 10 s
 
-// config.queue_max_age_ms as the queue takes it (validate_config checks 0 .. 60000; a Daemon
-// built from an unchecked config gets it clamped, never a throw).
+// config.queue_max_age_ms as the queue takes it (validate_config checks the key's range; a
+// Daemon built from an unchecked config gets it clamped to that range, never a throw).
 std::chrono::nanoseconds queue_max_age(const DaemonConfig& config) {
-  const double ms = std::clamp(std::isfinite(config.queue_max_age_ms) ? config.queue_max_age_ms : 0.0, 0.0, 60000.0);
+  const double ms =
+      std::clamp(std::isfinite(config.queue_max_age_ms) ? config.queue_max_age_ms : 0.0, 0.0, kMaxQueueMaxAgeMs);
   return std::chrono::nanoseconds(static_cast<std::int64_t>(ms * 1e6));
 }
 
@@ -196,7 +197,7 @@ struct Daemon::Impl final : ControlTarget {
   Impl(DaemonConfig c, ReconstructorFactory f)
       : config(std::move(c)),
         factory(std::move(f)),
-        queue(std::max<std::size_t>(config.queue_capacity, 16), queue_max_age(config)),
+        queue(std::max(config.queue_capacity, kMinQueueCapacity), queue_max_age(config)),
         rate_gate(config.rate_hz),
         conditioner(config.offsets) {
     for (const auto& o : config.offsets) offsets_configured |= o.has_value();

@@ -1,6 +1,7 @@
 // The daemon's configuration: every key of the config file (JSON, docs/daemon.md) and every
 // command-line flag ends up in DaemonConfig. Flags override the file; the file overrides the
-// defaults below.
+// defaults below. Each key is one row of the config key table (config_keys.h), which names its
+// member here, its flag, range and help.
 #pragma once
 
 #include "bodyd/inference/one_euro.h"
@@ -41,6 +42,12 @@ struct DaemonConfig;
 // when standing: between chin (0.87) and eye level (0.936) in the usual anthropometric tables
 // (Drillis and Contini 1966). An approximation: calibrating from the head is exact.
 inline constexpr double kHeadHeightPerStature = 0.90;
+
+// The accepted queue_capacity and queue_max_age_ms (validate_config; the Daemon clamps an
+// unchecked configuration to them).
+inline constexpr std::size_t kMinQueueCapacity = 16;
+inline constexpr std::size_t kMaxQueueCapacity = std::size_t{1} << 20;
+inline constexpr double kMaxQueueMaxAgeMs = 60000.0;
 
 struct DaemonConfig {
   // Tracker sources (replay:FILE, sim:FILE.bvh, ...). Empty: the bundled recording, looped
