@@ -10,10 +10,8 @@
 namespace bodyd::inference {
 namespace {
 
-std::shared_ptr<const Denoiser> make_mlpwin(const Model& model) { return std::make_shared<const Network>(model); }
-
 constexpr std::array kArchitectures = {
-    Architecture{kArchitectureMlpWin, &expected_tensors, &make_mlpwin},
+    Architecture{kArchitectureMlpWin, Network::kConfigFields, &Network::tensors, &Network::make},
 };
 
 }  // namespace
@@ -33,6 +31,15 @@ std::string architecture_names() {
     out += a.name;
   }
   return out;
+}
+
+TensorShapes expected_tensors(const Architecture& arch, const ModelConfig& config) {
+  TensorShapes v = arch.tensors(config);
+  const std::int64_t D = config.dim(), T = config.steps();
+  v.emplace_back("norm.mean", std::vector<std::int64_t>{D});
+  v.emplace_back("norm.std", std::vector<std::int64_t>{D});
+  v.emplace_back("diffusion.alpha_bar", std::vector<std::int64_t>{T});
+  return v;
 }
 
 std::shared_ptr<const Denoiser> make_denoiser(const Model& model) {

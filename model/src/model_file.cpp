@@ -26,8 +26,6 @@ static_assert(std::endian::native == std::endian::little, "model files are littl
 // Headers of real models are a few kB; anything above this is a corrupt length field
 // (safetensors uses the same limit).
 constexpr std::uint64_t kMaxHeaderBytes = 100u * 1024u * 1024u;
-// Upper bound on any single config entry: keeps every size product far from overflow.
-constexpr int kMaxConfigValue = 1 << 16;
 constexpr std::string_view kSha256Prefix = "sha256:";
 constexpr std::size_t kSha256HexChars = 64;
 // No model comes near this (the default is about 11 MB); a larger file is not read at all.
@@ -94,26 +92,39 @@ Json parse_meta_json(const std::string& source, std::string_view key, const std:
   }
 }
 
-NetConfig parse_config(const std::string& source, const std::string& text) {
+// Metadata "config": the fields `arch` names, each an integer in [1, its max] and a multiple of its
+// multiple_of, in the row's order; then the generic W, D, T, and D == features::kDim.
+ModelConfig parse_config(const std::string& source, const std::string& text, const Architecture& arch) {
   const Json j = parse_meta_json(source, "config", text);
-  if (!j.is_object()) fail(source, "metadata \"config\" must be a JSON object {W,D,E,H,L,TE,T}");
-  NetConfig c;
-  const std::pair<const char*, int*> keys[] = {{"W", &c.W}, {"D", &c.D},   {"E", &c.E}, {"H", &c.H},
-                                               {"L", &c.L}, {"TE", &c.TE}, {"T", &c.T}};
-  for (auto [key, dst] : keys) {
+  if (!j.is_object()) {
+    std::string keys;
+    for (const ConfigField& f : arch.config) keys += (keys.empty() ? "" : ",") + std::string(f.key);
+    fail(source, fmt::format("metadata \"config\" must be a JSON object {{{}}}", keys));
+  }
+  ModelConfig c;
+  for (const ConfigField& field : arch.config) {
+    const std::string key(field.key);
     auto it = j.find(key);
     if (it == j.end()) fail(source, fmt::format("config key \"{}\" is missing (config: {})", key, text));
-    auto v = json_uint(*it, kMaxConfigValue);
-    if (!v || *v < 1) {
-      fail(source, fmt::format("config \"{}\" must be an integer in [1, {}], got {}", key, kMaxConfigValue, it->dump()));
+    const int max = std::min(field.max, kMaxConfigValue);
+    auto v = json_uint(*it, static_cast<std::uint64_t>(max));
+    if (!v || *v < 1) fail(source, fmt::format("config \"{}\" must be an integer in [1, {}], got {}", key, max, it->dump()));
+    const int value = static_cast<int>(*v);
+    if (field.multiple_of > 1 && value % field.multiple_of != 0) {
+      fail(source, field.multiple_of == 2
+                       ? fmt::format("config \"{}\" must be even, got {}", key, value)
+                       : fmt::format("config \"{}\" must be a multiple of {}, got {}", key, field.multiple_of, value));
     }
-    *dst = static_cast<int>(*v);
+    c.set(key, value);
   }
-  if (c.TE % 2 != 0) fail(source, fmt::format("config \"TE\" must be even, got {}", c.TE));
-  if (c.D != features::kDim) {
+  for (std::string_view key : {kConfigFrames, kConfigFeatures, kConfigSteps}) {
+    // A row without them is a bug of this build, not of the file.
+    if (!c.find(key)) throw std::logic_error(fmt::format("architecture {}: its config lacks \"{}\"", arch.name, key));
+  }
+  if (c.dim() != features::kDim) {
     fail(source, fmt::format("config \"D\" is {} but this build's features have kDim = {} (feature_version {}); "
                              "use a model trained for this version",
-                             c.D, features::kDim, features::kVersion));
+                             c.dim(), features::kDim, features::kVersion));
   }
   return c;
 }
@@ -391,37 +402,35 @@ TensorFile read_tensor_file(const std::filesystem::path& path) {
   return parse_tensor_file(bytes, path.string());
 }
 
-std::vector<std::pair<std::string, std::vector<std::int64_t>>> expected_tensors(const NetConfig& c) {
-  using Shape = std::vector<std::int64_t>;
-  std::vector<std::pair<std::string, Shape>> v;
-  // In 64 bits: config values are at most 2^16, so products like W * E cannot overflow.
-  const std::int64_t W = c.W, D = c.D, E = c.E, H = c.H, TE = c.TE, T = c.T;
-  auto linear = [&](const std::string& name, std::int64_t in, std::int64_t out) {
-    v.emplace_back(name + ".weight", Shape{out, in});
-    v.emplace_back(name + ".bias", Shape{out});
-  };
-  auto norm = [&](const std::string& name, std::int64_t n) {
-    v.emplace_back(name + ".weight", Shape{n});
-    v.emplace_back(name + ".bias", Shape{n});
-  };
-  linear("enc", 2 * D, E);
-  linear("inp", W * E, H);
-  linear("time1", TE, H);
-  linear("time2", H, H);
-  for (int b = 0; b < c.L; ++b) {
-    const std::string p = fmt::format("blocks.{}.", b);
-    norm(p + "norm", H);
-    linear(p + "fc1", H, H);
-    linear(p + "fc2", H, H);
+ModelConfig::ModelConfig(std::initializer_list<std::pair<std::string, int>> values) {
+  for (const auto& [key, value] : values) set(key, value);
+}
+
+std::optional<int> ModelConfig::find(std::string_view key) const {
+  for (const auto& [k, v] : values_)
+    if (k == key) return v;
+  return std::nullopt;
+}
+
+int ModelConfig::at(std::string_view key) const {
+  if (auto v = find(key)) return *v;
+  throw ModelFileError(fmt::format("model config: key \"{}\" is missing (config: {})", key, to_string()));
+}
+
+void ModelConfig::set(std::string_view key, int value) {
+  for (auto& [k, v] : values_) {
+    if (k == key) {
+      v = value;
+      return;
+    }
   }
-  norm("out_norm", H);
-  linear("out", H, W * E);
-  linear("dec1", 2 * E, E);
-  linear("dec2", E, D);
-  v.emplace_back("norm.mean", Shape{D});
-  v.emplace_back("norm.std", Shape{D});
-  v.emplace_back("diffusion.alpha_bar", Shape{T});
-  return v;
+  values_.emplace_back(std::string(key), value);
+}
+
+std::string ModelConfig::to_string() const {
+  std::string out;
+  for (const auto& [k, v] : values_) out += fmt::format("{}{}={}", out.empty() ? "" : " ", k, v);
+  return out;
 }
 
 const TensorF32& Model::tensor(std::string_view name) const {
@@ -462,7 +471,7 @@ Model parse_model(std::span<const std::byte> bytes, const std::string& source) {
                              "with the current features",
                              m.feature_version, features::kVersion));
   }
-  m.config = parse_config(source, require_meta(source, file, "config"));
+  m.config = parse_config(source, require_meta(source, file, "config"), *architecture);
   m.skeleton = parse_skeleton(source, require_meta(source, file, "skeleton"));
   m.fps = parse_double_meta(source, "fps", require_meta(source, file, "fps"));
   if (m.fps <= 0.0) fail(source, fmt::format("metadata \"fps\" must be > 0, got {}", m.fps));
@@ -472,16 +481,15 @@ Model parse_model(std::span<const std::byte> bytes, const std::string& source) {
   }
 
   // Tensors: exactly the expected set, with exactly the expected shapes, all finite.
-  const auto expected = architecture->expected_tensors(m.config);
+  const TensorShapes expected = expected_tensors(*architecture, m.config);
   std::set<std::string, std::less<>> expected_names;
   for (const auto& [name, shape] : expected) {
     expected_names.insert(name);
     auto it = file.tensors.find(name);
     if (it == file.tensors.end()) fail(source, fmt::format("tensor \"{}\" (shape {}) is missing", name, shape_str(shape)));
     if (it->second.shape != shape) {
-      fail(source, fmt::format("tensor \"{}\" has shape {}, expected {} for config W={} D={} E={} H={} L={} TE={} T={}", name,
-                               shape_str(it->second.shape), shape_str(shape), m.config.W, m.config.D, m.config.E,
-                               m.config.H, m.config.L, m.config.TE, m.config.T));
+      fail(source, fmt::format("tensor \"{}\" has shape {}, expected {} for config {}", name, shape_str(it->second.shape),
+                               shape_str(shape), m.config.to_string()));
     }
     const auto& d = it->second.data;
     if (auto bad = std::find_if(d.begin(), d.end(), [](float x) { return !std::isfinite(x); }); bad != d.end()) {
@@ -490,8 +498,8 @@ Model parse_model(std::span<const std::byte> bytes, const std::string& source) {
   }
   for (const auto& [name, t] : file.tensors) {
     if (!expected_names.contains(name)) {
-      fail(source, fmt::format("unexpected tensor \"{}\" (shape {}) for architecture {} with L={}", name, shape_str(t.shape),
-                               arch, m.config.L));
+      fail(source, fmt::format("unexpected tensor \"{}\" (shape {}) for architecture {} with config {}", name,
+                               shape_str(t.shape), arch, m.config.to_string()));
     }
   }
 

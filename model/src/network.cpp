@@ -59,9 +59,50 @@ void timestep_embedding(int t, std::span<double> out) {
   }
 }
 
+MlpWinConfig MlpWinConfig::from(const ModelConfig& c) {
+  return MlpWinConfig{c.at("W"), c.at("D"), c.at("E"), c.at("H"), c.at("L"), c.at("TE"), c.at("T")};
+}
+
+ModelConfig MlpWinConfig::to_model_config() const {
+  return ModelConfig{{"W", W}, {"D", D}, {"E", E}, {"H", H}, {"L", L}, {"TE", TE}, {"T", T}};
+}
+
+TensorShapes Network::tensors(const ModelConfig& config) {
+  using Shape = std::vector<std::int64_t>;
+  const MlpWinConfig c = MlpWinConfig::from(config);
+  TensorShapes v;
+  // In 64 bits: config values are at most 2^16, so products like W * E cannot overflow.
+  const std::int64_t W = c.W, D = c.D, E = c.E, H = c.H, TE = c.TE;
+  auto linear = [&](const std::string& name, std::int64_t in, std::int64_t out) {
+    v.emplace_back(name + ".weight", Shape{out, in});
+    v.emplace_back(name + ".bias", Shape{out});
+  };
+  auto norm = [&](const std::string& name, std::int64_t n) {
+    v.emplace_back(name + ".weight", Shape{n});
+    v.emplace_back(name + ".bias", Shape{n});
+  };
+  linear("enc", 2 * D, E);
+  linear("inp", W * E, H);
+  linear("time1", TE, H);
+  linear("time2", H, H);
+  for (int b = 0; b < c.L; ++b) {
+    const std::string p = "blocks." + std::to_string(b) + ".";
+    norm(p + "norm", H);
+    linear(p + "fc1", H, H);
+    linear(p + "fc2", H, H);
+  }
+  norm("out_norm", H);
+  linear("out", H, W * E);
+  linear("dec1", 2 * E, E);
+  linear("dec2", E, D);
+  return v;
+}
+
+std::shared_ptr<const Denoiser> Network::make(const Model& model) { return std::make_shared<const Network>(model); }
+
 Network::Network(const Model& model)
-    : config_(model.config), alpha_bar_(model.alpha_bar), norm_mean_(model.norm_mean), norm_std_(model.norm_std) {
-  const NetConfig& c = config_;
+    : config_(MlpWinConfig::from(model.config)), alpha_bar_(model.alpha_bar), norm_mean_(model.norm_mean), norm_std_(model.norm_std) {
+  const MlpWinConfig& c = config_;
   const auto linear = [&](const std::string& name) {
     return Linear{to_matrix(model.tensor(name + ".weight")), to_vector(model.tensor(name + ".bias"))};
   };
@@ -102,7 +143,7 @@ Network::Network(const Model& model)
 
 NetworkScratch::NetworkScratch(const Network& network, int max_batch) : config_(network.config()), max_batch_(max_batch) {
   BODYD_REQUIRE(max_batch >= 1, "NetworkScratch needs max_batch >= 1");
-  const NetConfig& c = config_;
+  const MlpWinConfig& c = config_;
   e_.resize(c.E, c.W * max_batch);
   h_.resize(c.H, max_batch);
   n_.resize(c.H, max_batch);
@@ -124,7 +165,7 @@ void Network::forward(std::span<const float> x, std::span<const float> m, int t,
 
 void Network::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                       NetworkScratch& s) const {
-  const NetConfig& c = config_;
+  const MlpWinConfig& c = config_;
   const std::size_t window = static_cast<std::size_t>(c.W) * static_cast<std::size_t>(c.D);
   BODYD_REQUIRE(s.config_.W == c.W && s.config_.D == c.D && s.config_.E == c.E && s.config_.H == c.H,
                     "NetworkScratch was made for another network");

@@ -1,11 +1,12 @@
-// bodyd-bench-net: times Network::forward and a K-step DDIM sample of a model file on one thread.
+// bodyd-bench-net: times the denoiser's forward pass (whatever architecture the model file names)
+// and a K-step DDIM sample of a model file on one thread.
 //
 //   bodyd-bench-net --model MODEL.safetensors [--steps 4] [--guidance 1] [--runs 200]
 //
 // A default-size random model for benchmarking (no training needed):
 //   python3 training/model_net.py --random-model /tmp/random.safetensors
+#include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/model_file.h"
-#include "bodyd/inference/network.h"
 #include "bodyd/inference/sampler.h"
 
 #include <CLI/CLI.hpp>
@@ -66,27 +67,34 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "bodyd-bench-net: %s\n", e.what());
     return 1;
   }
-  const NetConfig& c = model->config;
-  auto net = std::make_shared<const Network>(*model);
+  std::shared_ptr<const Denoiser> net;
+  try {
+    net = make_denoiser(*model);
+  } catch (const ModelFileError& e) {
+    std::fprintf(stderr, "bodyd-bench-net: %s\n", e.what());
+    return 1;
+  }
   const std::size_t window = static_cast<std::size_t>(net->window_size());
+  const std::size_t dim = static_cast<std::size_t>(net->dim());
+  const int t_mid = net->steps() / 2;
 
   bodyd::inference::Rng rng(1);
   std::vector<float> x(window), m(window), out(window);
   for (std::size_t i = 0; i < window; ++i) {
     x[i] = rng.normal();
     // Head and hands style mask: a few feature columns observed in every frame.
-    m[i] = (i % static_cast<std::size_t>(c.D)) < 27 ? 1.0f : 0.0f;
+    m[i] = (i % dim) < 27 ? 1.0f : 0.0f;
   }
 
-  fmt::print("model {}: W={} D={} E={} H={} L={} TE={} T={}\n", model_path, c.W, c.D, c.E, c.H, c.L, c.TE, c.T);
-  NetworkScratch scratch(*net, 2);
-  const Stats fwd = time_runs(runs, [&] { net->forward(x, m, c.T / 2, out, scratch); });
+  fmt::print("model {}: {} {}\n", model_path, net->architecture(), model->config.to_string());
+  const auto scratch = net->make_scratch(2);
+  const Stats fwd = time_runs(runs, [&] { net->forward(x, m, t_mid, out, *scratch); });
   fmt::print("forward (batch 1):       median {:8.1f} us  p90 {:8.1f} us  min {:8.1f} us  ({} runs)\n", fwd.median_us,
              fwd.p90_us, fwd.min_us, runs);
   std::vector<float> x2(2 * window), m2(2 * window), out2(2 * window);
   std::copy(x.begin(), x.end(), x2.begin());
   std::copy(m.begin(), m.end(), m2.begin());
-  const Stats fwd2 = time_runs(runs, [&] { net->forward(x2, m2, c.T / 2, out2, scratch); });
+  const Stats fwd2 = time_runs(runs, [&] { net->forward(x2, m2, t_mid, out2, *scratch); });
   fmt::print("forward (batch 2):       median {:8.1f} us  p90 {:8.1f} us  min {:8.1f} us\n", fwd2.median_us, fwd2.p90_us,
              fwd2.min_us);
 

@@ -156,7 +156,7 @@ inline void fuzz_model(const std::uint8_t* data, std::size_t size) {
   }
   try {
     const inference::Model model = inference::parse_model(bytes, "fuzz.safetensors");
-    input_fuzz_check(model.norm_std.size() == static_cast<std::size_t>(model.config.D), "model: norm_std size");
+    input_fuzz_check(model.norm_std.size() == static_cast<std::size_t>(model.config.dim()), "model: norm_std size");
     for (float s : model.norm_std) input_fuzz_check(std::isfinite(s) && s > 0.0f, "model: norm_std not positive");
     input_fuzz_check(model.skeleton.validate().empty(), "model: invalid skeleton");
   } catch (const inference::ModelFileError&) {

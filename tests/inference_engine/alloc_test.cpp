@@ -83,7 +83,7 @@ TEST(Allocation, ForwardAndSampleDoNotAllocate) {
   if (!BODYD_COUNT_MALLOC) GTEST_SKIP() << "sanitizer build: malloc is not ours to count";
   const auto tiny = inference::load_model(tiny_model_path());
   // Default-size shapes, so Eigen takes the same product paths as with a real model.
-  const auto model = random_model(inference::NetConfig{20, 191, 64, 512, 2, 64, 100}, 1, *tiny);
+  const auto model = random_model(inference::MlpWinConfig{20, 191, 64, 512, 2, 64, 100}.to_model_config(), 1, *tiny);
   const auto net = std::make_shared<const Network>(model);
   const std::size_t n = static_cast<std::size_t>(net->window_size());
   std::vector<float> x(2 * n, 0.3f), m(2 * n, 0.0f), out(2 * n);

@@ -33,9 +33,11 @@ TEST(Denoiser, FactoryBuildsTheFilesArchitectureAndMatchesPyTorch) {
   const std::shared_ptr<const inference::Denoiser> denoiser = inference::make_denoiser(*model);
   ASSERT_NE(denoiser, nullptr);
   EXPECT_EQ(denoiser->architecture(), "mlpwin-v1");
-  EXPECT_EQ(denoiser->frames(), model->config.W);
-  EXPECT_EQ(denoiser->dim(), model->config.D);
-  EXPECT_EQ(denoiser->steps(), model->config.T);
+  EXPECT_EQ(denoiser->frames(), model->config.frames());
+  EXPECT_EQ(denoiser->dim(), model->config.dim());
+  EXPECT_EQ(denoiser->steps(), model->config.steps());
+  EXPECT_EQ(denoiser->frames(), 4);
+  EXPECT_EQ(denoiser->steps(), 10);
   EXPECT_NE(dynamic_cast<const inference::Network*>(denoiser.get()), nullptr);
   auto scratch = denoiser->make_scratch(1);
   ASSERT_NE(scratch, nullptr);

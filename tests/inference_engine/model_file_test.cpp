@@ -1,5 +1,6 @@
 // Model-file loader: the valid fixture loads with the expected content; every kind of broken
 // file (written to a temp dir from the valid fixture) fails with a ModelFileError naming the problem.
+#include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/features.h"
 #include "bodyd/inference/model_file.h"
 #include "bodyd/motion/bvh.h"
@@ -130,13 +131,13 @@ class ModelFileTest : public ::testing::Test {
 
 TEST_F(ModelFileTest, ValidFixtureLoads) {
   const auto m = inference::load_model(tiny_model_path());
-  EXPECT_EQ(m->config.W, 4);
-  EXPECT_EQ(m->config.D, features::kDim);
-  EXPECT_EQ(m->config.E, 8);
-  EXPECT_EQ(m->config.H, 16);
-  EXPECT_EQ(m->config.L, 1);
-  EXPECT_EQ(m->config.TE, 64);
-  EXPECT_EQ(m->config.T, 10);
+  // The config holds the fields of mlpwin-v1's row, in the row's order.
+  const std::vector<std::pair<std::string, int>> config = {{"W", 4},  {"D", features::kDim}, {"E", 8}, {"H", 16},
+                                                           {"L", 1},  {"TE", 64},            {"T", 10}};
+  EXPECT_EQ(m->config.values(), config);
+  EXPECT_EQ(m->config.frames(), 4);
+  EXPECT_EQ(m->config.dim(), features::kDim);
+  EXPECT_EQ(m->config.steps(), 10);
   EXPECT_EQ(m->feature_version, features::kVersion);
   EXPECT_DOUBLE_EQ(m->fps, 30.0);
   ASSERT_EQ(m->skeleton.size(), 22);
@@ -174,7 +175,9 @@ TEST_F(ModelFileTest, ReencodedFixtureStillLoads) {
 
 TEST_F(ModelFileTest, ExpectedTensorsMatchTheFile) {
   const auto m = inference::load_model(tiny_model_path());
-  const auto expected = inference::expected_tensors(m->config);
+  const auto* arch = inference::find_architecture(m->metadata.at("architecture"));
+  ASSERT_NE(arch, nullptr);
+  const auto expected = inference::expected_tensors(*arch, m->config);
   EXPECT_EQ(expected.size(), m->tensors.size());
   // 4 + 4 + 2*2 linears + 1 block * (norm + 2 linears) + out_norm + 3 linears = 17 pairs + 3 = ... count by hand:
   // enc, inp, time1, time2 (8) + blocks.0.{norm,fc1,fc2} (6) + out_norm, out, dec1, dec2 (8) + norm.mean/std, alpha_bar (3).

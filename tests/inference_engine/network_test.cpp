@@ -50,7 +50,7 @@ TEST(Network, MatchesPyTorchOnTheFixture) {
     EXPECT_LE(relative_error(reference_forward(*model, x, m, t), expected), kParityTolerance) << "case " << i;
     // And the check can fail: the output at another step differs by far more than the tolerance.
     std::vector<float> other(expected.size());
-    net.forward(x, m, (t + 3) % model->config.T, other, scratch);
+    net.forward(x, m, (t + 3) % model->config.steps(), other, scratch);
     EXPECT_GT(relative_error(other, expected), 100 * kParityTolerance);
   }
 }
@@ -58,8 +58,8 @@ TEST(Network, MatchesPyTorchOnTheFixture) {
 TEST(Network, MatchesReferenceOnLargerConfig) {
   const auto tiny = inference::load_model(tiny_model_path());
   // Default-like shape (E, W, D as deployed) with a smaller trunk to keep the naive reference fast.
-  const inference::NetConfig config{20, 191, 64, 128, 2, 64, 100};
-  const auto model = random_model(config, 11, *tiny);
+  const inference::MlpWinConfig config{20, 191, 64, 128, 2, 64, 100};
+  const auto model = random_model(config.to_model_config(), 11, *tiny);
   const Network net(model);
   NetworkScratch scratch(net, 2);
   std::mt19937 rng(5);
@@ -135,7 +135,7 @@ TEST(NetworkDeathTest, BrokenPreconditionsAbort) {
   NetworkScratch s(net);
   const std::size_t n = static_cast<std::size_t>(net.window_size());
   std::vector<float> x(n, 0.0f), m(n, 0.0f), out(n);
-  EXPECT_DEATH(net.forward(x, m, model->config.T, out, s), "t must be in");
+  EXPECT_DEATH(net.forward(x, m, model->config.steps(), out, s), "t must be in");
   EXPECT_DEATH(net.forward(x, m, -1, out, s), "t must be in");
   std::vector<float> x2(2 * n), m2(2 * n), out2(2 * n);
   EXPECT_DEATH(net.forward(x2, m2, 0, out2, s), "batch");

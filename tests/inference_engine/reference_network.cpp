@@ -1,5 +1,7 @@
 #include "reference_network.h"
 
+#include "bodyd/inference/network.h"
+
 #include <cmath>
 #include <string>
 
@@ -48,7 +50,7 @@ Vec silu(Vec v) {
 
 std::vector<double> reference_forward(const inference::Model& model, std::span<const float> x, std::span<const float> m,
                                       int t) {
-  const auto& c = model.config;
+  const auto c = inference::MlpWinConfig::from(model.config);
   const auto W = static_cast<std::size_t>(c.W), D = static_cast<std::size_t>(c.D), E = static_cast<std::size_t>(c.E);
   // 1. per-frame encoder on concat(x_w, m_w)
   std::vector<Vec> e(W);

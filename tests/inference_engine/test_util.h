@@ -1,6 +1,7 @@
 // Helpers shared by the inference_engine tests.
 #pragma once
 
+#include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/model_file.h"
 
 #include "../test_paths.h"
@@ -10,6 +11,7 @@
 #include <cstdint>
 #include <random>
 #include <span>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -29,14 +31,16 @@ double relative_error(const A& a, const B& b) {
   return diff / scale;
 }
 
-// A model with the given config and random weights (all finite), built in memory.
-inline inference::Model random_model(const inference::NetConfig& config, std::uint32_t seed, const inference::Model& like) {
-  inference::Model m = like;  // metadata, skeleton
+// A model of `like`'s architecture with the given config and random weights (all finite), built in memory.
+inline inference::Model random_model(const inference::ModelConfig& config, std::uint32_t seed, const inference::Model& like) {
+  inference::Model m = like;  // metadata (architecture), skeleton
   m.config = config;
   m.tensors.clear();
   std::mt19937 rng(seed);
   std::normal_distribution<float> normal(0.0f, 1.0f);
-  for (const auto& [name, shape] : inference::expected_tensors(config)) {
+  const inference::Architecture* arch = inference::find_architecture(like.metadata.at("architecture"));
+  if (arch == nullptr) throw std::logic_error("random_model: unknown architecture");
+  for (const auto& [name, shape] : inference::expected_tensors(*arch, config)) {
     inference::TensorF32 t;
     t.shape = shape;
     std::size_t n = 1;
@@ -49,8 +53,8 @@ inline inference::Model random_model(const inference::NetConfig& config, std::ui
     }
     m.tensors[name] = std::move(t);
   }
-  m.norm_mean.assign(static_cast<std::size_t>(config.D), 0.0f);
-  m.norm_std.assign(static_cast<std::size_t>(config.D), 1.0f);
+  m.norm_mean.assign(static_cast<std::size_t>(config.dim()), 0.0f);
+  m.norm_std.assign(static_cast<std::size_t>(config.dim()), 1.0f);
   m.alpha_bar = m.tensors.at("diffusion.alpha_bar").data;
   for (std::size_t i = 0; i < m.alpha_bar.size(); ++i) {
     m.alpha_bar[i] = 0.999f - 0.99f * static_cast<float>(i) / static_cast<float>(m.alpha_bar.size());

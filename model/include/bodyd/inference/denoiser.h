@@ -4,9 +4,10 @@
 //
 // To add an architecture: implement Denoiser (weights only, immutable, shared between sessions)
 // and its DenoiserScratch (one session's buffers, sized at construction), then add one row to
-// the table in src/denoiser.cpp: its name, the tensors a model file of it must hold, and its
-// factory. The model loader checks a file against that row; DiffusionReconstructor and Sampler
-// only ever see this interface.
+// the table in src/denoiser.cpp: its name, the fields of its metadata "config", the tensors a
+// model file of it must hold for a config, and its factory. The model loader checks a file
+// against that row and knows nothing else of the architecture; DiffusionReconstructor and
+// Sampler only ever see this interface.
 #pragma once
 
 #include "bodyd/inference/model_file.h"
@@ -34,12 +35,13 @@ class Denoiser {
 
   // The architecture name as written in model files (e.g. "mlpwin-v1").
   [[nodiscard]] virtual std::string_view architecture() const = 0;
-  [[nodiscard]] virtual const NetConfig& config() const = 0;
-  [[nodiscard]] int frames() const { return config().W; }
-  [[nodiscard]] int dim() const { return config().D; }
-  [[nodiscard]] int steps() const { return config().T; }
+  // Frames per window W (the newest last), features per frame D, diffusion steps T: the config's
+  // W, D and T (kConfigFrames, kConfigFeatures, kConfigSteps), which every architecture has.
+  [[nodiscard]] virtual int frames() const = 0;
+  [[nodiscard]] virtual int dim() const = 0;
+  [[nodiscard]] virtual int steps() const = 0;
   // Floats in one window: W * D.
-  [[nodiscard]] int window_size() const { return config().W * config().D; }
+  [[nodiscard]] int window_size() const { return frames() * dim(); }
   // diffusion.alpha_bar[t], t in [0, T).
   [[nodiscard]] virtual std::span<const float> alpha_bar() const = 0;
   // Feature normalisation (D each): the network works on (f - mean) / std.
@@ -56,13 +58,26 @@ class Denoiser {
                        DenoiserScratch& scratch) const = 0;
 };
 
-// One row of the architecture table.
+// One integer field of an architecture's metadata "config". The loader requires it and checks that
+// it is an integer in [1, max] and a multiple of `multiple_of`.
+struct ConfigField {
+  std::string_view key;
+  std::string_view meaning;  // what it is, for readers of the table
+  int multiple_of = 1;       // 2: the value must be even
+  int max = kMaxConfigValue;
+};
+
+// One row of the architecture table: everything the loader knows of an architecture.
 struct Architecture {
   std::string_view name;
-  // The tensors a model file of this architecture holds for `config`, with their shapes, in file
-  // order (including norm.mean, norm.std, diffusion.alpha_bar); the loader requires exactly these.
-  std::vector<std::pair<std::string, std::vector<std::int64_t>>> (*expected_tensors)(const NetConfig& config);
-  // Builds the denoiser from a model that parse_model() has checked against expected_tensors.
+  // The fields of metadata "config" its files hold, in the order messages list them. They include
+  // W, D and T (kConfigFrames, kConfigFeatures, kConfigSteps); other keys in a file are ignored.
+  std::span<const ConfigField> config;
+  // The network's tensors for a config holding those fields (names and shapes, in file order).
+  // The loader requires exactly these plus norm.mean, norm.std and diffusion.alpha_bar
+  // (expected_tensors below), all finite.
+  TensorShapes (*tensors)(const ModelConfig& config);
+  // Builds the denoiser from a model that parse_model() has checked against this row.
   std::shared_ptr<const Denoiser> (*make)(const Model& model);
 };
 
@@ -72,6 +87,9 @@ struct Architecture {
 [[nodiscard]] const Architecture* find_architecture(std::string_view name);
 // "mlpwin-v1, ..." for messages.
 [[nodiscard]] std::string architecture_names();
+// Every tensor a model file of `arch` holds for `config`: arch.tensors(config), then norm.mean [D],
+// norm.std [D] and diffusion.alpha_bar [T], which every architecture has.
+[[nodiscard]] TensorShapes expected_tensors(const Architecture& arch, const ModelConfig& config);
 // The denoiser of a loaded model, by its architecture field. Throws ModelFileError naming the
 // model's source if the architecture is unknown (parse_model already refuses such files).
 [[nodiscard]] std::shared_ptr<const Denoiser> make_denoiser(const Model& model);

@@ -7,7 +7,8 @@
 //
 // Two layers: a generic container decoder (parse_tensor_file: any tensor names, F32 only) and the
 // model loader (parse_model / load_model), which checks everything a "bodyd-model" file must hold
-// for the "mlpwin-v1" architecture and names what is wrong. Loading allocates and may throw
+// and names what is wrong. What a file of one architecture holds (its config fields and tensors) is
+// that architecture's row of the table in denoiser.h; this layer knows no architecture. Loading allocates and may throw
 // ModelFileError; it happens once at start-up, never in the real-time loop. The loaded Model is
 // immutable and meant to be shared (std::shared_ptr<const Model>) by every session.
 #pragma once
@@ -18,7 +19,9 @@
 #include <cstdint>
 #include <filesystem>
 #include <map>
+#include <initializer_list>
 #include <memory>
+#include <optional>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -37,7 +40,6 @@ class ModelFileError : public std::runtime_error {
 
 inline constexpr std::string_view kModelFormat = "bodyd-model";
 inline constexpr std::string_view kModelFormatVersion = "1";
-inline constexpr std::string_view kArchitectureMlpWin = "mlpwin-v1";
 inline constexpr int kModelSkeletonJoints = 22;
 // Metadata keys of the checksum (docs/model-file.md, "Checksum"): "sha256:" and 64 hex digits
 // of the length field, the header (with those digits as '0's) and the data; and a JSON object
@@ -67,25 +69,46 @@ struct TensorFile {
 [[nodiscard]] TensorFile parse_tensor_file(std::span<const std::byte> bytes, const std::string& source_name);
 [[nodiscard]] TensorFile read_tensor_file(const std::filesystem::path& path);
 
-// Network hyper-parameters (metadata "config"); the names are those of docs/model-file.md.
-struct NetConfig {
-  int W = 0;   // frames per window
-  int D = 0;   // features per frame (features::kDim)
-  int E = 0;   // per-frame embedding width
-  int H = 0;   // trunk width
-  int L = 0;   // residual blocks
-  int TE = 0;  // time-embedding sinusoid dimension (even)
-  int T = 0;   // diffusion steps
+// The config keys every architecture has (docs/model-file.md, "Metadata"): frames per window,
+// features per frame (== features::kDim) and diffusion steps (== the length of diffusion.alpha_bar).
+inline constexpr std::string_view kConfigFrames = "W";
+inline constexpr std::string_view kConfigFeatures = "D";
+inline constexpr std::string_view kConfigSteps = "T";
+// Upper bound on any config value: keeps every size product far from overflow.
+inline constexpr int kMaxConfigValue = 1 << 16;
+
+// The integer hyper-parameters of metadata "config" (each in [1, 65536]), in the order the
+// architecture's row lists them (denoiser.h, Architecture::config). The loader checks them against
+// that row; what they mean beyond W, D and T is the architecture's business.
+class ModelConfig {
+ public:
+  ModelConfig() = default;
+  ModelConfig(std::initializer_list<std::pair<std::string, int>> values);
+
+  // The value of `key`, or nullopt.
+  [[nodiscard]] std::optional<int> find(std::string_view key) const;
+  // The value of `key`; throws ModelFileError when absent (cannot happen for a key of the row of
+  // a checked model).
+  [[nodiscard]] int at(std::string_view key) const;
+  void set(std::string_view key, int value);  // replaces or appends
+  [[nodiscard]] const std::vector<std::pair<std::string, int>>& values() const { return values_; }
+  [[nodiscard]] int frames() const { return at(kConfigFrames); }
+  [[nodiscard]] int dim() const { return at(kConfigFeatures); }
+  [[nodiscard]] int steps() const { return at(kConfigSteps); }
+  // "W=4 D=191 E=8 ..." for messages.
+  [[nodiscard]] std::string to_string() const;
+
+ private:
+  std::vector<std::pair<std::string, int>> values_;
 };
 
-// The tensors mlpwin-v1 expects for `config`, with their shapes, in file order (network
-// parameters under their PyTorch state-dict names, then norm.mean, norm.std, diffusion.alpha_bar).
-[[nodiscard]] std::vector<std::pair<std::string, std::vector<std::int64_t>>> expected_tensors(const NetConfig& config);
+// Tensor names with their shapes, in file order.
+using TensorShapes = std::vector<std::pair<std::string, std::vector<std::int64_t>>>;
 
 // A loaded, fully checked model. Immutable after loading.
 struct Model {
   std::string source;                // where it was loaded from (for messages)
-  NetConfig config;
+  ModelConfig config;                // metadata "config": the fields of its architecture's row (denoiser.h)
   int feature_version = 0;           // == features::kVersion
   double fps = 0.0;                  // frame rate of the windows
   Skeleton skeleton;                 // 22 joints, metres (the training data's skeleton)
@@ -96,7 +119,8 @@ struct Model {
   std::map<std::string, std::string, std::less<>> metadata;  // every metadata entry, as stored
   std::map<std::string, TensorF32, std::less<>> tensors;     // every tensor, by name
 
-  // The tensor `name`; throws ModelFileError when absent (cannot happen for expected_tensors()).
+  // The tensor `name`; throws ModelFileError when absent (cannot happen for a tensor the
+  // architecture's row names).
   [[nodiscard]] const TensorF32& tensor(std::string_view name) const;
 };
 

@@ -16,10 +16,29 @@
 
 #include <Eigen/Core>
 
+#include <array>
+#include <memory>
 #include <span>
 #include <vector>
 
 namespace bodyd::inference {
+
+inline constexpr std::string_view kArchitectureMlpWin = "mlpwin-v1";
+
+// mlpwin-v1's hyper-parameters, the fields of its metadata "config" (docs/model-file.md).
+struct MlpWinConfig {
+  int W = 0;   // frames per window
+  int D = 0;   // features per frame (features::kDim)
+  int E = 0;   // per-frame embedding width
+  int H = 0;   // trunk width
+  int L = 0;   // residual blocks
+  int TE = 0;  // time-embedding sinusoid dimension (even)
+  int T = 0;   // diffusion steps
+
+  // From a config the loader checked against Network::kConfigFields.
+  [[nodiscard]] static MlpWinConfig from(const ModelConfig& config);
+  [[nodiscard]] ModelConfig to_model_config() const;
+};
 
 class NetworkScratch;
 
@@ -29,8 +48,25 @@ class Network final : public Denoiser {
   // Copies the weights out of a checked model and precomputes the time embedding of every step.
   explicit Network(const Model& model);
 
+  // The architecture table's row (denoiser.h): config fields, tensors, factory.
+  static constexpr std::array<ConfigField, 7> kConfigFields = {{
+      {"W", "frames per window"},
+      {"D", "features per frame"},
+      {"E", "per-frame embedding width"},
+      {"H", "trunk width"},
+      {"L", "residual blocks"},
+      {"TE", "time-embedding dimension", 2},
+      {"T", "diffusion steps"},
+  }};
+  // Network parameters under their PyTorch state-dict names, in file order (docs/model-file.md).
+  [[nodiscard]] static TensorShapes tensors(const ModelConfig& config);
+  [[nodiscard]] static std::shared_ptr<const Denoiser> make(const Model& model);
+
   [[nodiscard]] std::string_view architecture() const override { return kArchitectureMlpWin; }
-  [[nodiscard]] const NetConfig& config() const override { return config_; }
+  [[nodiscard]] const MlpWinConfig& config() const { return config_; }
+  [[nodiscard]] int frames() const override { return config_.W; }
+  [[nodiscard]] int dim() const override { return config_.D; }
+  [[nodiscard]] int steps() const override { return config_.T; }
   // diffusion.alpha_bar[t], t in [0, T).
   [[nodiscard]] std::span<const float> alpha_bar() const override { return alpha_bar_; }
   // Feature normalisation (D each): the network works on (f - mean) / std.
@@ -64,7 +100,7 @@ class Network final : public Denoiser {
     Linear fc1, fc2;
   };
 
-  NetConfig config_;
+  MlpWinConfig config_;
   std::vector<float> alpha_bar_, norm_mean_, norm_std_;
   // enc.weight split into the columns that multiply x and those that multiply m, so the
   // concatenation [x_w; m_w] never has to be built.
@@ -90,7 +126,7 @@ class NetworkScratch final : public DenoiserScratch {
 
  private:
   friend class Network;
-  NetConfig config_;
+  MlpWinConfig config_;
   int max_batch_;
   Eigen::MatrixXf e_;      // E x (W * batch): per-frame embeddings, frame after frame
   Eigen::MatrixXf h_;      // H x batch: trunk state
