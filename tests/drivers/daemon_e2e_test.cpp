@@ -7,15 +7,15 @@
 #include "../test_paths.h"
 #include "pose_sub_helpers.h"
 
+#include "bodyd/test/files.h"
+#include "bodyd/test/process.h"
+#include "bodyd/test/temp_dir.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <zmq.hpp>
 
-#include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <chrono>
 #include <filesystem>
@@ -24,82 +24,28 @@
 #include <sstream>
 #include <thread>
 
-extern char** environ;
-
 namespace bodyd {
 namespace {
 
 namespace fs = std::filesystem;
 
-std::string read_file(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using test::read_file;
+using test::TempDir;
 
 // bodyd as a child process, stdout and stderr in files, with `fake_bvh` as BODYD_FAKE_DEVICES
 // (unset when empty).
-class Daemon {
+class Daemon : public test::Process {
  public:
-  Daemon(std::vector<std::string> args, const fs::path& dir, const std::string& fake_bvh) : dir_(dir) {
-    args.insert(args.begin(), BODYD_EXE);
-    std::vector<std::string> env;
-    for (char** e = environ; *e; ++e)
-      if (std::string_view(*e).rfind("BODYD_FAKE_DEVICES=", 0) != 0) env.emplace_back(*e);
-    if (!fake_bvh.empty()) env.push_back("BODYD_FAKE_DEVICES=" + fake_bvh);
-    std::vector<char*> argv, envp;
-    for (auto& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    for (auto& e : env) envp.push_back(e.data());
-    envp.push_back(nullptr);
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 1, (dir / "stdout").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&actions, 2, (dir / "stderr").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    if (posix_spawn(&pid_, argv[0], &actions, nullptr, argv.data(), envp.data()) != 0) pid_ = -1;
-    posix_spawn_file_actions_destroy(&actions);
-  }
-  ~Daemon() {
-    if (pid_ > 0 && !code_) {
-      kill(pid_, SIGKILL);
-      int status = 0;
-      waitpid(pid_, &status, 0);
-    }
-  }
-  void signal(int sig) const {
-    if (pid_ > 0 && !code_) kill(pid_, sig);
-  }
-  std::optional<int> wait(int timeout_ms) {
-    const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
-    while (!code_) {
-      int status = 0;
-      if (waitpid(pid_, &status, WNOHANG) == pid_) {
-        code_ = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-        break;
-      }
-      if (std::chrono::steady_clock::now() > end) break;
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    return code_;
-  }
-  std::string out() const { return read_file(dir_ / "stdout"); }
-  std::string err() const { return read_file(dir_ / "stderr"); }
+  Daemon(std::vector<std::string> args, const fs::path& dir, const std::string& fake_bvh)
+      : Process(with_bodyd(std::move(args)), {.env = {{"BODYD_FAKE_DEVICES", fake_bvh.empty() ? test::kUnset : fake_bvh}},
+                                              .stdout_path = dir / "stdout",
+                                              .stderr_path = dir / "stderr"}) {}
 
  private:
-  fs::path dir_;
-  pid_t pid_ = -1;
-  std::optional<int> code_;
-};
-
-struct TempDir {
-  TempDir() {
-    path = fs::temp_directory_path() / ("bodyd-drivers-e2e-" + std::to_string(getpid()) + "-" + std::to_string(n++));
-    fs::create_directories(path);
+  static std::vector<std::string> with_bodyd(std::vector<std::string> args) {
+    args.insert(args.begin(), BODYD_EXE);
+    return args;
   }
-  ~TempDir() { fs::remove_all(path); }
-  fs::path path;
-  static inline int n = 0;
 };
 
 std::string fake_clip() { return (test::fixtures() / "walk_60.bvh").string(); }

@@ -11,6 +11,12 @@
 #include "pose_sub_helpers.h"
 #include "osc_helpers.h"
 
+#include "bodyd/test/files.h"
+#include "bodyd/test/net.h"
+#include "bodyd/test/process.h"
+#include "bodyd/test/temp_dir.h"
+#include "bodyd/test/wait.h"
+
 #include <gtest/gtest.h>
 #include <lo/lo.h>
 #include <nlohmann/json.hpp>
@@ -20,7 +26,6 @@
 #include <fcntl.h>
 #include <netinet/in.h>
 #include <signal.h>
-#include <spawn.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -35,71 +40,52 @@
 #include <sstream>
 #include <thread>
 
-extern char** environ;
-
 namespace bodyd {
 namespace {
 
 namespace fs = std::filesystem;
 using Bytes = std::vector<std::uint8_t>;
 
-std::string read_file(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using test::read_file;
 
-class Daemon {
+// bodyd as a child process, stdout and stderr in files in `dir`.
+class Daemon : public test::Process {
  public:
-  Daemon(std::vector<std::string> args, const fs::path& dir) : dir_(dir) {
-    args.insert(args.begin(), BODYD_EXE);
-    std::vector<char*> argv;
-    for (auto& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 1, (dir / "stdout").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&actions, 2, (dir / "stderr").c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    if (posix_spawn(&pid_, argv[0], &actions, nullptr, argv.data(), environ) != 0) pid_ = -1;
-    posix_spawn_file_actions_destroy(&actions);
-  }
-  ~Daemon() {
-    if (pid_ > 0 && !code_) {
-      kill(pid_, SIGKILL);
-      int status = 0;
-      waitpid(pid_, &status, 0);
-    }
-  }
-  std::optional<int> stop(int timeout_ms) {
-    if (pid_ > 0 && !code_) kill(pid_, SIGTERM);
-    const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
-    while (!code_ && std::chrono::steady_clock::now() < end) {
-      int status = 0;
-      if (waitpid(pid_, &status, WNOHANG) == pid_) code_ = WIFEXITED(status) ? WEXITSTATUS(status) : 128;
-      else std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    return code_;
-  }
-  std::string err() const { return read_file(dir_ / "stderr"); }
+  Daemon(std::vector<std::string> args, const fs::path& dir)
+      : Process(with_bodyd(std::move(args)), {.stdout_path = dir / "stdout", .stderr_path = dir / "stderr"}) {}
+  // SIGTERM; the exit code within timeout_ms, or nullopt.
+  std::optional<int> stop(int timeout_ms) { return terminate(timeout_ms); }
 
  private:
-  fs::path dir_;
-  pid_t pid_ = -1;
-  std::optional<int> code_;
+  static std::vector<std::string> with_bodyd(std::vector<std::string> args) {
+    args.insert(args.begin(), BODYD_EXE);
+    return args;
+  }
 };
 
-// A port free right now (bound, read, released): the daemon binds it a moment later.
-int free_port(int type = SOCK_DGRAM) {
-  const int fd = socket(AF_INET, type, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
-  socklen_t len = sizeof a;
-  getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
-  close(fd);
-  return ntohs(a.sin_port);
+// The daemon's --endpoints-file (dir/endpoints.json) once it names the control endpoint
+// (waiting up to 10 s); an empty object if it never does.
+nlohmann::json wait_for_endpoints(const fs::path& dir) {
+  nlohmann::json endpoints = nlohmann::json::object();
+  test::eventually(
+      [&] {
+        endpoints = nlohmann::json::parse(read_file(dir / "endpoints.json"), nullptr, false);
+        if (endpoints.is_discarded()) endpoints = nlohmann::json::object();
+        return endpoints.contains("control");
+      },
+      std::chrono::milliseconds(10000));
+  return endpoints;
+}
+
+// A SUB socket taking everything from `pub`, connected long enough for the subscription to
+// reach the publisher.
+zmq::socket_t subscribe_all(zmq::context_t& ctx, const std::string& pub) {
+  zmq::socket_t sub(ctx, zmq::socket_type::sub);
+  sub.set(zmq::sockopt::linger, 0);
+  sub.set(zmq::sockopt::subscribe, "");
+  sub.connect(pub);
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  return sub;
 }
 
 using test::osc_floats;
@@ -146,20 +132,15 @@ std::vector<Bad> bad_packets() {
 }
 
 TEST(DaemonNetworkInputs, BadPacketsAreCountedWhilePosesKeepComing) {
-  const fs::path dir = fs::temp_directory_path() / ("bodyd-net-e2e-" + std::to_string(getpid()));
-  fs::create_directories(dir);
-  const int ports[3] = {free_port(), free_port(), free_port()};
-  Daemon daemon({"--method", "ik", "--pub", "tcp://127.0.0.1:*", "--control", "tcp://127.0.0.1:" + std::to_string(free_port(SOCK_STREAM)), "--endpoints-file",
+  const test::TempDir tmp("bodyd-net-e2e");
+  const fs::path& dir = tmp.path;
+  const int ports[3] = {test::free_loopback_port(), test::free_loopback_port(), test::free_loopback_port()};
+  Daemon daemon({"--method", "ik", "--pub", "tcp://127.0.0.1:*", "--control", "tcp://127.0.0.1:" + std::to_string(test::free_loopback_port(SOCK_STREAM)), "--endpoints-file",
                  (dir / "endpoints.json").string(), "--source",
                  "vrchat:127.0.0.1:" + std::to_string(ports[0]) + "?oscquery=off", "--source",
                  "vmc:127.0.0.1:" + std::to_string(ports[1]), "--source", "udp:127.0.0.1:" + std::to_string(ports[2])},
                 dir);
-  nlohmann::json endpoints;
-  for (int i = 0; i < 500 && !endpoints.contains("control"); ++i) {
-    endpoints = nlohmann::json::parse(read_file(dir / "endpoints.json"), nullptr, false);
-    if (endpoints.is_discarded()) endpoints = nlohmann::json::object();
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
+  nlohmann::json endpoints = wait_for_endpoints(dir);
   ASSERT_TRUE(endpoints.contains("control")) << daemon.err();
   zmq::context_t ctx;
   zmq::socket_t sub(ctx, zmq::socket_type::sub);
@@ -238,7 +219,6 @@ TEST(DaemonNetworkInputs, BadPacketsAreCountedWhilePosesKeepComing) {
   EXPECT_EQ(daemon.stop(5000), 0) << daemon.err();
   const std::string log = daemon.err();
   EXPECT_NE(log.find("rejected a packet from 127.0.0.1"), std::string::npos) << log;
-  fs::remove_all(dir);
 }
 
 // The VRChat input driving the pose stream: osc.js plays a BVH clip's head and wrists as
@@ -249,31 +229,22 @@ TEST(DaemonNetworkInputs, VrchatSenderDrivesThePoseStream) {
   if (std::system("node --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "node is not installed (scripts/setup)";
   if (!fs::exists(test::source_dir() / "tests/node/node_modules/osc/package.json"))
     GTEST_SKIP() << "the npm package osc is not installed in tests/node (scripts/setup runs npm ci there)";
-  const fs::path dir = fs::temp_directory_path() / ("bodyd-net-vrc-" + std::to_string(getpid()));
-  fs::create_directories(dir);
+  const test::TempDir tmp("bodyd-net-vrc");
+  const fs::path& dir = tmp.path;
   SimOptions sim;  // 90 Hz, the clip's motion without noise
   sim.position_noise_mm = 0;
   sim.rotation_noise_deg = 0;
   sim.dropout_rate_hz = 0;
   const std::vector<TrackerSample> samples = simulate_trackers(read_bvh(test::fixtures() / "walk_60.bvh"), sim);
   write_tracker_log(dir / "walk.csv", samples);
-  const int port = free_port();
-  Daemon daemon({"--method", "ik", "--pub", "tcp://127.0.0.1:*", "--control", "tcp://127.0.0.1:" + std::to_string(free_port(SOCK_STREAM)), "--endpoints-file",
+  const int port = test::free_loopback_port();
+  Daemon daemon({"--method", "ik", "--pub", "tcp://127.0.0.1:*", "--control", "tcp://127.0.0.1:" + std::to_string(test::free_loopback_port(SOCK_STREAM)), "--endpoints-file",
                  (dir / "endpoints.json").string(), "--source", "vrchat:127.0.0.1:" + std::to_string(port)},
                 dir);
-  nlohmann::json endpoints;
-  for (int i = 0; i < 500 && !endpoints.contains("control"); ++i) {
-    endpoints = nlohmann::json::parse(read_file(dir / "endpoints.json"), nullptr, false);
-    if (endpoints.is_discarded()) endpoints = nlohmann::json::object();
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
+  nlohmann::json endpoints = wait_for_endpoints(dir);
   ASSERT_TRUE(endpoints.contains("control")) << daemon.err();
   zmq::context_t ctx;
-  zmq::socket_t sub(ctx, zmq::socket_type::sub);
-  sub.set(zmq::sockopt::linger, 0);
-  sub.set(zmq::sockopt::subscribe, "");
-  sub.connect(endpoints["pub"].get<std::string>());
-  std::this_thread::sleep_for(std::chrono::milliseconds(200));  // the subscription reaches the publisher
+  zmq::socket_t sub = subscribe_all(ctx, endpoints["pub"].get<std::string>());
 
   std::thread sender([&] {
     const std::string command = "NODE_PATH='" + (test::source_dir() / "tests/node/node_modules").string() + "' node '" +
@@ -299,7 +270,6 @@ TEST(DaemonNetworkInputs, VrchatSenderDrivesThePoseStream) {
                                       << daemon.err();
   EXPECT_EQ(daemon.stop(5000), 0) << daemon.err();
   EXPECT_NE(daemon.err().find("OSCQuery on http://127.0.0.1:"), std::string::npos) << daemon.err();
-  fs::remove_all(dir);
 }
 
 // Issue 20 item 2: one forged VMC packet (a serial holding terminal escapes and a fake log
@@ -310,29 +280,20 @@ TEST(DaemonNetworkInputs, AForgedVmcSerialCannotKeepOrStealTheHead) {
   if (std::system("node --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "node is not installed (scripts/setup)";
   if (!fs::exists(test::source_dir() / "tests/node/node_modules/osc/package.json"))
     GTEST_SKIP() << "the npm package osc is not installed in tests/node (scripts/setup runs npm ci there)";
-  const fs::path dir = fs::temp_directory_path() / ("bodyd-net-vmc-" + std::to_string(getpid()));
-  fs::create_directories(dir);
+  const test::TempDir tmp("bodyd-net-vmc");
+  const fs::path& dir = tmp.path;
   std::vector<TrackerSample> samples = read_tracker_log(test::source_dir() / "data/demo/walk.csv").samples;
   samples.resize(3 * 360);  // 360 time steps, 4 s at the sender's 11 ms
   write_tracker_log(dir / "walk.csv", samples);
-  const int port = free_port();
+  const int port = test::free_loopback_port();
   Daemon daemon({"--method", "ik", "--pub", "tcp://127.0.0.1:*", "--control",
-                 "tcp://127.0.0.1:" + std::to_string(free_port(SOCK_STREAM)), "--endpoints-file",
+                 "tcp://127.0.0.1:" + std::to_string(test::free_loopback_port(SOCK_STREAM)), "--endpoints-file",
                  (dir / "endpoints.json").string(), "--source", "vmc:127.0.0.1:" + std::to_string(port)},
                 dir);
-  nlohmann::json endpoints;
-  for (int i = 0; i < 500 && !endpoints.contains("control"); ++i) {
-    endpoints = nlohmann::json::parse(read_file(dir / "endpoints.json"), nullptr, false);
-    if (endpoints.is_discarded()) endpoints = nlohmann::json::object();
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
+  nlohmann::json endpoints = wait_for_endpoints(dir);
   ASSERT_TRUE(endpoints.contains("control")) << daemon.err();
   zmq::context_t ctx;
-  zmq::socket_t sub(ctx, zmq::socket_type::sub);
-  sub.set(zmq::sockopt::linger, 0);
-  sub.set(zmq::sockopt::subscribe, "");
-  sub.connect(endpoints["pub"].get<std::string>());
-  std::this_thread::sleep_for(std::chrono::milliseconds(200));  // the subscription reaches the publisher
+  zmq::socket_t sub = subscribe_all(ctx, endpoints["pub"].get<std::string>());
 
   const int fd = socket(AF_INET, SOCK_DGRAM, 0);
   sockaddr_in to{};
@@ -394,7 +355,6 @@ TEST(DaemonNetworkInputs, AForgedVmcSerialCannotKeepOrStealTheHead) {
   EXPECT_NE(log.find("serial \"FORGED-2\" ignored: the head is held by \"HMD-1\""), std::string::npos) << log;
   EXPECT_EQ(log.find('\x1b'), std::string::npos) << "a raw escape reached the log";
   EXPECT_EQ(log.find("\n2026-12-02 00:00:00.000 bodyd critical: FAKE"), std::string::npos) << "a forged log line";
-  fs::remove_all(dir);
 }
 
 }  // namespace
