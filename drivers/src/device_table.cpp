@@ -1,7 +1,12 @@
 // The device table (device_table.h): one row per known vendor/product ID.
 #include "bodyd/drivers/device_table.h"
 
+#include "device_protocol.h"
+
+#include "bodyd/base/require.h"
 #include "bodyd/drivers/hydra.h"
+
+#include <string>
 
 namespace bodyd::drivers {
 
@@ -26,5 +31,22 @@ DeviceProtocol device_protocol_of(DeviceId id) {
   const KnownDevice* d = known_device(id);
   return d ? d->protocol : DeviceProtocol::BodydReport;
 }
+
+namespace detail {
+
+const DeviceProtocolRow& device_protocol_row(DeviceProtocol protocol) {
+  // protocol, HID opener, fake encoder
+  static const DeviceProtocolRow rows[] = {
+      {DeviceProtocol::BodydReport, open_bodyd_report_hid, encode_bodyd_report_fake},
+      {DeviceProtocol::Hydra, open_hydra_hid, encode_hydra_fake},
+  };
+  const DeviceProtocolRow* found = nullptr;
+  for (const DeviceProtocolRow& row : rows)
+    if (row.protocol == protocol) found = &row;
+  BODYD_REQUIRE(found, "DeviceProtocol " + std::to_string(static_cast<int>(protocol)) + " has no row in device_table.cpp");
+  return *found;
+}
+
+}  // namespace detail
 
 }  // namespace bodyd::drivers

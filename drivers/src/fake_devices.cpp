@@ -1,5 +1,7 @@
 #include "bodyd/drivers/fake_devices.h"
 
+#include "device_protocol.h"
+
 #include "bodyd/base/random.h"
 #include "bodyd/drivers/report.h"
 #include "bodyd/motion/bvh.h"
@@ -130,28 +132,39 @@ std::optional<std::vector<std::uint8_t>> SimulatedDevice::poll(std::int64_t now_
 }
 
 std::vector<std::uint8_t> SimulatedDevice::encode(const Item& item, std::int64_t t_rel_ns) {
-  const DeviceFaults& f = config_.faults;
-  if (config_.protocol == FakeProtocol::Hydra) {
-    HydraReport r;
-    r.sequence = static_cast<std::uint8_t>(sequence_);
-    for (int c = 0; c < 2; ++c) {
-      const TrackerSample& s = item.samples[static_cast<std::size_t>(c)];
-      r.controllers[c].valid = s.valid;
-      r.controllers[c].position_m = s.position_m;
-      r.controllers[c].rotation = s.rotation;
-    }
-    const auto bytes = encode_hydra_report(r, config_.hydra);
-    return {bytes.begin(), bytes.end()};
+  return detail::device_protocol_row(config_.protocol).encode_fake({config_, item.samples, sequence_, t_rel_ns});
+}
+
+namespace detail {
+
+// The Hydra's fake encoder (device_protocol.h): both controllers in one report.
+std::vector<std::uint8_t> encode_hydra_fake(const FakeReport& report) {
+  HydraReport r;
+  r.sequence = static_cast<std::uint8_t>(report.sequence);
+  for (int c = 0; c < 2; ++c) {
+    const TrackerSample& s = report.samples[static_cast<std::size_t>(c)];
+    r.controllers[c].valid = s.valid;
+    r.controllers[c].position_m = s.position_m;
+    r.controllers[c].rotation = s.rotation;
   }
+  const auto bytes = encode_hydra_report(r, report.config.hydra);
+  return {bytes.begin(), bytes.end()};
+}
+
+// The bodyd report's fake encoder (device_protocol.h): one role per report, with the device
+// clock (drift and jump faults applied).
+std::vector<std::uint8_t> encode_bodyd_report_fake(const FakeReport& report) {
+  const DeviceFaults& f = report.config.faults;
+  const std::int64_t t_rel_ns = report.t_rel_ns;
   double device_us = static_cast<double>(t_rel_ns) * 1e-3 * (1.0 + f.clock_drift_ppm * 1e-6);
   if (f.clock_jump_at_s >= 0.0 && t_rel_ns >= static_cast<std::int64_t>(f.clock_jump_at_s * 1e9))
     device_us += f.clock_jump_s * 1e6;
-  const auto clock = static_cast<std::int64_t>(config_.clock_start_us) + static_cast<std::int64_t>(device_us);
-  const TrackerSample& s = item.samples.front();
+  const auto clock = static_cast<std::int64_t>(report.config.clock_start_us) + static_cast<std::int64_t>(device_us);
+  const TrackerSample& s = report.samples.front();
   TrackerReport r;
   r.role = s.role;
   r.valid = s.valid;
-  r.sequence = sequence_;
+  r.sequence = report.sequence;
   r.battery_percent = 80;
   r.device_time_us = static_cast<std::uint32_t>(static_cast<std::uint64_t>(clock));  // wraps like a device's
   r.position_m = s.position_m;
@@ -163,6 +176,8 @@ std::vector<std::uint8_t> SimulatedDevice::encode(const Item& item, std::int64_t
   }
   return {bytes.begin(), bytes.end()};
 }
+
+}  // namespace detail
 
 void SimulatedDevice::feature_report(const std::uint8_t* data, std::size_t size) {
   std::lock_guard lock(mutex_);

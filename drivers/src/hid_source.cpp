@@ -1,6 +1,7 @@
 // HID driver (hid_source.h): the bodyd report and the Razer Hydra over a HidTransport.
 #include "bodyd/drivers/hid_source.h"
 
+#include "device_protocol.h"
 #include "device_source_base.h"
 
 #include <spdlog/spdlog.h>
@@ -118,6 +119,73 @@ class HydraHidDevice final : public detail::OpenDevice {
   std::array<std::uint8_t, kReadBufferSize> buffer_{};
 };
 
+// The HID description of a device for logs: "HID 1209:B0D1 /dev/hidraw3 (bodyd tracker)".
+std::string describe(const HidDeviceInfo& info, const char* what) {
+  return "HID " + detail::format_device_id({info.vendor_id, info.product_id}) + " " + info.path + " (" +
+         (info.product.empty() ? what : info.product) + ")";
+}
+
+}  // namespace
+
+namespace detail {
+
+// The bodyd report's opener (device_protocol.h): every interface is a device.
+void open_bodyd_report_hid(const HidOpenContext& context, std::vector<HidDeviceInfo>& infos, std::vector<Candidate>& out) {
+  for (const HidDeviceInfo& info : infos) {
+    const std::string description = describe(info, "bodyd tracker");
+    out.push_back({info.path, description, [context, info, description](std::string& error) {
+                     std::unique_ptr<HidDevice> d = context.transport->open(info, error);
+                     if (!d) return std::unique_ptr<OpenDevice>();
+                     return std::unique_ptr<OpenDevice>(
+                         std::make_unique<BodydHidDevice>(std::move(d), description, context.options->read_timeout_ms));
+                   }});
+  }
+}
+
+// The Hydra's opener (device_protocol.h). A Hydra shows up as two HID interfaces: 0 streams
+// data, 1 takes commands. Pair each data interface with a control interface of the same serial
+// number, else in order.
+void open_hydra_hid(const HidOpenContext& context, std::vector<HidDeviceInfo>& infos, std::vector<Candidate>& out) {
+  std::sort(infos.begin(), infos.end(), [](const auto& a, const auto& b) { return a.path < b.path; });
+  std::vector<HidDeviceInfo> data, control;
+  for (const HidDeviceInfo& i : infos) {
+    if (i.interface_number == kHydraControlInterface)
+      control.push_back(i);
+    else if (i.interface_number == kHydraDataInterface)
+      data.push_back(i);
+  }
+  if (data.empty() && control.empty()) {
+    // Interface numbers unknown: alternate, data first.
+    for (std::size_t k = 0; k < infos.size(); ++k) (k % 2 == 0 ? data : control).push_back(infos[k]);
+  }
+  for (std::size_t k = 0; k < data.size(); ++k) {
+    const HidDeviceInfo d = data[k];
+    std::optional<HidDeviceInfo> c;
+    for (const HidDeviceInfo& ci : control)
+      if (!d.serial.empty() && ci.serial == d.serial) c = ci;
+    if (!c && k < control.size()) c = control[k];
+    const std::string description = describe(d, "Razer Hydra");
+    out.push_back({d.path, description, [context, d, c, description](std::string& error) {
+                     std::unique_ptr<HidDevice> data_dev = context.transport->open(d, error);
+                     if (!data_dev) return std::unique_ptr<OpenDevice>();
+                     std::unique_ptr<HidDevice> control_dev;
+                     if (c) {
+                       std::string control_error;
+                       control_dev = context.transport->open(*c, control_error);
+                       if (!control_dev)
+                         spdlog::warn("{}: cannot open the control interface {}: {} (motion mode cannot be set)",
+                                      description, c->path, control_error);
+                     }
+                     return std::unique_ptr<OpenDevice>(std::make_unique<HydraHidDevice>(
+                         std::move(data_dev), std::move(control_dev), description, *context.options));
+                   }});
+  }
+}
+
+}  // namespace detail
+
+namespace {
+
 class HidSource final : public detail::DeviceSourceBase {
  public:
   HidSource(const HidSourceOptions& options, std::shared_ptr<HidTransport> transport)
@@ -131,12 +199,8 @@ class HidSource final : public detail::DeviceSourceBase {
     std::vector<detail::Candidate> out;
     for (const DeviceId id : options_.devices) {
       std::vector<HidDeviceInfo> infos = transport_->enumerate(id.vendor_id, id.product_id);
-      switch (options_.protocol.value_or(device_protocol_of(id))) {
-        case DeviceProtocol::BodydReport:
-          for (const HidDeviceInfo& info : infos) add_bodyd(info, out);
-          break;
-        case DeviceProtocol::Hydra: add_hydras(infos, out); break;
-      }
+      const DeviceProtocol protocol = options_.protocol.value_or(device_protocol_of(id));
+      detail::device_protocol_row(protocol).open_hid({transport_.get(), &options_}, infos, out);
     }
     return out;
   }
@@ -150,60 +214,6 @@ class HidSource final : public detail::DeviceSourceBase {
   }
 
  private:
-  static std::string describe(const HidDeviceInfo& info, const char* what) {
-    return "HID " + detail::format_device_id({info.vendor_id, info.product_id}) + " " + info.path + " (" +
-           (info.product.empty() ? what : info.product) + ")";
-  }
-
-  void add_bodyd(const HidDeviceInfo& info, std::vector<detail::Candidate>& out) {
-    const std::string description = describe(info, "bodyd tracker");
-    out.push_back({info.path, description, [this, info, description](std::string& error) {
-                     std::unique_ptr<HidDevice> d = transport_->open(info, error);
-                     if (!d) return std::unique_ptr<detail::OpenDevice>();
-                     return std::unique_ptr<detail::OpenDevice>(
-                         std::make_unique<BodydHidDevice>(std::move(d), description, options_.read_timeout_ms));
-                   }});
-  }
-
-  // A Hydra shows up as two HID interfaces: 0 streams data, 1 takes commands. Pair each
-  // data interface with a control interface of the same serial number, else in order.
-  void add_hydras(std::vector<HidDeviceInfo>& infos, std::vector<detail::Candidate>& out) {
-    std::sort(infos.begin(), infos.end(), [](const auto& a, const auto& b) { return a.path < b.path; });
-    std::vector<HidDeviceInfo> data, control;
-    for (const HidDeviceInfo& i : infos) {
-      if (i.interface_number == kHydraControlInterface)
-        control.push_back(i);
-      else if (i.interface_number == kHydraDataInterface)
-        data.push_back(i);
-    }
-    if (data.empty() && control.empty()) {
-      // Interface numbers unknown: alternate, data first.
-      for (std::size_t k = 0; k < infos.size(); ++k) (k % 2 == 0 ? data : control).push_back(infos[k]);
-    }
-    for (std::size_t k = 0; k < data.size(); ++k) {
-      const HidDeviceInfo d = data[k];
-      std::optional<HidDeviceInfo> c;
-      for (const HidDeviceInfo& ci : control)
-        if (!d.serial.empty() && ci.serial == d.serial) c = ci;
-      if (!c && k < control.size()) c = control[k];
-      const std::string description = describe(d, "Razer Hydra");
-      out.push_back({d.path, description, [this, d, c, description](std::string& error) {
-                       std::unique_ptr<HidDevice> data_dev = transport_->open(d, error);
-                       if (!data_dev) return std::unique_ptr<detail::OpenDevice>();
-                       std::unique_ptr<HidDevice> control_dev;
-                       if (c) {
-                         std::string control_error;
-                         control_dev = transport_->open(*c, control_error);
-                         if (!control_dev)
-                           spdlog::warn("{}: cannot open the control interface {}: {} (motion mode cannot be set)",
-                                        description, c->path, control_error);
-                       }
-                       return std::unique_ptr<detail::OpenDevice>(std::make_unique<HydraHidDevice>(
-                           std::move(data_dev), std::move(control_dev), description, options_));
-                     }});
-    }
-  }
-
   HidSourceOptions options_;
   std::shared_ptr<HidTransport> transport_;
 };

@@ -7,6 +7,11 @@
 #include "bodyd/drivers/network_source.h"
 #include "bodyd/drivers/open_source.h"
 
+#include "bodyd/drivers/fake_devices.h"
+#include "bodyd/drivers/hydra.h"
+#include "bodyd/drivers/report.h"
+
+#include "../../drivers/src/device_protocol.h"
 #include "../../drivers/src/network_protocol.h"
 
 #include <gtest/gtest.h>
@@ -246,4 +251,42 @@ TEST(DeviceTable, RowsAreUniqueAndDecideTheProtocol) {
   EXPECT_EQ(device_protocol_of({0x1532, 0x0300}), DeviceProtocol::Hydra);
   EXPECT_EQ(device_protocol_of({0x1234, 0x5678}), DeviceProtocol::BodydReport);  // any ID may stream the report
   EXPECT_EQ(known_device({0x1234, 0x5678}), nullptr);
+}
+
+// Every protocol has its row (opener, fake encoder), and the fake encoder's bytes are a report
+// the protocol's decoder takes back.
+TEST(DeviceTable, EveryProtocolHasARowWhoseFakeTheDecoderReads) {
+  std::vector<DeviceProtocol> protocols = {DeviceProtocol::BodydReport, DeviceProtocol::Hydra};
+  for (const KnownDevice& d : known_devices()) protocols.push_back(d.protocol);
+  for (DeviceProtocol p : protocols) {
+    const detail::DeviceProtocolRow& row = detail::device_protocol_row(p);
+    EXPECT_EQ(row.protocol, p);
+    EXPECT_NE(row.open_hid, nullptr);
+    EXPECT_NE(row.encode_fake, nullptr);
+  }
+  SimulatedDeviceConfig config;
+  TrackerSample left, right;
+  left.role = Role::LeftHand;
+  right.role = Role::RightHand;
+  left.valid = right.valid = true;
+  left.position_m = Vec3(0.1, 1.0, -0.2);
+  right.position_m = Vec3(-0.1, 1.1, -0.3);
+  const std::vector<TrackerSample> one{left}, two{left, right};
+
+  config.protocol = DeviceProtocol::BodydReport;
+  const std::vector<std::uint8_t> report =
+      detail::device_protocol_row(config.protocol).encode_fake({config, one, 7, 1'000'000});
+  TrackerReport decoded;
+  ASSERT_EQ(decode_tracker_report(report.data(), report.size(), decoded), ReportError::None);
+  EXPECT_EQ(decoded.role, Role::LeftHand);
+  EXPECT_EQ(decoded.sequence, 7);
+  EXPECT_NEAR(decoded.position_m.y(), 1.0, 1e-3);
+
+  config.protocol = DeviceProtocol::Hydra;
+  const std::vector<std::uint8_t> hydra =
+      detail::device_protocol_row(config.protocol).encode_fake({config, two, 9, 1'000'000});
+  HydraReport h;
+  ASSERT_EQ(decode_hydra_report(hydra.data(), hydra.size(), config.hydra, h), HydraError::None);
+  EXPECT_EQ(h.sequence, 9);
+  EXPECT_NEAR(h.controllers[1].position_m.y(), 1.1, 2e-3);
 }

@@ -7,11 +7,15 @@
 // How to add a device (docs/architecture.md, "A new tracker source"):
 //   - of a protocol bodyd reads already (a new ID streaming the bodyd report): one row, and its
 //     line in the udev rule;
-//   - of a new protocol, also: its DeviceProtocol value, its opener in hid_source.cpp (the switch
-//     in HidSource::scan, which makes the OpenDevice that reads with the protocol's decoder), the
-//     decoder's pure functions in a file of their own (like hydra.h), fuzzed
-//     (tests/drivers/fuzz_targets.h), and its fake encoder in fake_devices.cpp
-//     (SimulatedDevice::encode) for the simulated devices of tests.
+//   - of a new protocol, also: its DeviceProtocol value and its row in the protocol rows
+//     (device_protocol_row in device_table.cpp; the row type is drivers/src/device_protocol.h):
+//     its HID opener (next to the others in hid_source.cpp: it pairs interfaces and makes the
+//     OpenDevice that reads with the protocol's decoder) and its fake encoder (next to the
+//     others in fake_devices.cpp: the bytes a device sends for one report); the decoder's pure
+//     functions in a file of their own (like hydra.h), fuzzed (tests/drivers/fuzz_targets.h).
+//     A protocol whose reports carry several roles or whose device is several interfaces (the
+//     Hydra) also needs its case where the simulated devices pair samples and list interfaces
+//     (fake_devices.cpp).
 #pragma once
 
 #include "bodyd/drivers/device_source.h"
@@ -31,7 +35,7 @@ enum class DeviceProtocol : std::uint8_t {
 struct KnownDevice {
   DeviceId id;
   std::string_view name;    // what bodyd --list-devices says it is, e.g. "Razer Hydra (two hands)"
-  DeviceProtocol protocol;  // how it is read (hid:, usb:) and simulated (fake_devices.h)
+  DeviceProtocol protocol;  // how it is read (hid:, usb:) and simulated (fake_devices.h): its row, device_protocol.h
   bool hid = true;          // read over HID (hid:VID:PID); the udev rule's SUBSYSTEM=="hidraw" line
   bool usb = false;         // read over USB (usb:VID:PID); the udev rule's SUBSYSTEM=="usb" line
 };
