@@ -7,7 +7,7 @@
 #include "bodyd/inference/features.h"
 #include "bodyd/simulators/tracker_sim.h"
 
-#include "../inference_eval/alloc_counter.h"
+#include "bodyd/test/alloc_counter.h"
 #include "../test_paths.h"
 
 #include <gtest/gtest.h>

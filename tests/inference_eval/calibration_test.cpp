@@ -6,7 +6,7 @@
 #include "bodyd/motion/bvh.h"
 
 #include "../test_paths.h"
-#include "alloc_counter.h"
+#include "bodyd/test/alloc_counter.h"
 
 #include <gtest/gtest.h>
 

@@ -1,6 +1,6 @@
 #include "bodyd/inference/tracker_history.h"
 
-#include "alloc_counter.h"
+#include "bodyd/test/alloc_counter.h"
 
 #include <gtest/gtest.h>
 
