@@ -6,6 +6,8 @@
 
 #include "bodyd/protocol/recording.h"
 #include "../test_paths.h"
+#include "bodyd/test/files.h"
+#include "bodyd/test/temp_dir.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -21,22 +23,7 @@ using namespace bodyd::render;
 
 namespace {
 
-class TempDir {
- public:
-  TempDir() {
-    static int counter = 0;
-    path_ = fs::temp_directory_path() / ("bodyd-render-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  [[nodiscard]] const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
-};
+using bodyd::test::TempDir;
 
 Motion walk() { return read_bvh(test::fixtures() / "walk_60.bvh"); }
 
@@ -47,17 +34,8 @@ Motion shifted(const Motion& m, const Vec3& offset_m) {
   return out;
 }
 
-std::vector<std::uint8_t> read_bytes(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-std::string read_text(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using bodyd::test::read_file;
+using bodyd::test::read_file_bytes;
 
 ImageSize png_size(const std::vector<std::uint8_t>& png) {
   const auto chunks = parse_png_chunks(png);
@@ -74,10 +52,10 @@ struct RunResult {
   std::string out, err;
 };
 RunResult run_render(const std::string& args, const TempDir& tmp) {
-  const fs::path out = tmp.path() / "stdout.txt", err = tmp.path() / "stderr.txt";
+  const fs::path out = tmp.path / "stdout.txt", err = tmp.path / "stderr.txt";
   const std::string cmd = (test::bin_dir() / "bodyd-render").string() + " " + args + " >" + out.string() + " 2>" + err.string();
   const int status = std::system(cmd.c_str());
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, read_text(out), read_text(err)};
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, read_file(out), read_file(err)};
 }
 
 // A pose recording of `m` as bodyd-record would write it: the skeleton, then `per_frame` poses per
@@ -188,9 +166,9 @@ TEST(RenderLoad, WrongFrameCountIsAClearError) {
   Motion m = walk();
   Motion short_clip = m;
   short_clip.frames.resize(50);
-  write_bvh(tmp.path() / "short.bvh", short_clip);
+  write_bvh(tmp.path / "short.bvh", short_clip);
   try {
-    (void)load_bvh_prediction(tmp.path() / "short.bvh", m, "x");
+    (void)load_bvh_prediction(tmp.path / "short.bvh", m, "x");
     FAIL() << "no error";
   } catch (const RenderError& e) {
     EXPECT_NE(std::string(e.what()).find("short.bvh: 50 frames, but the ground truth has 60"), std::string::npos) << e.what();
@@ -202,9 +180,9 @@ TEST(RenderLoad, OtherSkeletonNamesTheMissingJoint) {
   Motion m = walk();
   Motion other = m;
   other.skeleton.names[static_cast<size_t>(other.skeleton.find("Hand_L"))] = "LeftHand";
-  write_bvh(tmp.path() / "other.bvh", other);
+  write_bvh(tmp.path / "other.bvh", other);
   try {
-    (void)load_bvh_prediction(tmp.path() / "other.bvh", m, "x");
+    (void)load_bvh_prediction(tmp.path / "other.bvh", m, "x");
     FAIL() << "no error";
   } catch (const RenderError& e) {
     EXPECT_NE(std::string(e.what()).find("lacks joints of the ground truth"), std::string::npos) << e.what();
@@ -216,7 +194,7 @@ TEST(RenderLoad, RecordingOnePosePerFrameAndResampled) {
   TempDir tmp;
   const Motion m = walk();
   for (int per_frame : {1, 3}) {
-    const fs::path path = tmp.path() / ("rec" + std::to_string(per_frame) + ".bdrec");
+    const fs::path path = tmp.path / ("rec" + std::to_string(per_frame) + ".bdrec");
     write_recording(m, per_frame, per_frame == 1 ? 60 : 180, path);
     const Track t = load_recording_prediction(path, m, "rec");
     const Comparison cmp = make_comparison("walk_60", m, {t});
@@ -228,9 +206,9 @@ TEST(RenderLoad, RecordingOnePosePerFrameAndResampled) {
 TEST(RenderLoad, RecordingShorterThanTheClipIsAnError) {
   TempDir tmp;
   const Motion m = walk();
-  write_recording(m, 3, 90, tmp.path() / "half.bdrec");
+  write_recording(m, 3, 90, tmp.path / "half.bdrec");
   try {
-    (void)load_recording_prediction(tmp.path() / "half.bdrec", m, "rec");
+    (void)load_recording_prediction(tmp.path / "half.bdrec", m, "rec");
     FAIL() << "no error";
   } catch (const RenderError& e) {
     EXPECT_NE(std::string(e.what()).find("record the whole clip"), std::string::npos) << e.what();
@@ -312,23 +290,23 @@ TEST(RenderApng, RejectsMismatchedAndCorruptFrames) {
 TEST(RenderTool, WritesDeterministicPictures) {
   TempDir tmp;
   const Motion m = walk();
-  write_bvh(tmp.path() / "walk_60.ik.pred.bvh", shifted(m, Vec3(0.0, 0.0, 0.06)));
-  write_bvh(tmp.path() / "walk_60.pred.bvh", shifted(m, Vec3(0.02, 0.0, 0.0)));
+  write_bvh(tmp.path / "walk_60.ik.pred.bvh", shifted(m, Vec3(0.0, 0.0, 0.06)));
+  write_bvh(tmp.path / "walk_60.pred.bvh", shifted(m, Vec3(0.02, 0.0, 0.0)));
   const std::string args = "--truth " + (test::fixtures() / "walk_60.bvh").string() + " --pred " +
-                           (tmp.path() / "walk_60.pred.bvh").string() + " --pred " +
-                           (tmp.path() / "walk_60.ik.pred.bvh").string() + " --every 10 --apng --anim-every 15";
-  RunResult r = run_render(args + " --out " + (tmp.path() / "a").string(), tmp);
+                           (tmp.path / "walk_60.pred.bvh").string() + " --pred " +
+                           (tmp.path / "walk_60.ik.pred.bvh").string() + " --every 10 --apng --anim-every 15";
+  RunResult r = run_render(args + " --out " + (tmp.path / "a").string(), tmp);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("diffusion: mpjpe_cm 2.00"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("ik: mpjpe_cm 6.00"), std::string::npos) << r.out;
-  r = run_render(args + " --out " + (tmp.path() / "b").string(), tmp);
+  r = run_render(args + " --out " + (tmp.path / "b").string(), tmp);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   for (const char* name : {"walk_60.contact_sheet.png", "walk_60.error_plot.png", "walk_60.anim.png"}) {
-    const auto a = read_bytes(tmp.path() / "a" / name);
+    const auto a = read_file_bytes(tmp.path / "a" / name);
     ASSERT_GT(a.size(), 1000u) << name;
-    EXPECT_EQ(a, read_bytes(tmp.path() / "b" / name)) << name << " differs between two runs";
+    EXPECT_EQ(a, read_file_bytes(tmp.path / "b" / name)) << name << " differs between two runs";
   }
-  const ImageSize sheet = png_size(read_bytes(tmp.path() / "a" / "walk_60.contact_sheet.png"));
+  const ImageSize sheet = png_size(read_file_bytes(tmp.path / "a" / "walk_60.contact_sheet.png"));
   EXPECT_EQ(sheet.width, 20 + 6 * 300);  // 6 frames (every 10 of 60) in one row of 6
 }
 
@@ -337,19 +315,19 @@ TEST(RenderTool, MismatchedInputsFailWithTheReason) {
   Motion m = walk();
   Motion short_clip = m;
   short_clip.frames.resize(30);
-  write_bvh(tmp.path() / "short.bvh", short_clip);
+  write_bvh(tmp.path / "short.bvh", short_clip);
   const std::string truth = (test::fixtures() / "walk_60.bvh").string();
-  RunResult r = run_render("--truth " + truth + " --pred " + (tmp.path() / "short.bvh").string() + " --out " +
-                               (tmp.path() / "o").string(),
+  RunResult r = run_render("--truth " + truth + " --pred " + (tmp.path / "short.bvh").string() + " --out " +
+                               (tmp.path / "o").string(),
                            tmp);
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("short.bvh: 30 frames, but the ground truth has 60"), std::string::npos) << r.err;
-  EXPECT_FALSE(fs::exists(tmp.path() / "o" / "walk_60.contact_sheet.png"));
-  r = run_render("--truth " + truth + " --out " + (tmp.path() / "o").string(), tmp);
+  EXPECT_FALSE(fs::exists(tmp.path / "o" / "walk_60.contact_sheet.png"));
+  r = run_render("--truth " + truth + " --out " + (tmp.path / "o").string(), tmp);
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("at least one --pred or --recording"), std::string::npos) << r.err;
   r = run_render("--truth " + truth + " --pred " + truth + " --recording " + (test::fixtures() / "bow_30.bvh").string() +
-                     " --out " + (tmp.path() / "o").string(),
+                     " --out " + (tmp.path / "o").string(),
                  tmp);
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("bow_30.bvh"), std::string::npos) << r.err;

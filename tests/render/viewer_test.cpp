@@ -4,6 +4,9 @@
 // itself in headless Chromium: a screenshot whose skeleton pixels are counted and the status panel
 // read from the page's DOM. The Chromium tests skip when chromium or three.js is missing.
 #include "../test_paths.h"
+#include "bodyd/test/files.h"
+#include "bodyd/test/process.h"
+#include "bodyd/test/temp_dir.h"
 
 #include <arpa/inet.h>
 #include <cairo.h>
@@ -13,7 +16,6 @@
 #include <nlohmann/json.hpp>
 #include <poll.h>
 #include <signal.h>
-#include <spawn.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -25,89 +27,25 @@
 #include <sstream>
 #include <thread>
 
-extern char** environ;
-
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
 namespace {
 
-std::string read_text(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using bodyd::test::read_file;
+using bodyd::test::TempDir;
 
-class TempDir {
+// A child process looked up on PATH, stdout/stderr in `dir`/`name`.stdout, .stderr; SIGTERM,
+// then SIGKILL after 3 s, on destruction. A process that cannot start throws.
+class Process : public bodyd::test::Process {
  public:
-  TempDir() {
-    path_ = fs::temp_directory_path() / ("bodyd-viewer-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter_++));
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  [[nodiscard]] const fs::path& path() const { return path_; }
+  Process(const std::vector<std::string>& args, const fs::path& dir, const std::string& name)
+      : bodyd::test::Process(args, {.output_dir = dir, .name = name, .search_path = true, .destroy_grace_ms = 3000}) {}
+  std::optional<int> wait(std::chrono::milliseconds timeout) { return bodyd::test::Process::wait(ms(timeout)); }
+  std::optional<int> terminate(std::chrono::milliseconds timeout) { return bodyd::test::Process::terminate(ms(timeout)); }
 
  private:
-  static inline int counter_ = 0;
-  fs::path path_;
-};
-
-// A child process with stdout/stderr in files; SIGTERM then SIGKILL on destruction.
-class Process {
- public:
-  Process(std::vector<std::string> args, const fs::path& dir, const std::string& name)
-      : out_(dir / (name + ".stdout")), err_(dir / (name + ".stderr")) {
-    std::vector<char*> argv;
-    for (auto& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
-    posix_spawn_file_actions_addopen(&actions, 1, out_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&actions, 2, err_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    if (posix_spawnp(&pid_, argv[0], &actions, nullptr, argv.data(), environ) != 0) pid_ = -1;
-    posix_spawn_file_actions_destroy(&actions);
-  }
-  ~Process() { stop(); }
-  [[nodiscard]] bool started() const { return pid_ > 0; }
-  // Waits up to `timeout` for the process to exit; its exit code, or nullopt.
-  std::optional<int> wait(std::chrono::milliseconds timeout) {
-    const auto until = std::chrono::steady_clock::now() + timeout;
-    while (pid_ > 0) {
-      int status = 0;
-      if (waitpid(pid_, &status, WNOHANG) == pid_) {
-        pid_ = -1;
-        return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-      }
-      if (std::chrono::steady_clock::now() > until) return std::nullopt;
-      std::this_thread::sleep_for(20ms);
-    }
-    return std::nullopt;
-  }
-  // SIGTERM, then the exit code within `timeout` (nullopt: still running).
-  std::optional<int> terminate(std::chrono::milliseconds timeout) {
-    if (pid_ > 0) kill(pid_, SIGTERM);
-    return wait(timeout);
-  }
-  void stop() {
-    if (pid_ <= 0) return;
-    kill(pid_, SIGTERM);
-    if (!wait(3000ms)) {
-      kill(pid_, SIGKILL);
-      waitpid(pid_, nullptr, 0);
-      pid_ = -1;
-    }
-  }
-  [[nodiscard]] std::string out() const { return read_text(out_); }
-  [[nodiscard]] std::string err() const { return read_text(err_); }
-
- private:
-  pid_t pid_ = -1;
-  fs::path out_, err_;
+  static int ms(std::chrono::milliseconds t) { return static_cast<int>(t.count()); }
 };
 
 // A TCP connection to 127.0.0.1:port with blocking I/O and a receive timeout.
@@ -191,20 +129,20 @@ struct Stack {
   // recording: the file bodyd replays (default: the bundled one).
   explicit Stack(std::vector<std::string> bridge_flags = {}, fs::path recording = {}) {
     const fs::path bin = bodyd::test::bin_dir();
-    const fs::path endpoints = dir.path() / "endpoints.json";
+    const fs::path endpoints = dir.path / "endpoints.json";
     if (recording.empty()) recording = bodyd::test::source_dir() / "data/demo/walk.csv";
     daemon = std::make_unique<Process>(
         std::vector<std::string>{(bin / "bodyd").string(), "--replay", recording.string(), "--method", "ik", "--loop",
                                  "--pub", "tcp://127.0.0.1:*", "--control", "tcp://127.0.0.1:*", "--endpoints-file",
                                  endpoints.string(),
                                  "--log-level", "warn"},
-        dir.path(), "bodyd");
+        dir.path, "bodyd");
     std::string pub;
     for (int i = 0; i < 250 && pub.empty(); ++i) {
       std::this_thread::sleep_for(20ms);
       try {
         if (fs::exists(endpoints)) {
-          const auto j = nlohmann::json::parse(read_text(endpoints));
+          const auto j = nlohmann::json::parse(read_file(endpoints));
           control = j.at("control").get<std::string>();
           pub = j.at("pub").get<std::string>();
         }
@@ -218,7 +156,7 @@ struct Stack {
     std::vector<std::string> bridge_args{(bin / "bodyd-viewer-bridge").string(), "--endpoint", pub, "--control", control,
                                          "--http", "127.0.0.1:0", "--log-level", "warn"};
     bridge_args.insert(bridge_args.end(), bridge_flags.begin(), bridge_flags.end());
-    bridge = std::make_unique<Process>(bridge_args, dir.path(), "bridge");
+    bridge = std::make_unique<Process>(bridge_args, dir.path, "bridge");
     for (int i = 0; i < 250 && http_port == 0; ++i) {
       std::this_thread::sleep_for(20ms);
       const std::string out = bridge->out();
@@ -248,16 +186,7 @@ struct Stack {
 bool have_curl() { return std::system("curl --version > /dev/null 2>&1") == 0; }
 
 // curl's output for `args` (shell words): -s, at most 10 s.
-std::string curl(const std::string& args) {
-  std::string out;
-  FILE* p = ::popen(("curl -s --max-time 10 " + args + " 2>&1").c_str(), "r");
-  if (!p) return out;
-  char buffer[4096];
-  size_t n;
-  while ((n = std::fread(buffer, 1, sizeof buffer, p)) > 0) out.append(buffer, n);
-  ::pclose(p);
-  return out;
-}
+std::string curl(const std::string& args) { return bodyd::test::shell("curl -s --max-time 10 " + args + " 2>&1").out; }
 
 // The status code curl got ("000": no answer within 10 s).
 std::string status_of(const std::string& args) { return curl("-o /dev/null -w '%{http_code}' " + args); }
@@ -433,8 +362,7 @@ TEST(ViewerBridge, RefusesNonLoopbackAndBadSpecs) {
   TempDir dir;
   const fs::path bin = bodyd::test::bin_dir();
   for (const char* spec : {"0.0.0.0:8080", "localhost8080", "127.0.0.1:99999"}) {
-    Process p({(bin / "bodyd-viewer-bridge").string(), "--endpoint", "tcp://127.0.0.1:1", "--http", spec}, dir.path(), "b");
-    ASSERT_TRUE(p.started());
+    Process p({(bin / "bodyd-viewer-bridge").string(), "--endpoint", "tcp://127.0.0.1:1", "--http", spec}, dir.path, "b");
     EXPECT_EQ(p.wait(5000ms), 2) << spec;
     EXPECT_NE(p.err().find("--http"), std::string::npos) << p.err();
   }
@@ -599,8 +527,7 @@ TEST(ViewerBridge, RefusesADescriptorLimitTooLowForItsWorkers) {
   TempDir dir;
   Process p({"/usr/bin/prlimit", "--nofile=40:40", (bodyd::test::bin_dir() / "bodyd-viewer-bridge").string(), "--endpoint",
              "tcp://127.0.0.1:1", "--control", "none", "--http", "127.0.0.1:0"},
-            dir.path(), "b");
-  ASSERT_TRUE(p.started());
+            dir.path, "b");
   EXPECT_EQ(p.wait(5000ms), 2) << p.err();
   EXPECT_NE(p.err().find("ulimit -n"), std::string::npos) << p.err();
 }
@@ -617,18 +544,17 @@ TEST(ViewerBrowser, HeadlessChromiumShowsTheSkeleton) {
   Stack stack({"--enable-hold-load"});
   ASSERT_EQ(stack.error, "");
   ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
-  const fs::path shot = stack.dir.path() / "shot.png";
+  const fs::path shot = stack.dir.path / "shot.png";
   // ?hold-load: the page's load event waits for the first drawn pose, and chromium takes the
   // screenshot at the load event (--timeout caps the wait; --virtual-time-budget never ends while
   // a WebSocket is open). SwiftShader renders WebGL on the CPU.
   Process browser({*chromium, "--headless", "--no-sandbox", "--disable-gpu-sandbox", "--use-angle=swiftshader",
                    "--enable-unsafe-swiftshader", "--no-first-run", "--disable-extensions", "--disable-background-networking",
                    "--disable-sync", "--disable-component-update", "--no-default-browser-check", "--hide-scrollbars",
-                   "--user-data-dir=" + (stack.dir.path() / "profile").string(), "--window-size=800,600",
+                   "--user-data-dir=" + (stack.dir.path / "profile").string(), "--window-size=800,600",
                    "--timeout=30000", "--screenshot=" + shot.string(),
                    "http://127.0.0.1:" + std::to_string(stack.http_port) + "/?hold-load"},
-                  stack.dir.path(), "chromium");
-  ASSERT_TRUE(browser.started());
+                  stack.dir.path, "chromium");
   const auto code = browser.wait(60000ms);
   ASSERT_TRUE(code.has_value()) << "chromium did not finish";
   ASSERT_TRUE(fs::exists(shot)) << "no screenshot; chromium exit " << *code << ": " << browser.err().substr(0, 2000);
@@ -669,7 +595,7 @@ TEST(ViewerBrowser, HeadlessChromiumShowsTheDaemonsStatus) {
   if (!chromium) GTEST_SKIP() << "chromium is not installed (apt-get install chromium); the viewer's browser test is skipped";
   // A source name as long as an installed bodyd's and longer (replay:/usr/share/bodyd/...).
   TempDir long_dir;
-  const fs::path deep = long_dir.path() / "usr/share/bodyd/data/demo/a-recording-directory-with-a-long-name";
+  const fs::path deep = long_dir.path / "usr/share/bodyd/data/demo/a-recording-directory-with-a-long-name";
   fs::create_directories(deep);
   fs::copy_file(bodyd::test::source_dir() / "data/demo/walk.csv", deep / "walk.csv");
   Stack stack({"--enable-hold-load"}, deep / "walk.csv");
@@ -680,10 +606,9 @@ TEST(ViewerBrowser, HeadlessChromiumShowsTheDaemonsStatus) {
   Process browser({*chromium, "--headless", "--no-sandbox", "--disable-gpu-sandbox", "--use-angle=swiftshader",
                    "--enable-unsafe-swiftshader", "--no-first-run", "--disable-extensions", "--disable-background-networking",
                    "--disable-sync", "--disable-component-update", "--no-default-browser-check",
-                   "--user-data-dir=" + (stack.dir.path() / "profile").string(), "--timeout=30000", "--dump-dom",
+                   "--user-data-dir=" + (stack.dir.path / "profile").string(), "--timeout=30000", "--dump-dom",
                    "http://127.0.0.1:" + std::to_string(stack.http_port) + "/?hold-load"},
-                  stack.dir.path(), "chromium");
-  ASSERT_TRUE(browser.started());
+                  stack.dir.path, "chromium");
   ASSERT_TRUE(browser.wait(60000ms).has_value()) << "chromium did not finish";
   const std::string dom = browser.out();
   ASSERT_NE(dom.find("id=\"daemon\""), std::string::npos) << dom.substr(0, 3000);
