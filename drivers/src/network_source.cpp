@@ -2,6 +2,8 @@
 
 #include "network_protocol.h"
 
+#include "bodyd/base/loopback.h"
+#include "bodyd/base/spec_options.h"
 #include "bodyd/drivers/open_source.h"
 
 #include <spdlog/spdlog.h>
@@ -50,8 +52,6 @@ std::string resolve_ipv4(const std::string& host, in_addr& out) {
   freeaddrinfo(found);
   return {};
 }
-
-bool is_loopback(in_addr a) { return (ntohl(a.s_addr) >> 24) == 127; }
 
 std::string address_text(const sockaddr_in& a) {
   char text[INET_ADDRSTRLEN] = "?";
@@ -242,11 +242,7 @@ std::optional<NetworkSourceOptions> parse_network_spec(NetworkKind kind, std::st
     return std::nullopt;
   }
   o.kind = NetworkKind{protocol->scheme};  // the row's own text, which outlives the options
-  std::string_view address = argument, query;
-  if (const auto q = argument.find('?'); q != std::string_view::npos) {
-    address = argument.substr(0, q);
-    query = argument.substr(q + 1);
-  }
+  const auto [address, query] = split_spec_query(argument);
   if (address.empty()) {
     if (protocol->default_port == 0) {
       error = where + ": missing the port, e.g. " + std::string(kind.scheme) + ":127.0.0.1:9100";
@@ -268,15 +264,16 @@ std::optional<NetworkSourceOptions> parse_network_spec(NetworkKind kind, std::st
       return std::nullopt;
     }
   }
-  while (!query.empty()) {
-    const auto amp = query.find('&');
-    const std::string_view item = query.substr(0, amp);
-    query = amp == std::string_view::npos ? std::string_view() : query.substr(amp + 1);
-    const auto eq = item.find('=');
-    const std::string key(item.substr(0, eq));
-    const std::string value(eq == std::string_view::npos ? std::string_view() : item.substr(eq + 1));
-    if (!protocol->option(key, value, o)) {
-      error = where + ": unknown option \"" + std::string(item) + "\" (" + std::string(protocol->options_help) + ")";
+  // The options by the one spec rule (bodyd/base/spec_options.h); which keys, the protocol's row.
+  std::vector<SpecOption> options;
+  if (std::string e = parse_spec_options(query, options); !e.empty()) {
+    error = where + ": " + e + " (" + std::string(protocol->options_help) + ")";
+    return std::nullopt;
+  }
+  for (const SpecOption& option : options) {
+    if (!protocol->option(option.key, option.value, o)) {
+      error = where + ": unknown option \"" + option.key + "=" + option.value + "\" (" +
+              std::string(protocol->options_help) + ")";
       return std::nullopt;
     }
   }

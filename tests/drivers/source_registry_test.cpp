@@ -162,6 +162,17 @@ TEST(SourceRegistry, CheckSourceSpec) {
   EXPECT_NE(check_source_spec("bogus:x").find("unknown kind"), std::string::npos);
 }
 
+// A network source's options follow the one spec rule of every spec (bodyd/base/spec_options.h,
+// the outputs' too): KEY=VALUE, a trailing '&' allowed, no key twice.
+TEST(SourceRegistry, NetworkOptionsFollowTheOneSpecRule) {
+  EXPECT_EQ(check_source_spec("vrchat:9001?oscquery=off&name=Me&"), "");
+  EXPECT_NE(check_source_spec("vrchat:9001?oscquery").find("option \"oscquery\" is not KEY=VALUE"), std::string::npos);
+  EXPECT_NE(check_source_spec("vmc:1?head=A&&left_hand=B").find("is not KEY=VALUE"), std::string::npos);
+  const std::string twice = check_source_spec("vmc:1?head=A&head=B");
+  EXPECT_NE(twice.find("option \"head\" given twice"), std::string::npos) << twice;
+  EXPECT_NE(twice.find("vmc: takes"), std::string::npos) << twice;  // and says which options there are
+}
+
 // ---- the device table (device_table.h) ------------------------------------------------------
 
 namespace {
