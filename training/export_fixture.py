@@ -11,6 +11,9 @@ tiny_model_io.safetensors: the same container; metadata "cases" (JSON) lists the
     forward.<i>.x, forward.<i>.m, forward.<i>.out  (W, D); step in cases["forward"][i]["t"]
     ddim.<i>.obs, ddim.<i>.mask, ddim.<i>.noise, ddim.<i>.out  (W, D); cases["ddim"][i] has K,
       guidance, eta (0) and the timesteps.
+tiny_tcn.safetensors, tiny_tcn_io.safetensors: the same for a seeded random TcnCausal (tcn-v1) with
+  D = 191 and W=10, C=16, K=3, L=3, R=2 (dilations 1, 2, 1: receptive field 9 <= W), TE=64, T=10; two
+  forward cases and one DDIM run.
 Deterministic: re-running rewrites identical files.
 """
 
@@ -28,15 +31,16 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import model_net as mn  # noqa: E402
 
 W, D, E, H, L, TE, T = 4, 191, 8, 16, 1, 64, 10
+TCN = {"W": 10, "D": D, "C": 16, "K": 3, "L": 3, "R": 2, "TE": 64, "T": 10}
 
 
-def randomise(net: mn.MlpWin, g: torch.Generator) -> None:
+def randomise(net: torch.nn.Module, g: torch.Generator) -> None:
     with torch.no_grad():
         for name, p in net.named_parameters():
             if "norm" in name and name.endswith("weight"):
                 p.copy_(1.0 + 0.3 * torch.randn(p.shape, generator=g))
             elif name.endswith("weight"):
-                p.copy_(torch.randn(p.shape, generator=g) * (1.5 / math.sqrt(p.shape[1])))
+                p.copy_(torch.randn(p.shape, generator=g) * (1.5 / math.sqrt(math.prod(p.shape[1:]))))
             else:
                 p.copy_(0.3 * torch.randn(p.shape, generator=g))
 
@@ -83,8 +87,50 @@ def main() -> None:
     io_path = os.path.join(a.out_dir, "tiny_model_io.safetensors")
     mn.write_tensor_file(io_path, tensors, {"cases": json.dumps(cases), "model": "tiny_model.safetensors",
                                             "written_by": "training/export_fixture.py"})
-    for p in (model_path, io_path):
+    for p in (model_path, io_path) + write_tcn(a.out_dir, skeleton):
         print(f"wrote {p} ({os.path.getsize(p)} bytes)")
+
+
+def write_tcn(out_dir: str, skeleton: dict) -> tuple[str, str]:
+    """tiny_tcn.safetensors and tiny_tcn_io.safetensors (own generator: the MlpWin files stay as they were)."""
+    g = torch.Generator().manual_seed(20261202)
+    c = TCN
+    net = mn.TcnCausal(c["W"], c["D"], C=c["C"], K=c["K"], L=c["L"], R=c["R"], TE=c["TE"], T=c["T"])
+    assert net.receptive_field() <= c["W"]
+    randomise(net, g)
+    net.eval()
+    Wt, Tt = c["W"], c["T"]
+    mean = torch.randn(D, generator=g) * 0.1
+    std = 0.5 + torch.rand(D, generator=g)
+    ab = mn.cosine_alpha_bars(Tt)
+    model_path = os.path.join(out_dir, "tiny_tcn.safetensors")
+    mn.write_model(model_path, net, mean, std, ab, skeleton,
+                   {"provenance": {"data": "none: seeded random parameters (training/export_fixture.py)",
+                                   "command": "python3 training/export_fixture.py"}})
+    # Random entries observed; the online case: every frame but the newest observed, trackers in the newest.
+    masks = [(torch.rand(Wt, D, generator=g) < 0.4).float(), torch.zeros(Wt, D)]
+    masks[1][:-1, :] = 1.0
+    masks[1][-1, 36:45] = 1.0
+    masks[1][-1, 72:81] = 1.0
+    tensors: dict[str, torch.Tensor] = {}
+    cases: dict[str, list] = {"forward": [], "ddim": []}
+    with torch.no_grad():
+        for i, (t, m) in enumerate(zip([0, 7], masks)):
+            obs = torch.randn(Wt, D, generator=g) * 1.5
+            x = m * obs + (1 - m) * torch.randn(Wt, D, generator=g)
+            out = net(x[None], m[None], torch.tensor([t]))[0]
+            tensors.update({f"forward.{i}.x": x, f"forward.{i}.m": m, f"forward.{i}.out": out})
+            cases["forward"].append({"t": t})
+        K, s, m = 3, 1.0, masks[1]
+        obs = torch.randn(Wt, D, generator=g)
+        noise = torch.randn(Wt, D, generator=g)
+        out = mn.ddim_sample(net, obs[None], m[None], ab, K, None, guidance=s, noise=noise[None])[0]
+        tensors.update({"ddim.0.obs": obs, "ddim.0.mask": m, "ddim.0.noise": noise, "ddim.0.out": out})
+        cases["ddim"].append({"K": K, "guidance": s, "eta": 0.0, "timesteps": mn.ddim_timesteps(Tt, K)})
+    io_path = os.path.join(out_dir, "tiny_tcn_io.safetensors")
+    mn.write_tensor_file(io_path, tensors, {"cases": json.dumps(cases), "model": "tiny_tcn.safetensors",
+                                            "written_by": "training/export_fixture.py"})
+    return model_path, io_path
 
 
 if __name__ == "__main__":

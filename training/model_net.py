@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
-"""The bodyd diffusion network "mlpwin-v1", its noise schedule, DDIM sampler and model-file writer.
+"""The bodyd diffusion networks ("mlpwin-v1", "tcn-v1"), their noise schedule, DDIM sampler and model-file writer.
 
-The C++ runtime (model/src/network.cpp, sampler.cpp, model_file.cpp) implements exactly the
-same network and sampler; tests/inference_engine checks the two against a fixture written by
+The C++ runtime (model/src/network.cpp, tcn.cpp, sampler.cpp, model_file.cpp) implements exactly the
+same networks and sampler; tests/inference_engine checks the two against fixtures written by
 training/export_fixture.py. The model file layout is specified in docs/model-file.md.
 
 Method: CondMDI-style masked conditional diffusion (Cohan et al., "Flexible Motion In-betweening
@@ -11,6 +11,8 @@ the observed entries replace the noisy sample under the mask and the mask is an 
 
 Only this module's public API is used by train.py:
   MlpWin(W, D, E=64, H=512, L=2, TE=64, T=100); forward(x, m, t) with x, m (B, W, D), t (B,) long
+  TcnCausal(W, D, C=128, K=3, L=5, R=5, TE=64, T=100); the same forward
+  ARCHITECTURES: architecture name -> class (each class has ARCHITECTURE and config())
   cosine_alpha_bars(T)
   ddim_timesteps(T, K)
   ddim_sample(net, obs, mask, alpha_bars, K, generator, guidance=1.0, eta=0.0, noise=None)
@@ -18,6 +20,7 @@ Only this module's public API is used by train.py:
 
 Command line (a random-initialised model for benchmarks, no training):
   python3 training/model_net.py --random-model OUT.safetensors --W 20 --E 64 --H 512 --L 2
+  python3 training/model_net.py --random-model OUT.safetensors --arch tcn-v1 --W 64 --C 128 --K 3 --L 5 --R 5
 Adding the checksum to a model file written before it (docs/model-file.md, "Checksum"):
   python3 training/model_net.py --restamp FILE...
 """
@@ -37,7 +40,7 @@ import torch
 from torch import nn
 import torch.nn.functional as F
 
-ARCHITECTURE = "mlpwin-v1"
+ARCHITECTURE = "mlpwin-v1"  # the default network; each class names its own (ARCHITECTURE)
 FORMAT = "bodyd-model"
 FORMAT_VERSION = "1"
 # Checksum metadata keys (docs/model-file.md, "Checksum"); the C++ loader requires them in a model.
@@ -88,6 +91,8 @@ class MlpWin(nn.Module):
     time2.*, blocks.<b>.norm.*, blocks.<b>.fc1.*, blocks.<b>.fc2.*, out_norm.*, out.*, dec1.*, dec2.*
     """
 
+    ARCHITECTURE = "mlpwin-v1"
+
     def __init__(self, W: int, D: int, E: int = 64, H: int = 512, L: int = 2, TE: int = 64, T: int = 100):
         super().__init__()
         if TE % 2 != 0:
@@ -117,6 +122,73 @@ class MlpWin(nn.Module):
         return self.dec2(F.silu(self.dec1(torch.cat([z, e], dim=-1))))      # (B, W, D)
 
 
+class CausalBlock(nn.Module):
+    """One residual block of tcn-v1: h + fc(SiLU(causal_conv(LayerNorm(h)))), per frame LayerNorm over
+    channels, a dilated 1-D convolution over frames that sees only the current and earlier frames
+    (zeros before the window's first frame)."""
+
+    def __init__(self, C: int, K: int, dilation: int):
+        super().__init__()
+        self.norm = nn.LayerNorm(C, eps=LAYERNORM_EPS)
+        self.conv = nn.Conv1d(C, C, K, dilation=dilation)
+        self.fc = nn.Linear(C, C)
+        self.pad = (K - 1) * dilation
+
+    def forward(self, h: torch.Tensor) -> torch.Tensor:                    # (B, W, C)
+        n = self.norm(h).transpose(1, 2)                                   # (B, C, W)
+        a = F.silu(self.conv(F.pad(n, (self.pad, 0))))                     # causal: left padding only
+        return h + self.fc(a.transpose(1, 2))
+
+
+class TcnCausal(nn.Module):
+    """tcn-v1: a temporal convolutional denoiser whose weights are shared over time.
+
+    forward(x, m, t) as MlpWin's: x (B, W, D) noisy sample with observed entries replaced by the
+    observations, m (B, W, D) the mask, t (B,) long. Per frame e_w = SiLU(enc([x_w; m_w])) + temb(t);
+    L causal residual blocks, block b with kernel K and dilation 2^(b mod R); per frame
+    y_w = dec2(SiLU(dec1(SiLU(out_norm(h_w))))). Frame w's output depends on frames w-F+1..w only,
+    F = 1 + (K-1) * sum_b 2^(b mod R) (receptive_field()), so a window longer than F gives the newest
+    frame the output of an unbounded stream and the C++ runtime can stream it (docs/model-file.md).
+    State-dict names: enc.*, time1.*, time2.*, blocks.<b>.norm.*, blocks.<b>.conv.* (weight
+    [C, C, K]), blocks.<b>.fc.*, out_norm.*, dec1.*, dec2.*
+    """
+
+    ARCHITECTURE = "tcn-v1"
+
+    def __init__(self, W: int, D: int, C: int = 128, K: int = 3, L: int = 5, R: int = 5, TE: int = 64,
+                 T: int = 100):
+        super().__init__()
+        if TE % 2 != 0:
+            raise ValueError(f"TE must be even, got {TE}")
+        if not 1 <= R <= 16:
+            raise ValueError(f"R must be in [1, 16], got {R}")
+        self.W, self.D, self.C, self.K, self.L, self.R, self.TE, self.T = W, D, C, K, L, R, TE, T
+        self.enc = nn.Linear(2 * D, C)
+        self.time1 = nn.Linear(TE, C)
+        self.time2 = nn.Linear(C, C)
+        self.blocks = nn.ModuleList([CausalBlock(C, K, 2 ** (b % R)) for b in range(L)])
+        self.out_norm = nn.LayerNorm(C, eps=LAYERNORM_EPS)
+        self.dec1 = nn.Linear(C, C)
+        self.dec2 = nn.Linear(C, D)
+
+    def config(self) -> dict:
+        return {"W": self.W, "D": self.D, "C": self.C, "K": self.K, "L": self.L, "R": self.R, "TE": self.TE,
+                "T": self.T}
+
+    def receptive_field(self) -> int:
+        return 1 + (self.K - 1) * sum(2 ** (b % self.R) for b in range(self.L))
+
+    def forward(self, x: torch.Tensor, m: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        temb = self.time2(F.silu(self.time1(timestep_embedding(t, self.TE))))   # (B, C)
+        h = F.silu(self.enc(torch.cat([x, m], dim=-1))) + temb[:, None, :]     # (B, W, C)
+        for blk in self.blocks:
+            h = blk(h)
+        return self.dec2(F.silu(self.dec1(F.silu(self.out_norm(h)))))         # (B, W, D)
+
+
+ARCHITECTURES = {MlpWin.ARCHITECTURE: MlpWin, TcnCausal.ARCHITECTURE: TcnCausal}
+
+
 def cosine_alpha_bars(T: int) -> torch.Tensor:
     """alpha_bar[t] for t = 0..T-1 (float32), the cosine schedule of Nichol & Dhariwal (2021).
 
@@ -144,7 +216,7 @@ def ddim_timesteps(T: int, K: int) -> list[int]:
 
 
 @torch.no_grad()
-def ddim_sample(net: MlpWin, obs: torch.Tensor, mask: torch.Tensor, alpha_bars: torch.Tensor, K: int,
+def ddim_sample(net: nn.Module, obs: torch.Tensor, mask: torch.Tensor, alpha_bars: torch.Tensor, K: int,
                 generator: torch.Generator | None, guidance: float = 1.0, eta: float = 0.0,
                 noise: torch.Tensor | None = None) -> torch.Tensor:
     """DDIM imputation sampling (CondMDI Algorithm 2 with DDIM steps), in normalised feature space.
@@ -301,7 +373,7 @@ def _skeleton_json(skeleton: Any) -> str:
     return json.dumps({"names": names, "parents": parents, "offsets_m": offs}, separators=(",", ":"))
 
 
-def write_model(path: str, net: MlpWin, mean: torch.Tensor, std: torch.Tensor, alpha_bars: torch.Tensor,
+def write_model(path: str, net: nn.Module, mean: torch.Tensor, std: torch.Tensor, alpha_bars: torch.Tensor,
                 skeleton: Any, metadata: dict) -> None:
     """Writes a bodyd model file (docs/model-file.md).
 
@@ -333,7 +405,7 @@ def write_model(path: str, net: MlpWin, mean: torch.Tensor, std: torch.Tensor, a
     meta.update({
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
-        "architecture": ARCHITECTURE,
+        "architecture": net.ARCHITECTURE,
         "config": json.dumps(cfg, separators=(",", ":")),
         "skeleton": _skeleton_json(skeleton),
     })
@@ -344,13 +416,13 @@ def write_model(path: str, net: MlpWin, mean: torch.Tensor, std: torch.Tensor, a
     write_tensor_file(path, tensors, meta)
 
 
-def load_model(path: str, device: str = "cpu") -> tuple[MlpWin, dict[str, torch.Tensor], dict[str, str]]:
+def load_model(path: str, device: str = "cpu") -> tuple[nn.Module, dict[str, torch.Tensor], dict[str, str]]:
     """Reads a model file back: (net in eval mode, {"norm.mean", "norm.std", "diffusion.alpha_bar"}, metadata)."""
     tensors, meta = read_tensor_file(path)
-    if meta.get("format") != FORMAT or meta.get("architecture") != ARCHITECTURE:
-        raise ValueError(f"{path}: not a {FORMAT} {ARCHITECTURE} file")
+    if meta.get("format") != FORMAT or meta.get("architecture") not in ARCHITECTURES:
+        raise ValueError(f"{path}: not a {FORMAT} file of a known architecture ({', '.join(ARCHITECTURES)})")
     cfg = json.loads(meta["config"])
-    net = MlpWin(**cfg)
+    net = ARCHITECTURES[meta["architecture"]](**cfg)
     extra = {k: tensors.pop(k) for k in ("norm.mean", "norm.std", "diffusion.alpha_bar")}
     net.load_state_dict(tensors, strict=True)
     return net.to(device).eval(), extra, meta
@@ -413,11 +485,15 @@ def main() -> None:
                     help="write a random-initialised model (identity normalisation) for benchmarks")
     ap.add_argument("--restamp", metavar="FILE", nargs="+",
                     help="add the checksum to model files written before it (tensors and metadata unchanged)")
+    ap.add_argument("--arch", choices=sorted(ARCHITECTURES), default=ARCHITECTURE)
     ap.add_argument("--W", type=int, default=20)
     ap.add_argument("--D", type=int, default=191)
     ap.add_argument("--E", type=int, default=64)
     ap.add_argument("--H", type=int, default=512)
     ap.add_argument("--L", type=int, default=2)
+    ap.add_argument("--C", type=int, default=128, help="tcn-v1: channels")
+    ap.add_argument("--K", type=int, default=3, help="tcn-v1: kernel size")
+    ap.add_argument("--R", type=int, default=5, help="tcn-v1: dilation cycle (block b has dilation 2^(b mod R))")
     ap.add_argument("--TE", type=int, default=64)
     ap.add_argument("--T", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
@@ -431,14 +507,17 @@ def main() -> None:
     if not a.random_model:
         ap.error("give --random-model OUT or --restamp FILE...")
     torch.manual_seed(a.seed)
-    net = MlpWin(a.W, a.D, a.E, a.H, a.L, a.TE, a.T)
+    if a.arch == TcnCausal.ARCHITECTURE:
+        net = TcnCausal(a.W, a.D, C=a.C, K=a.K, L=a.L, R=a.R, TE=a.TE, T=a.T)
+    else:
+        net = MlpWin(a.W, a.D, a.E, a.H, a.L, a.TE, a.T)
     skeleton = skeleton_from_bvh(a.skeleton_bvh)
     prov = {"data": "none (random initialisation)", "seed": a.seed, "git_commit": _git_commit(),
             "command": "python3 training/model_net.py " + " ".join(sys.argv[1:])}
     write_model(a.random_model, net, torch.zeros(a.D), torch.ones(a.D), cosine_alpha_bars(a.T), skeleton,
                 {"provenance": prov})
     n = sum(p.numel() for p in net.parameters())
-    print(f"wrote {a.random_model}: {ARCHITECTURE} {net.config()} ({n} parameters)")
+    print(f"wrote {a.random_model}: {net.ARCHITECTURE} {net.config()} ({n} parameters)")
 
 
 if __name__ == "__main__":

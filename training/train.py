@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from model_net import MlpWin, cosine_alpha_bars, ddim_sample, load_model, write_model  # noqa: E402
+from model_net import ARCHITECTURES, MlpWin, TcnCausal, cosine_alpha_bars, ddim_sample, load_model, write_model  # noqa: E402
 
 
 def parse_args():
@@ -37,9 +37,14 @@ def parse_args():
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--weight-decay", type=float, default=1e-4)
     p.add_argument("--warmup", type=int, default=500, help="linear learning-rate warm-up steps")
-    p.add_argument("--E", type=int, default=64)
-    p.add_argument("--H", type=int, default=512)
-    p.add_argument("--L", type=int, default=2)
+    p.add_argument("--arch", choices=sorted(ARCHITECTURES), default=MlpWin.ARCHITECTURE,
+                   help="the network (docs/model-file.md, \"Architectures\"); --init-from takes the model's")
+    p.add_argument("--E", type=int, default=64, help="mlpwin-v1: per-frame embedding")
+    p.add_argument("--H", type=int, default=512, help="mlpwin-v1: trunk width")
+    p.add_argument("--L", type=int, default=0, help="residual blocks (0 = the architecture's default: mlpwin-v1 2, tcn-v1 5)")
+    p.add_argument("--C", type=int, default=128, help="tcn-v1: channels")
+    p.add_argument("--K", type=int, default=3, help="tcn-v1: convolution kernel size in frames")
+    p.add_argument("--R", type=int, default=5, help="tcn-v1: dilation cycle (block b has dilation 2^(b mod R))")
     p.add_argument("--T", type=int, default=100)
     p.add_argument("--uncond-prob", type=float, default=0.1, help="fraction of samples with no condition (for guidance)")
     p.add_argument("--hand-drop-prob", type=float, default=0.15, help="per hand: probability of a tracking-loss span")
@@ -257,7 +262,10 @@ def main():
         cfg = init[0].config()
         if (cfg["W"], cfg["D"]) != (W, D):
             sys.exit(f"--init-from {a.init_from}: model W={cfg['W']} D={cfg['D']}, data/--window W={W} D={D}")
-        a.E, a.H, a.L, a.T = cfg["E"], cfg["H"], cfg["L"], cfg["T"]
+        a.arch = init[0].ARCHITECTURE
+        for k, v in cfg.items():
+            if k not in ("W", "D"):
+                setattr(a, k, v)
         mean, std = init[1]["norm.mean"], init[1]["norm.std"]
     else:
         newest = x_raw[torch.from_numpy(train_idx).to(dev), Ws - W:].reshape(-1, D)
@@ -321,8 +329,13 @@ def main():
             x[:, :, pos_cols] = x[:, :, pos_cols] * sc
         return (x - mean_d) / std_d
 
-    net = MlpWin(W, D, E=a.E, H=a.H, L=a.L, T=a.T).to(dev)
-    ema = MlpWin(W, D, E=a.E, H=a.H, L=a.L, T=a.T).to(dev)
+    def make_net():
+        if a.arch == TcnCausal.ARCHITECTURE:
+            return TcnCausal(W, D, C=a.C, K=a.K, L=a.L or 5, R=a.R, T=a.T).to(dev)
+        return MlpWin(W, D, E=a.E, H=a.H, L=a.L or 2, T=a.T).to(dev)
+
+    net = make_net()
+    ema = make_net()
     if init is not None:
         net.load_state_dict(init[0].state_dict())
         print(f"initialised from {a.init_from}", flush=True)
@@ -335,7 +348,9 @@ def main():
     gen = torch.Generator(device=dev)
     gen.manual_seed(a.seed)
     nparams = sum(p.numel() for p in net.parameters())
-    print(f"model: mlpwin-v1 W={W} D={D} E={a.E} H={a.H} L={a.L} T={a.T}, {nparams / 1e6:.2f} M parameters", flush=True)
+    cfg_text = " ".join(f"{k}={v}" for k, v in net.config().items())
+    extra = f", receptive field {net.receptive_field()} frames" if hasattr(net, "receptive_field") else ""
+    print(f"model: {net.ARCHITECTURE} {cfg_text}, {nparams / 1e6:.2f} M parameters{extra}", flush=True)
 
     step, wall_before = 0, 0.0
     t0 = time.time()

@@ -2,6 +2,7 @@
 #include "bodyd/inference/denoiser.h"
 
 #include "bodyd/inference/network.h"
+#include "bodyd/inference/tcn.h"
 
 #include <fmt/format.h>
 
@@ -12,6 +13,7 @@ namespace {
 
 constexpr std::array kArchitectures = {
     Architecture{kArchitectureMlpWin, Network::kConfigFields, &Network::tensors, &Network::make},
+    Architecture{kArchitectureTcn, Tcn::kConfigFields, &Tcn::tensors, &Tcn::make},
 };
 
 }  // namespace

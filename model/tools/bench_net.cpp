@@ -1,5 +1,5 @@
-// bodyd-bench-net: times the denoiser's forward pass (whatever architecture the model file names)
-// and a K-step DDIM sample of a model file on one thread.
+// bodyd-bench-net: times the denoiser's forward pass (whatever architecture the model file names),
+// a K-step DDIM sample and, for an architecture that streams, one streamed frame, on one thread.
 //
 //   bodyd-bench-net --model MODEL.safetensors [--steps 4] [--guidance 1] [--runs 200]
 //
@@ -106,6 +106,19 @@ int main(int argc, char** argv) {
   } catch (const std::invalid_argument& e) {
     std::fprintf(stderr, "bodyd-bench-net: %s\n", e.what());
     return 1;
+  }
+  // An architecture that streams (Denoiser::make_stream): one new frame at one step, the cost per
+  // frame of a streamed step whatever the history.
+  if (const auto stream = net->make_stream(t_mid)) {
+    std::size_t frame = 0;
+    const std::size_t frames = window / dim;
+    std::vector<float> y(dim);
+    const Stats str = time_runs(runs, [&] {
+      const std::size_t f = frame++ % frames;
+      stream->push(std::span(x).subspan(f * dim, dim), std::span(m).subspan(f * dim, dim), y);
+    });
+    fmt::print("stream (one frame):      median {:8.1f} us  p90 {:8.1f} us  min {:8.1f} us\n", str.median_us, str.p90_us,
+               str.min_us);
   }
   return 0;
 }

@@ -277,6 +277,29 @@ TEST_F(ModelFileTest, ConfigProblems) {
   expect_error(p, {"inp.weight", "[16,32]", "expected [32,32]"});
 }
 
+// The loader checks a file against its architecture's row, whichever row: tcn-v1's fields
+// (its R limited to 16 by the row) and tensors are named like mlpwin-v1's.
+TEST_F(ModelFileTest, TcnFilesAreCheckedAgainstTheirRow) {
+  const Parts tcn = Parts::of(read_bytes(fixtures() / "tiny_tcn.safetensors"));
+  EXPECT_NO_THROW((void)inference::load_model(write(tcn.bytes(), "tcn.safetensors")));
+  Parts p = tcn;
+  p.edit_meta_json("config", [](Json& j) { j.erase("K"); });
+  expect_error(p, {"config key \"K\" is missing"});
+  p = tcn;
+  p.edit_meta_json("config", [](Json& j) { j["R"] = 17; });
+  expect_error(p, {"config \"R\" must be an integer in [1, 16], got 17"});
+  p = tcn;
+  p.edit_meta_json("config", [](Json& j) { j["K"] = 2; });
+  expect_error(p, {"blocks.0.conv.weight", "[16,16,3]", "expected [16,16,2]", "for config W=10 D=191 C=16 K=2"});
+  p = tcn;
+  p.edit_meta_json("config", [](Json& j) { j["L"] = 2; });
+  expect_error(p, {"unexpected tensor", "blocks.2.", "tcn-v1", "L=2"});
+  // A tcn-v1 config under the mlpwin-v1 name: mlpwin-v1's fields are asked for.
+  p = tcn;
+  p.meta()["architecture"] = "mlpwin-v1";
+  expect_error(p, {"config key \"E\" is missing"});
+}
+
 TEST_F(ModelFileTest, TensorShapeChanged) {
   Parts p = parts();
   p.header["blocks.0.fc1.weight"]["shape"] = Json::array({256});  // same byte count, wrong shape

@@ -29,6 +29,19 @@ class DenoiserScratch {
   [[nodiscard]] virtual int max_batch() const = 0;
 };
 
+// Streamed evaluation at one diffusion step, for an architecture whose outputs depend only on the
+// current and earlier frames (Denoiser::make_stream): push() takes one new frame (x_w, m_w: D
+// floats each) and writes that frame's output, given every frame pushed since reset(), at a cost
+// that does not grow with the history. Outputs equal forward()'s on the window of the frames
+// pushed since reset(); the architecture says when they equal a sliding window's (tcn.h).
+// Must not outlive its denoiser; push() does not allocate.
+class DenoiserStream {
+ public:
+  virtual ~DenoiserStream() = default;
+  virtual void reset() = 0;
+  virtual void push(std::span<const float> x, std::span<const float> m, std::span<float> out) = 0;
+};
+
 class Denoiser {
  public:
   virtual ~Denoiser() = default;
@@ -56,6 +69,12 @@ class Denoiser {
   // Does not allocate.
   virtual void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                        DenoiserScratch& scratch) const = 0;
+  // A streamed evaluation at step t (0 <= t < T), or nullptr for an architecture that cannot
+  // stream (each output frame depends on the whole window). Allocates; call at set-up.
+  [[nodiscard]] virtual std::unique_ptr<DenoiserStream> make_stream(int t) const {
+    (void)t;
+    return nullptr;
+  }
 };
 
 // One integer field of an architecture's metadata "config". The loader requires it and checks that

@@ -1,0 +1,156 @@
+// The "tcn-v1" denoising network (docs/model-file.md, "Network "tcn-v1""): a temporal
+// convolutional network whose weights are shared over time, evaluated with Eigen in float.
+//
+// x0_hat = f(x, m, t) on a W x D window, like every Denoiser (denoiser.h). Per frame an encoder of
+// [x_w; m_w] plus the step embedding, then L residual blocks, each a LayerNorm, a causal dilated
+// 1-D convolution over frames (kernel K, dilation 2^(b mod R), zeros before the window's first
+// frame), SiLU and a per-frame linear layer, then a per-frame decoder. Frame w's output depends on
+// frames w-F+1..w only, F = receptive_field(); with F <= W the newest frame's output is that of an
+// unbounded stream, which TcnStream computes at a cost per frame that does not grow with W.
+// Identical to training/model_net.py's TcnCausal; tests/inference_engine checks the two.
+//
+// Like Network: a Tcn holds only weights (immutable, shared between sessions); every buffer lives
+// in a TcnScratch (or a TcnStream) owned by one session. forward() does not allocate.
+#pragma once
+
+#include "bodyd/inference/denoiser.h"
+#include "bodyd/inference/model_file.h"
+
+#include <Eigen/Core>
+
+#include <array>
+#include <memory>
+#include <span>
+#include <vector>
+
+namespace bodyd::inference {
+
+inline constexpr std::string_view kArchitectureTcn = "tcn-v1";
+
+// tcn-v1's hyper-parameters, the fields of its metadata "config".
+struct TcnConfig {
+  int W = 0;   // frames per window (the history the sampler sees, newest last)
+  int D = 0;   // features per frame (features::kDim)
+  int C = 0;   // channels
+  int K = 0;   // convolution kernel size (taps over frames)
+  int L = 0;   // residual blocks
+  int R = 0;   // dilation cycle: block b has dilation 2^(b mod R), R <= 16
+  int TE = 0;  // time-embedding sinusoid dimension (even)
+  int T = 0;   // diffusion steps
+
+  [[nodiscard]] static TcnConfig from(const ModelConfig& config);
+  [[nodiscard]] ModelConfig to_model_config() const;
+  [[nodiscard]] int dilation(int block) const { return 1 << (block % R); }
+  // Frames an output depends on: 1 + (K-1) * sum of the dilations.
+  [[nodiscard]] long receptive_field() const;
+};
+
+class TcnScratch;
+class TcnStream;
+
+class Tcn final : public Denoiser {
+ public:
+  // The architecture table's row (denoiser.h).
+  static constexpr std::array<ConfigField, 8> kConfigFields = {{
+      {"W", "frames per window"},
+      {"D", "features per frame"},
+      {"C", "channels"},
+      {"K", "convolution kernel size in frames"},
+      {"L", "residual blocks"},
+      {"R", "dilation cycle (block b has dilation 2^(b mod R))", 1, 16},
+      {"TE", "time-embedding dimension", 2},
+      {"T", "diffusion steps"},
+  }};
+  [[nodiscard]] static TensorShapes tensors(const ModelConfig& config);
+  [[nodiscard]] static std::shared_ptr<const Denoiser> make(const Model& model);
+
+  explicit Tcn(const Model& model);
+
+  [[nodiscard]] std::string_view architecture() const override { return kArchitectureTcn; }
+  [[nodiscard]] const TcnConfig& config() const { return config_; }
+  [[nodiscard]] int frames() const override { return config_.W; }
+  [[nodiscard]] int dim() const override { return config_.D; }
+  [[nodiscard]] int steps() const override { return config_.T; }
+  [[nodiscard]] std::span<const float> alpha_bar() const override { return alpha_bar_; }
+  [[nodiscard]] std::span<const float> norm_mean() const override { return norm_mean_; }
+  [[nodiscard]] std::span<const float> norm_std() const override { return norm_std_; }
+  [[nodiscard]] std::unique_ptr<DenoiserScratch> make_scratch(int max_batch) const override;
+  // A TcnStream at step t.
+  [[nodiscard]] std::unique_ptr<DenoiserStream> make_stream(int t) const override;
+
+  // As Network::forward: `batch` windows at step t, frame-major, out the same size. Requirements
+  // (a bug if broken: abort): whole windows, 1 <= batch <= scratch.max_batch(), 0 <= t < T, out
+  // not aliasing x or m, a scratch made by this network. Does not allocate.
+  void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+               TcnScratch& scratch) const;
+  void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+               DenoiserScratch& scratch) const override;
+
+ private:
+  friend class TcnScratch;
+  friend class TcnStream;
+  using RowMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  struct Linear {
+    RowMatrix weight;  // out x in
+    Eigen::VectorXf bias;
+  };
+  struct LayerNorm {
+    Eigen::VectorXf weight, bias;
+  };
+  struct Block {
+    LayerNorm norm;
+    std::vector<RowMatrix> taps;  // K matrices C x C: tap k multiplies frame w - (K-1-k) * dilation
+    Eigen::VectorXf conv_bias;
+    Linear fc;
+    int dilation = 1;
+  };
+
+  TcnConfig config_;
+  std::vector<float> alpha_bar_, norm_mean_, norm_std_;
+  RowMatrix enc_x_, enc_m_;  // enc.weight's columns for x and for m
+  Eigen::VectorXf enc_b_;
+  Eigen::MatrixXf time_table_;  // C x T: time2(SiLU(time1(sinusoid(t)))), column t
+  std::vector<Block> blocks_;
+  LayerNorm out_norm_;
+  Linear dec1_, dec2_;
+};
+
+// Per-session buffers for Tcn::forward, for up to max_batch windows per call.
+class TcnScratch final : public DenoiserScratch {
+ public:
+  explicit TcnScratch(const Tcn& network, int max_batch = 1);
+  [[nodiscard]] int max_batch() const override { return max_batch_; }
+
+ private:
+  friend class Tcn;
+  TcnConfig config_;
+  int max_batch_;
+  Eigen::MatrixXf h_, n_, a_, d_;  // C x (W * batch) each
+};
+
+// Streaming evaluation of a Tcn at one diffusion step: push() takes one new frame (x_w, m_w) and
+// returns that frame's output, keeping the past frames' activations of every block (ring
+// buffers of (K-1) * dilation frames each), so a frame costs the same whatever the history. The
+// outputs equal Tcn::forward's on the window of every frame pushed since reset() (the first
+// frame pushed is the window's first frame), and once F = receptive_field() frames or more have
+// been pushed, the newest output equals forward()'s newest frame on any window of the last W >= F
+// frames. Sized at construction; push() does not allocate. Must not outlive `network`.
+class TcnStream final : public DenoiserStream {
+ public:
+  TcnStream(const Tcn& network, int t);
+  // Forgets every frame pushed (the next frame is the first of a window).
+  void reset() override;
+  // x, m, out: D floats (normalised features, mask). Does not allocate.
+  void push(std::span<const float> x, std::span<const float> m, std::span<float> out) override;
+  [[nodiscard]] int step() const { return t_; }
+
+ private:
+  const Tcn* network_;
+  int t_;
+  long pushed_ = 0;
+  // Per block: the LayerNorm output of the last `history` frames, column (pushed % history).
+  std::vector<Eigen::MatrixXf> past_;
+  Eigen::VectorXf h_, n_, a_, d_;
+};
+
+}  // namespace bodyd::inference

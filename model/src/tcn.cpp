@@ -1,0 +1,258 @@
+// Eigen forward pass of tcn-v1 (docs/model-file.md, "Network "tcn-v1""), whole windows and streamed.
+//
+// Layout as network.cpp: a batch of windows is C x (W * batch), one column per frame, window after
+// window, so every per-frame layer is one matrix product over all frames; a causal convolution
+// tap is one product over a window's frames shifted by the tap's offset.
+#include "bodyd/inference/tcn.h"
+
+#include "bodyd/base/require.h"
+#include "bodyd/inference/network.h"  // timestep_embedding
+#include "eigen_ops.h"
+
+#include <string>
+
+namespace bodyd::inference {
+
+using detail::layer_norm;
+using detail::silu_inplace;
+using detail::to_matrix;
+using detail::to_vector;
+
+TcnConfig TcnConfig::from(const ModelConfig& c) {
+  return TcnConfig{c.at("W"), c.at("D"), c.at("C"), c.at("K"), c.at("L"), c.at("R"), c.at("TE"), c.at("T")};
+}
+
+ModelConfig TcnConfig::to_model_config() const {
+  return ModelConfig{{"W", W}, {"D", D}, {"C", C}, {"K", K}, {"L", L}, {"R", R}, {"TE", TE}, {"T", T}};
+}
+
+long TcnConfig::receptive_field() const {
+  long sum = 0;
+  for (int b = 0; b < L; ++b) sum += dilation(b);
+  return 1 + static_cast<long>(K - 1) * sum;
+}
+
+TensorShapes Tcn::tensors(const ModelConfig& config) {
+  using Shape = std::vector<std::int64_t>;
+  const TcnConfig c = TcnConfig::from(config);
+  TensorShapes v;
+  const std::int64_t D = c.D, C = c.C, K = c.K, TE = c.TE;
+  auto linear = [&](const std::string& name, std::int64_t in, std::int64_t out) {
+    v.emplace_back(name + ".weight", Shape{out, in});
+    v.emplace_back(name + ".bias", Shape{out});
+  };
+  auto norm = [&](const std::string& name) {
+    v.emplace_back(name + ".weight", Shape{C});
+    v.emplace_back(name + ".bias", Shape{C});
+  };
+  linear("enc", 2 * D, C);
+  linear("time1", TE, C);
+  linear("time2", C, C);
+  for (int b = 0; b < c.L; ++b) {
+    const std::string p = "blocks." + std::to_string(b) + ".";
+    norm(p + "norm");
+    v.emplace_back(p + "conv.weight", Shape{C, C, K});
+    v.emplace_back(p + "conv.bias", Shape{C});
+    linear(p + "fc", C, C);
+  }
+  norm("out_norm");
+  linear("dec1", C, C);
+  linear("dec2", C, D);
+  return v;
+}
+
+std::shared_ptr<const Denoiser> Tcn::make(const Model& model) { return std::make_shared<const Tcn>(model); }
+
+Tcn::Tcn(const Model& model)
+    : config_(TcnConfig::from(model.config)),
+      alpha_bar_(model.alpha_bar),
+      norm_mean_(model.norm_mean),
+      norm_std_(model.norm_std) {
+  const TcnConfig& c = config_;
+  const auto linear = [&](const std::string& name) {
+    return Linear{to_matrix(model.tensor(name + ".weight")), to_vector(model.tensor(name + ".bias"))};
+  };
+  const auto norm = [&](const std::string& name) {
+    return LayerNorm{to_vector(model.tensor(name + ".weight")), to_vector(model.tensor(name + ".bias"))};
+  };
+  const RowMatrix enc = to_matrix(model.tensor("enc.weight"));
+  enc_x_ = enc.leftCols(c.D);
+  enc_m_ = enc.rightCols(c.D);
+  enc_b_ = to_vector(model.tensor("enc.bias"));
+  for (int b = 0; b < c.L; ++b) {
+    const std::string p = "blocks." + std::to_string(b) + ".";
+    Block blk;
+    blk.norm = norm(p + "norm");
+    // PyTorch's Conv1d weight [out, in, K]: tap k of output o and input i at (o * C + i) * K + k.
+    const TensorF32& w = model.tensor(p + "conv.weight");
+    blk.taps.assign(static_cast<std::size_t>(c.K), RowMatrix(c.C, c.C));
+    for (int o = 0; o < c.C; ++o)
+      for (int i = 0; i < c.C; ++i)
+        for (int k = 0; k < c.K; ++k)
+          blk.taps[static_cast<std::size_t>(k)](o, i) =
+              w.data[(static_cast<std::size_t>(o) * static_cast<std::size_t>(c.C) + static_cast<std::size_t>(i)) *
+                         static_cast<std::size_t>(c.K) +
+                     static_cast<std::size_t>(k)];
+    blk.conv_bias = to_vector(model.tensor(p + "conv.bias"));
+    blk.fc = linear(p + "fc");
+    blk.dilation = c.dilation(b);
+    blocks_.push_back(std::move(blk));
+  }
+  out_norm_ = norm("out_norm");
+  dec1_ = linear("dec1");
+  dec2_ = linear("dec2");
+
+  // The time MLP depends on t alone: evaluated once per step here (in double, then rounded).
+  const Linear time1 = linear("time1");
+  const Linear time2 = linear("time2");
+  time_table_.resize(c.C, c.T);
+  std::vector<double> emb(static_cast<std::size_t>(c.TE));
+  for (int t = 0; t < c.T; ++t) {
+    timestep_embedding(t, emb);
+    const Eigen::VectorXd s = Eigen::Map<const Eigen::VectorXd>(emb.data(), c.TE);
+    Eigen::VectorXd a = time1.weight.cast<double>() * s + time1.bias.cast<double>();
+    a.array() = a.array() / (1.0 + (-a.array()).exp());
+    time_table_.col(t) = (time2.weight.cast<double>() * a + time2.bias.cast<double>()).cast<float>();
+  }
+}
+
+TcnScratch::TcnScratch(const Tcn& network, int max_batch) : config_(network.config()), max_batch_(max_batch) {
+  BODYD_REQUIRE(max_batch >= 1, "TcnScratch needs max_batch >= 1");
+  const Eigen::Index cols = static_cast<Eigen::Index>(config_.W) * max_batch;
+  h_.resize(config_.C, cols);
+  n_.resize(config_.C, cols);
+  a_.resize(config_.C, cols);
+  d_.resize(config_.C, cols);
+}
+
+std::unique_ptr<DenoiserScratch> Tcn::make_scratch(int max_batch) const {
+  return std::make_unique<TcnScratch>(*this, max_batch);
+}
+
+void Tcn::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+                  DenoiserScratch& scratch) const {
+  auto* s = dynamic_cast<TcnScratch*>(&scratch);
+  BODYD_REQUIRE(s != nullptr, "Tcn::forward needs a TcnScratch (made by Tcn::make_scratch)");
+  forward(x, m, t, out, *s);
+}
+
+void Tcn::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+                  TcnScratch& s) const {
+  const TcnConfig& c = config_;
+  const std::size_t window = static_cast<std::size_t>(c.W) * static_cast<std::size_t>(c.D);
+  BODYD_REQUIRE(s.config_.W == c.W && s.config_.D == c.D && s.config_.C == c.C, "TcnScratch was made for another network");
+  BODYD_REQUIRE(window > 0 && x.size() % window == 0, "x must hold whole windows of W * D floats");
+  const auto batch = static_cast<Eigen::Index>(x.size() / window);
+  BODYD_REQUIRE(batch >= 1 && batch <= s.max_batch_, "batch must be in [1, scratch.max_batch()]");
+  BODYD_REQUIRE(m.size() == x.size() && out.size() == x.size(), "x, m and out must have the same size");
+  BODYD_REQUIRE(t >= 0 && t < c.T, "t must be in [0, T)");
+  BODYD_REQUIRE(out.data() != x.data() && out.data() != m.data(), "out may not alias x or m");
+
+  const Eigen::Index W = c.W;
+  const Eigen::Index frames = W * batch;
+  const Eigen::Map<const Eigen::MatrixXf> X(x.data(), c.D, frames);
+  const Eigen::Map<const Eigen::MatrixXf> M(m.data(), c.D, frames);
+  Eigen::Map<Eigen::MatrixXf> Y(out.data(), c.D, frames);
+  auto h = s.h_.leftCols(frames);
+  auto n = s.n_.leftCols(frames);
+  auto a = s.a_.leftCols(frames);
+  auto d = s.d_.leftCols(frames);
+
+  // h_w = SiLU(enc [x_w; m_w] + b) + temb(t).
+  h.noalias() = enc_x_ * X;
+  h.noalias() += enc_m_ * M;
+  h.colwise() += enc_b_;
+  silu_inplace(h);
+  h.colwise() += time_table_.col(t);
+
+  for (const Block& blk : blocks_) {
+    layer_norm(h, blk.norm.weight, blk.norm.bias, n);
+    a.setZero();
+    a.colwise() += blk.conv_bias;
+    // Tap k reads frame w - offset (offset = (K-1-k) * dilation); frames before the window are 0.
+    for (int k = 0; k < c.K; ++k) {
+      const Eigen::Index offset = static_cast<Eigen::Index>(c.K - 1 - k) * blk.dilation;
+      if (offset >= W) continue;
+      const RowMatrix& tap = blk.taps[static_cast<std::size_t>(k)];
+      for (Eigen::Index b = 0; b < batch; ++b)
+        a.middleCols(b * W + offset, W - offset).noalias() += tap * n.middleCols(b * W, W - offset);
+    }
+    silu_inplace(a);
+    h.noalias() += blk.fc.weight * a;
+    h.colwise() += blk.fc.bias;
+  }
+
+  // y_w = dec2(SiLU(dec1(SiLU(LayerNorm_out(h_w))))).
+  layer_norm(h, out_norm_.weight, out_norm_.bias, n);
+  silu_inplace(n);
+  d.noalias() = dec1_.weight * n;
+  d.colwise() += dec1_.bias;
+  silu_inplace(d);
+  Y.noalias() = dec2_.weight * d;
+  Y.colwise() += dec2_.bias;
+}
+
+std::unique_ptr<DenoiserStream> Tcn::make_stream(int t) const { return std::make_unique<TcnStream>(*this, t); }
+
+TcnStream::TcnStream(const Tcn& network, int t) : network_(&network), t_(t) {
+  const TcnConfig& c = network_->config();
+  BODYD_REQUIRE(t >= 0 && t < c.T, "t must be in [0, T)");
+  for (const Tcn::Block& blk : network_->blocks_) {
+    // The current frame and the (K-1) * dilation before it.
+    past_.emplace_back(c.C, static_cast<Eigen::Index>(c.K - 1) * blk.dilation + 1);
+  }
+  h_.resize(c.C);
+  n_.resize(c.C);
+  a_.resize(c.C);
+  d_.resize(c.C);
+  reset();
+}
+
+void TcnStream::reset() {
+  pushed_ = 0;
+  for (auto& p : past_) p.setZero();
+}
+
+void TcnStream::push(std::span<const float> x, std::span<const float> m, std::span<float> out) {
+  const Tcn& net = *network_;
+  const TcnConfig& c = net.config();
+  const auto D = static_cast<std::size_t>(c.D);
+  BODYD_REQUIRE(x.size() == D && m.size() == D && out.size() == D, "x, m and out must hold one frame of D floats");
+  const Eigen::Map<const Eigen::VectorXf> X(x.data(), c.D);
+  const Eigen::Map<const Eigen::VectorXf> M(m.data(), c.D);
+  Eigen::Map<Eigen::VectorXf> Y(out.data(), c.D);
+
+  h_.noalias() = net.enc_x_ * X;
+  h_.noalias() += net.enc_m_ * M;
+  h_ += net.enc_b_;
+  silu_inplace(h_);
+  h_ += net.time_table_.col(t_);
+
+  for (std::size_t b = 0; b < net.blocks_.size(); ++b) {
+    const Tcn::Block& blk = net.blocks_[b];
+    Eigen::MatrixXf& past = past_[b];
+    const long size = past.cols();
+    layer_norm(h_, blk.norm.weight, blk.norm.bias, n_);
+    past.col(pushed_ % size) = n_;
+    a_ = blk.conv_bias;
+    for (int k = 0; k < c.K; ++k) {
+      const long offset = static_cast<long>(c.K - 1 - k) * blk.dilation;
+      if (offset > pushed_) continue;  // before the stream's first frame: zeros
+      a_.noalias() += blk.taps[static_cast<std::size_t>(k)] * past.col((pushed_ - offset) % size);
+    }
+    silu_inplace(a_);
+    h_.noalias() += blk.fc.weight * a_;
+    h_ += blk.fc.bias;
+  }
+  ++pushed_;
+
+  layer_norm(h_, net.out_norm_.weight, net.out_norm_.bias, n_);
+  silu_inplace(n_);
+  d_.noalias() = net.dec1_.weight * n_;
+  d_ += net.dec1_.bias;
+  silu_inplace(d_);
+  Y.noalias() = net.dec2_.weight * d_;
+  Y += net.dec2_.bias;
+}
+
+}  // namespace bodyd::inference

@@ -1,0 +1,43 @@
+// tcn-v1's forward pass, the sampler over it and the streamed evaluation must not allocate
+// (the allocation counter of tests/support replaces malloc in this binary).
+#include "bodyd/inference/sampler.h"
+#include "bodyd/inference/tcn.h"
+#include "test_util.h"
+
+#include "bodyd/test/alloc_counter.h"
+
+#include <gtest/gtest.h>
+
+namespace bodyd::test {
+namespace {
+
+TEST(TcnAllocation, ForwardSampleAndStreamDoNotAllocate) {
+  if (!AllocationCounter::counts_malloc()) GTEST_SKIP() << "sanitizer build: malloc is not ours to count";
+  const auto tiny = inference::load_model(fixtures() / "tiny_tcn.safetensors");
+  // The default shape of training/train.py --arch tcn-v1 (2.1 s of history at 30 fps), so Eigen takes
+  // the product paths of a real model.
+  const auto model = random_model(inference::TcnConfig{64, 191, 128, 3, 5, 5, 64, 100}.to_model_config(), 1, *tiny);
+  const auto net = std::make_shared<const inference::Tcn>(model);
+  const std::size_t n = static_cast<std::size_t>(net->window_size()), D = 191;
+  std::vector<float> x(2 * n, 0.3f), m(2 * n, 0.0f), out(2 * n);
+  for (std::size_t i = 0; i < m.size(); i += 4) m[i] = 1.0f;
+  inference::TcnScratch scratch(*net, 2);
+  inference::Sampler sampler(net, inference::SamplerOptions{2, 1.0f, 0.0f}, 1);
+  const auto stream = net->make_stream(99);
+  const std::span<const float> x1(x.data(), n), m1(m.data(), n);
+  const std::span<float> out1(out.data(), n);
+  std::vector<float> frame_out(D);
+
+  AllocationCounter allocations;
+  for (int i = 0; i < 2; ++i) {
+    net->forward(x1, m1, 50, out1, scratch);
+    net->forward(x, m, 99, out, scratch);
+    sampler.sample(x1, m1, out1);
+    for (std::size_t f = 0; f < 70; ++f)
+      stream->push(std::span(x).subspan((f % 64) * D, D), std::span(m).subspan((f % 64) * D, D), frame_out);
+  }
+  EXPECT_EQ(allocations.count(), 0);
+}
+
+}  // namespace
+}  // namespace bodyd::test

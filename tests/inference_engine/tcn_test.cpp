@@ -1,0 +1,178 @@
+// tcn-v1 (tcn.h): the loader's row, PyTorch parity on the fixture written by
+// training/export_fixture.py (forward and DDIM), causality, and streaming equal to full recomputation.
+#include "bodyd/inference/denoiser.h"
+#include "bodyd/inference/sampler.h"
+#include "bodyd/inference/tcn.h"
+#include "test_util.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cstdio>
+#include <random>
+
+namespace bodyd::test {
+namespace {
+
+using inference::Tcn;
+using inference::TcnScratch;
+using inference::TcnStream;
+
+constexpr double kParityTolerance = 1e-4;
+
+inline std::filesystem::path tiny_tcn_path() { return fixtures() / "tiny_tcn.safetensors"; }
+inline std::filesystem::path tiny_tcn_io_path() { return fixtures() / "tiny_tcn_io.safetensors"; }
+
+std::shared_ptr<const Tcn> tiny_tcn() {
+  const auto model = inference::load_model(tiny_tcn_path());
+  return std::make_shared<const Tcn>(*model);
+}
+
+std::vector<float> random_frames(std::mt19937& rng, std::size_t n, bool mask) {
+  std::normal_distribution<float> normal(0.0f, 1.0f);
+  std::vector<float> v(n);
+  for (float& x : v) x = mask ? static_cast<float>(rng() % 3 == 0) : normal(rng);
+  return v;
+}
+
+TEST(Tcn, TheTableHasItsRowAndTheFixtureLoads) {
+  const inference::Architecture* row = inference::find_architecture("tcn-v1");
+  ASSERT_NE(row, nullptr);
+  EXPECT_NE(inference::architecture_names().find("tcn-v1"), std::string::npos);
+  const auto model = inference::load_model(tiny_tcn_path());
+  const std::vector<std::pair<std::string, int>> config = {{"W", 10}, {"D", 191}, {"C", 16}, {"K", 3},
+                                                           {"L", 3},  {"R", 2},   {"TE", 64}, {"T", 10}};
+  EXPECT_EQ(model->config.values(), config);
+  const auto denoiser = inference::make_denoiser(*model);
+  EXPECT_EQ(denoiser->architecture(), "tcn-v1");
+  EXPECT_EQ(denoiser->frames(), 10);
+  EXPECT_EQ(denoiser->dim(), 191);
+  EXPECT_EQ(denoiser->steps(), 10);
+  ASSERT_NE(dynamic_cast<const Tcn*>(denoiser.get()), nullptr);
+  // It streams through the Denoiser interface; mlpwin-v1, whose every output sees the whole window, does not.
+  EXPECT_NE(denoiser->make_stream(0), nullptr);
+  EXPECT_EQ(inference::make_denoiser(*inference::load_model(tiny_model_path()))->make_stream(0), nullptr);
+  // Dilations 1, 2, 1 with K = 3: 1 + 2 * 4 frames.
+  EXPECT_EQ(dynamic_cast<const Tcn&>(*denoiser).config().receptive_field(), 9);
+  // 3 (enc, time1, time2) + 3 blocks * 3 (norm, conv, fc) + 3 (out_norm, dec1, dec2) = 15 weight/bias
+  // pairs, + norm.mean, norm.std, diffusion.alpha_bar.
+  EXPECT_EQ(inference::expected_tensors(*row, model->config).size(), 2u * 15u + 3u);
+  EXPECT_EQ(model->tensor("blocks.1.conv.weight").shape, (std::vector<std::int64_t>{16, 16, 3}));
+}
+
+TEST(Tcn, MatchesPyTorchOnTheFixture) {
+  const auto net = tiny_tcn();
+  const auto io = inference::read_tensor_file(tiny_tcn_io_path());
+  const auto cases = nlohmann::json::parse(io.metadata.at("cases"));
+  const auto scratch = net->make_scratch(1);
+  ASSERT_EQ(cases["forward"].size(), 2u);
+  for (std::size_t i = 0; i < cases["forward"].size(); ++i) {
+    const std::string p = "forward." + std::to_string(i) + ".";
+    const int t = cases["forward"][i]["t"];
+    const auto& expected = io.tensors.at(p + "out").data;
+    std::vector<float> out(expected.size()), other(expected.size());
+    net->forward(io.tensors.at(p + "x").data, io.tensors.at(p + "m").data, t, out, *scratch);
+    const double err = relative_error(out, expected);
+    std::printf("tcn forward case %zu (t=%d): relative error vs PyTorch %.3g\n", i, t, err);
+    EXPECT_LE(err, kParityTolerance) << "case " << i;
+    // The check can fail: another step's output is far off.
+    net->forward(io.tensors.at(p + "x").data, io.tensors.at(p + "m").data, (t + 3) % net->steps(), other, *scratch);
+    EXPECT_GT(relative_error(other, expected), 100 * kParityTolerance);
+  }
+  ASSERT_EQ(cases["ddim"].size(), 1u);
+  const auto& c = cases["ddim"][0];
+  inference::Sampler sampler(net, inference::SamplerOptions{c["K"].get<int>(), c["guidance"].get<float>(), 0.0f});
+  const auto& expected = io.tensors.at("ddim.0.out").data;
+  std::vector<float> out(expected.size());
+  sampler.sample_from_noise(io.tensors.at("ddim.0.obs").data, io.tensors.at("ddim.0.mask").data,
+                            io.tensors.at("ddim.0.noise").data, out);
+  const double err = relative_error(out, expected);
+  std::printf("tcn ddim: relative error vs PyTorch %.3g\n", err);
+  EXPECT_LE(err, kParityTolerance);
+}
+
+TEST(Tcn, OutputsDependOnlyOnTheFrameAndEarlierOnes) {
+  const auto net = tiny_tcn();
+  TcnScratch s(*net);
+  std::mt19937 rng(4);
+  const std::size_t D = 191, W = 10, n = W * D;
+  auto x = random_frames(rng, n, false);
+  const auto m = random_frames(rng, n, true);
+  std::vector<float> a(n), b(n);
+  net->forward(x, m, 5, a, s);
+  for (std::size_t d = 0; d < D; ++d) x[6 * D + d] += 1.0f;  // frame 6 changes
+  net->forward(x, m, 5, b, s);
+  EXPECT_EQ(std::vector<float>(a.begin(), a.begin() + 6 * D), std::vector<float>(b.begin(), b.begin() + 6 * D));
+  EXPECT_GT(relative_error(std::span(b).subspan(6 * D), std::span(a).subspan(6 * D)), 1e-3);
+}
+
+TEST(Tcn, BatchOfTwoEqualsTwoSingles) {
+  const auto net = tiny_tcn();
+  TcnScratch single(*net, 1), pair(*net, 2);
+  std::mt19937 rng(8);
+  const std::size_t n = static_cast<std::size_t>(net->window_size());
+  const auto x = random_frames(rng, 2 * n, false);
+  const auto m = random_frames(rng, 2 * n, true);
+  std::vector<float> out2(2 * n), a(n), b(n);
+  net->forward(x, m, 2, out2, pair);
+  net->forward(std::span(x).first(n), std::span(m).first(n), 2, a, single);
+  net->forward(std::span(x).subspan(n), std::span(m).subspan(n), 2, b, single);
+  EXPECT_LE(relative_error(std::span(out2).first(n), a), 1e-6);
+  EXPECT_LE(relative_error(std::span(out2).subspan(n), b), 1e-6);
+}
+
+TEST(Tcn, StreamingEqualsFullRecomputation) {
+  const auto net = tiny_tcn();
+  TcnScratch s(*net);
+  const std::size_t D = 191, W = 10;
+  std::mt19937 rng(6);
+  // A stream of 37 frames, 4 times W.
+  const std::size_t frames = 37;
+  const auto x = random_frames(rng, frames * D, false);
+  const auto m = random_frames(rng, frames * D, true);
+  for (int t : {0, 9}) {
+    TcnStream stream(*net, t);
+    std::vector<std::vector<float>> streamed(frames, std::vector<float>(D));
+    for (std::size_t f = 0; f < frames; ++f)
+      stream.push(std::span(x).subspan(f * D, D), std::span(m).subspan(f * D, D), streamed[f]);
+    // The first W frames are the window that starts with the stream: every frame's output equals forward()'s.
+    std::vector<float> full(W * D);
+    net->forward(std::span(x).first(W * D), std::span(m).first(W * D), t, full, s);
+    for (std::size_t f = 0; f < W; ++f)
+      EXPECT_LE(relative_error(streamed[f], std::span(full).subspan(f * D, D)), 1e-5) << "t " << t << " frame " << f;
+    // Later, the newest frame equals forward()'s newest frame on the window of the last W frames
+    // (the receptive field, 9 frames, fits in W = 10).
+    for (std::size_t end = W; end <= frames; ++end) {
+      const std::size_t begin = end - W;
+      net->forward(std::span(x).subspan(begin * D, W * D), std::span(m).subspan(begin * D, W * D), t, full, s);
+      EXPECT_LE(relative_error(streamed[end - 1], std::span(full).subspan((W - 1) * D, D)), 1e-5)
+          << "t " << t << " frame " << end - 1;
+    }
+    // The check can fail: the window's first frame, whose receptive field reaches before the window
+    // (zeros for forward(), the stream's past for the stream), differs.
+    EXPECT_GT(relative_error(streamed[frames - W], std::span(full).first(D)), 1e-3);
+    // reset() starts a new window.
+    stream.reset();
+    std::vector<float> again(D);
+    stream.push(std::span(x).first(D), std::span(m).first(D), again);
+    EXPECT_EQ(again, streamed[0]);
+  }
+}
+
+TEST(TcnDeathTest, BrokenPreconditionsAbort) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  const auto net = tiny_tcn();
+  TcnScratch s(*net);
+  const std::size_t n = static_cast<std::size_t>(net->window_size());
+  std::vector<float> x(n, 0.0f), m(n, 0.0f), out(n);
+  EXPECT_DEATH(net->forward(x, m, net->steps(), out, s), "t must be in");
+  std::vector<float> x2(2 * n), m2(2 * n), out2(2 * n);
+  EXPECT_DEATH(net->forward(x2, m2, 0, out2, s), "batch");
+  EXPECT_DEATH(TcnStream(*net, -1), "t must be in");
+  TcnStream stream(*net, 0);
+  std::vector<float> frame(190), y(191);
+  EXPECT_DEATH(stream.push(frame, frame, y), "one frame");
+}
+
+}  // namespace
+}  // namespace bodyd::test
