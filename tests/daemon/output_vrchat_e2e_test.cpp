@@ -30,14 +30,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string find_on_path(const std::string& name) {
-  const char* path = std::getenv("PATH");
-  std::stringstream ss(path ? path : "");
-  std::string dir;
-  while (std::getline(ss, dir, ':'))
-    if (!dir.empty() && ::access((fs::path(dir) / name).c_str(), X_OK) == 0) return (fs::path(dir) / name).string();
-  return {};
-}
+using test::find_on_path;
 
 using test::read_file;
 

@@ -21,14 +21,7 @@ namespace bodyd::test::slimevr {
 
 namespace fs = std::filesystem;
 
-inline std::string find_on_path(const std::string& name) {
-  const char* path = std::getenv("PATH");
-  std::stringstream ss(path ? path : "");
-  std::string dir;
-  while (std::getline(ss, dir, ':'))
-    if (!dir.empty() && ::access((fs::path(dir) / name).c_str(), X_OK) == 0) return (fs::path(dir) / name).string();
-  return {};
-}
+using test::find_on_path;
 
 inline fs::path client_script(const char* name) { return source_dir() / "tests" / "drivers" / "slimevr" / name; }
 inline fs::path pb_dir() { return BODYD_SLIMEVR_PY_DIR; }

@@ -17,6 +17,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -112,6 +113,17 @@ inline void collect_until_quiet(zmq::socket_t& sub, protocol::SkeletonMessage& s
     if (poses.size() != last) last = poses.size(), quiet_since = std::chrono::steady_clock::now();
     return feeder.wait(0).has_value() && std::chrono::steady_clock::now() - quiet_since > std::chrono::milliseconds(500);
   });
+}
+
+// The program `name` on PATH (the first executable one), or "".
+inline std::string find_on_path(const std::string& name) {
+  const char* path = std::getenv("PATH");
+  std::stringstream ss(path ? path : "");
+  std::string dir;
+  while (std::getline(ss, dir, ':'))
+    if (!dir.empty() && ::access((std::filesystem::path(dir) / name).c_str(), X_OK) == 0)
+      return (std::filesystem::path(dir) / name).string();
+  return {};
 }
 
 // A child process with its stderr in a file (stdout dropped); log() is its stderr.

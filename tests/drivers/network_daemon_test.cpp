@@ -92,15 +92,7 @@ using test::osc_floats;
 using test::osc_serialise;
 using test::osc_vmc;
 
-Bytes wrap_in_bundle(const std::vector<Bytes>& elements) {
-  Bytes out{'#', 'b', 'u', 'n', 'd', 'l', 'e', 0, 0, 0, 0, 0, 0, 0, 0, 1};
-  for (const Bytes& e : elements) {
-    const auto n = static_cast<std::uint32_t>(e.size());
-    for (int s = 24; s >= 0; s -= 8) out.push_back(static_cast<std::uint8_t>(n >> s));
-    out.insert(out.end(), e.begin(), e.end());
-  }
-  return out;
-}
+using test::wrap_in_bundle;
 
 struct Bad {
   int port_index;  // 0 vrchat, 1 vmc, 2 udp

@@ -69,16 +69,7 @@ lo_message pose_lo(std::initializer_list<float> values) {
   return m;
 }
 
-// "#bundle", a zero time tag, then each element with its big-endian size (OSC 1.0).
-Bytes wrap_in_bundle(const std::vector<Bytes>& elements) {
-  Bytes out{'#', 'b', 'u', 'n', 'd', 'l', 'e', 0, 0, 0, 0, 0, 0, 0, 0, 1};
-  for (const Bytes& e : elements) {
-    const auto n = static_cast<std::uint32_t>(e.size());
-    for (int s = 24; s >= 0; s -= 8) out.push_back(static_cast<std::uint8_t>(n >> s));
-    out.insert(out.end(), e.begin(), e.end());
-  }
-  return out;
-}
+using test::wrap_in_bundle;
 
 InputReject decode(const Bytes& b, std::vector<OscMessage>& out) {
   std::string detail;

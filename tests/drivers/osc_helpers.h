@@ -36,4 +36,15 @@ inline std::vector<std::uint8_t> osc_vmc(const char* path, const char* serial, s
   return osc_serialise(m, path);
 }
 
+// "#bundle", a zero time tag, then each element with its big-endian size (OSC 1.0).
+inline std::vector<std::uint8_t> wrap_in_bundle(const std::vector<std::vector<std::uint8_t>>& elements) {
+  std::vector<std::uint8_t> out{'#', 'b', 'u', 'n', 'd', 'l', 'e', 0, 0, 0, 0, 0, 0, 0, 0, 1};
+  for (const auto& e : elements) {
+    const auto n = static_cast<std::uint32_t>(e.size());
+    for (int s = 24; s >= 0; s -= 8) out.push_back(static_cast<std::uint8_t>(n >> s));
+    out.insert(out.end(), e.begin(), e.end());
+  }
+  return out;
+}
+
 }  // namespace bodyd::test
