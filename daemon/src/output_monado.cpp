@@ -2,27 +2,22 @@
 // on DIR/SlimeVRRpc (default $XDG_RUNTIME_DIR): bones and synthetic trackers in DataFeedUpdates
 // (bodyd/daemon/solarxr.h, docs/protocol-solarxr.md, docs/outputs.md "monado").
 //
-// One thread accepts and reads the clients' MessageBundles and answers each PollDataFeed at
-// once with the latest pose (Monado waits at most 4 s for the first, before any pose may exist)
-// and each SettingsRequest with the SteamVR tracker toggles; send() (the reconstruction thread)
-// sends one DataFeedUpdate per pose to the clients that sent a StartDataFeed, without blocking.
+// One thread (drivers' FramedServer, bodyd/drivers/framed_server.h) accepts and reads the
+// clients' MessageBundles; this output answers each PollDataFeed at once with the latest pose
+// (Monado waits at most 4 s for the first, before any pose may exist) and each SettingsRequest
+// with the SteamVR tracker toggles; send() (the reconstruction thread) sends one DataFeedUpdate
+// per pose to the clients that sent a StartDataFeed, without blocking.
 #include "bodyd/daemon/output.h"
 #include "bodyd/daemon/solarxr.h"
+#include "bodyd/drivers/framed_server.h"
 #include "bodyd/drivers/slimevr_bridge.h"
 
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
-#include <poll.h>
-#include <sys/eventfd.h>
-#include <sys/socket.h>
-#include <unistd.h>
-
-#include <atomic>
-#include <cerrno>
 #include <cstring>
+#include <map>
 #include <mutex>
-#include <thread>
 
 namespace bodyd::daemon {
 
@@ -75,9 +70,10 @@ bool parse_trackers(std::string_view text, std::uint16_t& out, std::string& erro
   }
 }
 
-class MonadoOutput final : public Output {
+class MonadoOutput final : public Output, sv::FramedHandler {
  public:
-  MonadoOutput(std::string path, std::uint16_t mask) : path_(std::move(path)), mask_(mask) {
+  MonadoOutput(std::string path, std::uint16_t mask)
+      : path_(std::move(path)), mask_(mask), server_(path_, kLimits, *this) {
     for (std::size_t i = 0; i < kTrackers.size(); ++i) {
       if (!(mask_ & (1u << i))) continue;
       sx::SyntheticTracker t;
@@ -102,13 +98,8 @@ class MonadoOutput final : public Output {
   std::string name() const override { return "monado:" + path_; }
 
   std::string open() override {
-    if (listen_fd_ >= 0) return {};
-    std::string e;
-    listen_fd_ = sv::listen_unix(path_, e);
-    if (listen_fd_ < 0) return "--output " + name() + ": " + e;
-    wake_fd_ = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
-    stop_.store(false);
-    thread_ = std::thread([this] { run(); });
+    if (server_.running()) return {};
+    if (std::string e = server_.start(); !e.empty()) return "--output " + name() + ": " + e;
     spdlog::info("monado: listening on {} (SolarXR)", path_);
     return {};
   }
@@ -135,24 +126,24 @@ class MonadoOutput final : public Output {
       st.rotation = (undo * g.rotations[static_cast<std::size_t>(j)]).normalized();
     }
     if (bones_.ready()) bones_.bones(g, undo, t, work_bones_);
-    std::lock_guard lock(mutex_);
+    std::lock_guard lock(server_.mutex());
     std::swap(latest_trackers_, work_trackers_);
     std::swap(latest_bones_, work_bones_);
     work_trackers_ = latest_trackers_;  // same size: no allocation
     bool any = false, dropped = false;
     std::pair<const std::uint8_t*, std::size_t> bytes{nullptr, 0};
-    for (auto& c : connections_) {
-      if (c->drop || !c->streaming) continue;
+    for (const auto& c : server_.connections()) {
+      if (c->drop || !static_cast<Connection&>(*c).streaming) continue;
       if (bytes.first == nullptr) bytes = send_encoder_.update(latest_trackers_, false, latest_bones_);
       append_frame(*c, bytes);
       ++updates_sent_;
       any = true;
-      flush(*c);
+      server_.flush(*c);
       dropped |= c->drop;
     }
     if (!any) ++updates_without_client_;
     if (dropped) {
-      wake();
+      server_.wake();
       out_error = "a client that does not read was dropped";
       return false;
     }
@@ -160,12 +151,12 @@ class MonadoOutput final : public Output {
   }
 
   nlohmann::json status() const override {
-    std::lock_guard lock(mutex_);
+    std::lock_guard lock(server_.mutex());
     std::size_t streaming = 0;
-    for (const auto& c : connections_) streaming += c->streaming ? 1 : 0;
+    for (const auto& c : server_.connections()) streaming += static_cast<const Connection&>(*c).streaming ? 1 : 0;
     return {{"trackers", names_},
             {"socket", path_},
-            {"clients", connections_.size()},
+            {"clients", server_.connections().size()},
             {"streaming", streaming},
             {"connections", connections_total_},
             {"updates_sent", updates_sent_},
@@ -179,27 +170,16 @@ class MonadoOutput final : public Output {
   }
 
   void close() override {
-    if (listen_fd_ < 0) return;
-    stop_.store(true);
-    wake();
-    if (thread_.joinable()) thread_.join();
-    std::lock_guard lock(mutex_);
-    for (auto& c : connections_) ::close(c->fd);
-    connections_.clear();
-    ::close(listen_fd_);
-    listen_fd_ = -1;
-    ::unlink(path_.c_str());
-    if (wake_fd_ >= 0) ::close(wake_fd_), wake_fd_ = -1;
+    if (server_.running()) server_.stop();
   }
 
  private:
-  struct Connection {
-    int fd = -1;
-    std::vector<std::uint8_t> in, out;
+  // The SolarXR RPC socket's limits (the socket loop is drivers' FramedServer).
+  static constexpr sv::FramedServerLimits kLimits{kMaxRpcFrameBytes, sv::kMaxConnections, kMaxPendingBytes,
+                                                  kRpcSendBufferBytes, kMaxFramesPerSecond, 8192};
+
+  struct Connection final : sv::FramedConnection {
     bool streaming = false;
-    bool drop = false;
-    std::int64_t window_start_ns = 0;
-    std::uint32_t window_frames = 0;
   };
 
   void reject(const std::string& reason, const std::string& detail) {
@@ -209,31 +189,12 @@ class MonadoOutput final : public Output {
       spdlog::warn("monado {}: {} ({}; {} so far, logged at the 1st, 2nd, 4th, 8th...)", path_, detail, reason, n);
   }
 
-  static void append_frame(Connection& c, std::pair<const std::uint8_t*, std::size_t> bytes) {
+  static void append_frame(sv::FramedConnection& c, std::pair<const std::uint8_t*, std::size_t> bytes) {
     const auto framed = static_cast<std::uint32_t>(bytes.second + sv::kFrameHeaderBytes);
     const std::size_t at = c.out.size();
     c.out.resize(at + framed);
     for (int k = 0; k < 4; ++k) c.out[at + static_cast<std::size_t>(k)] = static_cast<std::uint8_t>((framed >> (8 * k)) & 0xff);
     std::memcpy(c.out.data() + at + sv::kFrameHeaderBytes, bytes.first, bytes.second);
-  }
-
-  void flush(Connection& c) {
-    while (!c.out.empty() && !c.drop) {
-      const ssize_t n = ::send(c.fd, c.out.data(), c.out.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
-      if (n > 0) {
-        c.out.erase(c.out.begin(), c.out.begin() + n);
-        continue;
-      }
-      if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) break;
-      if (n < 0 && errno == EINTR) continue;
-      c.drop = true;
-      return;
-    }
-    if (c.out.size() > kMaxPendingBytes) {
-      reject("slow_reader", "a client read nothing of " + std::to_string(c.out.size()) + " bytes waiting: dropped");
-      ++dropped_;
-      c.drop = true;
-    }
   }
 
   void handle(Connection& c, const sx::Request& r) {
@@ -251,110 +212,52 @@ class MonadoOutput final : public Output {
     for (std::uint32_t tx : r.heartbeat_requests) append_frame(c, thread_encoder_.heartbeat_response(tx));
   }
 
-  void read(Connection& c) {
-    std::uint8_t buf[8192];
-    for (int reads = 0; reads < 16 && !c.drop; ++reads) {
-      const ssize_t n = ::recv(c.fd, buf, sizeof buf, MSG_DONTWAIT);
-      if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)) {
-        c.drop = true;
+  // ---- sv::FramedHandler (the server's thread, with its mutex held) ----
+
+  std::unique_ptr<sv::FramedConnection> make_connection() override { return std::make_unique<Connection>(); }
+
+  void accepted(sv::FramedConnection&) override {
+    ++connections_total_;
+    spdlog::info("monado {}: a client connected", path_);
+  }
+
+  void frame(sv::FramedConnection& c, const std::uint8_t* payload, std::size_t size, std::int64_t) override {
+    // FlatBuffers' verifier wants the buffer aligned: copy the payload to the start of one.
+    scratch_.assign(payload, payload + size);
+    sx::Request r;
+    std::string error;
+    if (!sx::decode_request(scratch_.data(), scratch_.size(), r, error)) {
+      reject("malformed", error);
+      return;
+    }
+    handle(static_cast<Connection&>(c), r);
+  }
+
+  void dropping(sv::FramedConnection*, sv::FramedDrop why, std::size_t bytes) override {
+    switch (why) {
+      case sv::FramedDrop::FrameTooLong:
+      case sv::FramedDrop::FrameTooShort:
+        reject(why == sv::FramedDrop::FrameTooLong ? "frame_too_long" : "frame_too_short",
+               "a frame declares " + std::to_string(bytes) + " bytes (4 to " + std::to_string(kMaxRpcFrameBytes) +
+                   " allowed): the connection is dropped");
+        ++dropped_;
         return;
-      }
-      if (n < 0) return;
-      const std::int64_t now = drivers::monotonic_ns();
-      c.in.insert(c.in.end(), buf, buf + n);
-      std::size_t at = 0;
-      while (!c.drop) {
-        const sv::FrameView f = sv::next_frame(c.in.data() + at, c.in.size() - at, kMaxRpcFrameBytes);
-        if (f.result == sv::FrameResult::NeedMore) break;
-        if (f.result != sv::FrameResult::Frame) {
-          reject(f.result == sv::FrameResult::TooLong ? "frame_too_long" : "frame_too_short",
-                 "a frame declares " + std::to_string(f.declared_bytes) + " bytes (4 to " +
-                     std::to_string(kMaxRpcFrameBytes) + " allowed): the connection is dropped");
-          ++dropped_;
-          c.drop = true;
-          break;
-        }
-        at += f.frame_bytes;
-        if (now - c.window_start_ns >= 1'000'000'000) c.window_start_ns = now, c.window_frames = 0;
-        if (++c.window_frames > kMaxFramesPerSecond) {
-          reject("flood", "a client sent more than " + std::to_string(kMaxFramesPerSecond) + " frames in a second: dropped");
-          ++dropped_;
-          c.drop = true;
-          break;
-        }
-        // FlatBuffers' verifier wants the buffer aligned: copy the payload to the start of one.
-        scratch_.assign(f.payload, f.payload + f.payload_bytes);
-        sx::Request r;
-        std::string error;
-        if (!sx::decode_request(scratch_.data(), scratch_.size(), r, error)) {
-          reject("malformed", error);
-          continue;
-        }
-        handle(c, r);
-      }
-      c.in.erase(c.in.begin(), c.in.begin() + static_cast<std::ptrdiff_t>(std::min(at, c.in.size())));
+      case sv::FramedDrop::Flood:
+        reject("flood", "a client sent more than " + std::to_string(kMaxFramesPerSecond) + " frames in a second: dropped");
+        ++dropped_;
+        return;
+      case sv::FramedDrop::SlowReader:
+        reject("slow_reader", "a client read nothing of " + std::to_string(bytes) + " bytes waiting: dropped");
+        ++dropped_;
+        return;
+      case sv::FramedDrop::TooManyClients:
+        reject("too_many_clients", "more than " + std::to_string(sv::kMaxConnections) + " clients at once: refused");
+        return;
     }
   }
 
-  void run() {
-    std::vector<pollfd> fds;
-    while (!stop_.load()) {
-      fds.clear();
-      {
-        std::lock_guard lock(mutex_);
-        fds.push_back({listen_fd_, POLLIN, 0});
-        fds.push_back({wake_fd_, POLLIN, 0});
-        for (const auto& c : connections_)
-          fds.push_back({c->fd, static_cast<short>(POLLIN | (c->out.empty() ? 0 : POLLOUT)), 0});
-      }
-      if (::poll(fds.data(), fds.size(), 100) < 0 && errno != EINTR) break;
-      std::lock_guard lock(mutex_);
-      if (fds[1].revents & POLLIN) {
-        std::uint64_t v;
-        (void)!::read(wake_fd_, &v, sizeof v);
-      }
-      for (std::size_t i = 2; i < fds.size(); ++i) {
-        if (fds[i].revents == 0) continue;
-        for (auto& c : connections_) {
-          if (c->fd != fds[i].fd || c->drop) continue;
-          if (fds[i].revents & (POLLIN | POLLHUP | POLLERR)) read(*c);
-          if (!c->drop && !c->out.empty()) flush(*c);
-        }
-      }
-      if (fds[0].revents & POLLIN) {
-        for (;;) {
-          const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
-          if (fd < 0) break;
-          if (connections_.size() >= sv::kMaxConnections) {
-            ::close(fd);
-            reject("too_many_clients", "more than " + std::to_string(sv::kMaxConnections) + " clients at once: refused");
-            continue;
-          }
-          sv::limit_send_buffer(fd, kRpcSendBufferBytes);
-          auto c = std::make_unique<Connection>();
-          c->fd = fd;
-          c->window_start_ns = drivers::monotonic_ns();
-          ++connections_total_;
-          spdlog::info("monado {}: a client connected", path_);
-          connections_.push_back(std::move(c));
-        }
-      }
-      for (auto it = connections_.begin(); it != connections_.end();) {
-        if (!(*it)->drop) {
-          ++it;
-          continue;
-        }
-        ::close((*it)->fd);
-        it = connections_.erase(it);
-        spdlog::info("monado {}: a client left", path_);
-      }
-    }
-  }
-
-  void wake() const {
-    if (wake_fd_ < 0) return;
-    const std::uint64_t one = 1;
-    (void)!::write(wake_fd_, &one, sizeof one);
+  void closing(sv::FramedConnection&, std::size_t, bool stopping) override {
+    if (!stopping) spdlog::info("monado {}: a client left", path_);
   }
 
   std::string path_;
@@ -367,11 +270,7 @@ class MonadoOutput final : public Output {
   std::vector<sx::Bone> work_bones_;
   sx::Encoder send_encoder_;  // reconstruction thread
 
-  int listen_fd_ = -1, wake_fd_ = -1;
-  std::atomic<bool> stop_{false};
-  std::thread thread_;
-  mutable std::mutex mutex_;  // what follows
-  std::vector<std::unique_ptr<Connection>> connections_;
+  sv::FramedServer server_;  // its mutex() guards what follows
   std::vector<sx::SyntheticTracker> latest_trackers_;
   std::vector<sx::Bone> latest_bones_;
   sx::Encoder thread_encoder_;

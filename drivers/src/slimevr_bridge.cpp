@@ -1,5 +1,6 @@
 // The SlimeVR bridge server, its registry and the steamvr:/monado: sources (slimevr_bridge.h).
 #include "bodyd/drivers/slimevr_bridge.h"
+#include "bodyd/drivers/framed_server.h"
 #include "bodyd/drivers/open_source.h"
 
 #include "bodyd/paths/private_dir.h"
@@ -9,20 +10,16 @@
 #include <spdlog/spdlog.h>
 
 #include <fcntl.h>
-#include <poll.h>
-#include <sys/eventfd.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
 #include <unistd.h>
 
-#include <atomic>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
-#include <thread>
 
 namespace bodyd::drivers::slimevr {
 
@@ -149,35 +146,30 @@ void limit_send_buffer(int fd, int bytes) { (void)::setsockopt(fd, SOL_SOCKET, S
 
 // ---- the server ---------------------------------------------------------------------------------
 
-struct BridgeServer::Impl {
+// The socket loop is FramedServer's (framed_server.h); what the bridge does with each event is here.
+struct BridgeServer::Impl final : FramedHandler {
   struct Device {           // a tracker a client announced
     std::string serial;
     std::int32_t role = 0;
     std::optional<Role> bodyd;
   };
-  struct Connection {
-    int fd = -1;
-    std::uint64_t number = 0;  // 1, 2, ... in the order of connection (logs)
-    std::vector<std::uint8_t> in, out;
+  struct Connection final : FramedConnection {
     std::map<std::int32_t, Device> devices;  // by tracker_id
-    std::int64_t window_start_ns = 0;
-    std::uint32_t window_frames = 0;
-    bool drop = false;
   };
 
+  explicit Impl(std::string p) : path(std::move(p)), server(path, FramedServerLimits{}, *this) { stats.path = path; }
+  ~Impl() override { server.stop(); }
+
   std::string path;
-  mutable std::mutex mutex;  // everything below
+  FramedServer server;       // its mutex() guards everything below
   int users = 0;
-  int listen_fd = -1;
-  int wake_fd = -1;
-  std::atomic<bool> stop_flag{false};
-  std::thread thread;
-  std::vector<std::unique_ptr<Connection>> connections;
   SampleSink* sink = nullptr;
   std::uint16_t source_index = 0;
   std::vector<AnnouncedTracker> trackers;
   Encoder encoder;
   BridgeStats stats;
+
+  std::mutex& mutex() const { return server.mutex(); }
 
   void reject(const std::string& reason, const std::string& detail) {
     ++stats.rejected;
@@ -187,33 +179,11 @@ struct BridgeServer::Impl {
       spdlog::warn("bridge {}: {} ({}; {} so far, logged at the 1st, 2nd, 4th, 8th...)", path, detail, reason, n);
   }
 
-  void announce(Connection& c) {
+  void announce(FramedConnection& c) {
     encoder.version(c.out, kProtocolVersion);
     for (const AnnouncedTracker& t : trackers) {
       encoder.tracker_added(c.out, t.id, t.serial, t.name, t.role, "bodyd");
       encoder.tracker_status(c.out, t.id, status::kOk);
-    }
-  }
-
-  // Writes what the socket takes now; drops a connection that kept too much.
-  void flush(Connection& c) {
-    while (!c.out.empty() && !c.drop) {
-      const ssize_t n = ::send(c.fd, c.out.data(), c.out.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
-      if (n > 0) {
-        c.out.erase(c.out.begin(), c.out.begin() + n);
-        continue;
-      }
-      if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) break;
-      if (n < 0 && errno == EINTR) continue;
-      c.drop = true;  // EPIPE, ECONNRESET: gone; the thread closes it
-      ++stats.disconnects;
-      return;
-    }
-    if (c.out.size() > kMaxPendingOutBytes) {
-      reject("slow_reader", "client " + std::to_string(c.number) + " read nothing of " + std::to_string(c.out.size()) +
-                                " bytes waiting: the connection is dropped");
-      ++stats.dropped;
-      c.drop = true;
     }
   }
 
@@ -230,6 +200,60 @@ struct BridgeServer::Impl {
       s.source_index = source_index;
       sink->push(s);
     }
+  }
+
+  // ---- FramedHandler ----
+
+  std::unique_ptr<FramedConnection> make_connection() override { return std::make_unique<Connection>(); }
+
+  void accepted(FramedConnection& c) override {
+    ++stats.connections;
+    announce(c);
+    server.flush(c);
+    spdlog::info("bridge {}: client {} connected ({} now)", path, c.number, server.connections().size() + 1);
+  }
+
+  void disconnected(FramedConnection&) override { ++stats.disconnects; }
+
+  void dropping(FramedConnection* c, FramedDrop why, std::size_t bytes) override {
+    switch (why) {
+      case FramedDrop::FrameTooLong:
+      case FramedDrop::FrameTooShort:
+        reject(why == FramedDrop::FrameTooLong ? "frame_too_long" : "frame_too_short",
+               "a frame declares " + std::to_string(bytes) + " bytes (the protocol allows 4 to " +
+                   std::to_string(kMaxFrameBytes) + "): the stream cannot be followed, the connection is dropped");
+        ++stats.dropped;
+        return;
+      case FramedDrop::Flood:
+        reject("flood", "client " + std::to_string(c->number) + " sent more than " + std::to_string(kMaxFramesPerSecond) +
+                            " frames in a second: the connection is dropped");
+        ++stats.dropped;
+        return;
+      case FramedDrop::SlowReader:
+        reject("slow_reader", "client " + std::to_string(c->number) + " read nothing of " + std::to_string(bytes) +
+                                  " bytes waiting: the connection is dropped");
+        ++stats.dropped;
+        return;
+      case FramedDrop::TooManyClients:
+        ++stats.refused;
+        reject("too_many_clients", "more than " + std::to_string(kMaxConnections) + " clients at once: refused");
+        return;
+    }
+  }
+
+  void closing(FramedConnection& c, std::size_t remaining, bool stopping) override {
+    push_invalid(static_cast<Connection&>(c));
+    if (!stopping) spdlog::info("bridge {}: client {} left ({} now)", path, c.number, remaining);
+  }
+
+  void frame(FramedConnection& c, const std::uint8_t* payload, std::size_t size, std::int64_t arrival_ns) override {
+    Message m;
+    std::string error;
+    if (!decode_message(payload, size, m, error)) {
+      reject("malformed", error);  // the framing held: skip this frame only
+      return;
+    }
+    handle(static_cast<Connection&>(c), m, arrival_ns);
   }
 
   void handle(Connection& c, const Message& m, std::int64_t arrival_ns) {
@@ -310,225 +334,72 @@ struct BridgeServer::Impl {
     }
   }
 
-  // Reads what is there and handles every whole frame; marks the connection for dropping on
-  // a broken stream, a flood or EOF.
-  void read(Connection& c) {
-    std::uint8_t buf[4096];
-    for (int reads = 0; reads < 16 && !c.drop; ++reads) {
-      const ssize_t n = ::recv(c.fd, buf, sizeof buf, MSG_DONTWAIT);
-      if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)) {
-        c.drop = true;
-        ++stats.disconnects;
-        return;
-      }
-      if (n < 0) return;
-      const std::int64_t arrival_ns = now_ns();
-      c.in.insert(c.in.end(), buf, buf + n);
-      std::size_t at = 0;
-      while (!c.drop) {
-        const FrameView f = next_frame(c.in.data() + at, c.in.size() - at);
-        if (f.result == FrameResult::NeedMore) break;
-        if (f.result == FrameResult::TooLong || f.result == FrameResult::TooShort) {
-          reject(f.result == FrameResult::TooLong ? "frame_too_long" : "frame_too_short",
-                 "a frame declares " + std::to_string(f.declared_bytes) + " bytes (the protocol allows 4 to " +
-                     std::to_string(kMaxFrameBytes) + "): the stream cannot be followed, the connection is dropped");
-          ++stats.dropped;
-          c.drop = true;
-          break;
-        }
-        at += f.frame_bytes;
-        ++stats.frames_in;
-        if (arrival_ns - c.window_start_ns >= 1'000'000'000) {
-          c.window_start_ns = arrival_ns;
-          c.window_frames = 0;
-        }
-        if (++c.window_frames > kMaxFramesPerSecond) {
-          reject("flood", "client " + std::to_string(c.number) + " sent more than " + std::to_string(kMaxFramesPerSecond) +
-                              " frames in a second: the connection is dropped");
-          ++stats.dropped;
-          c.drop = true;
-          break;
-        }
-        Message m;
-        std::string error;
-        if (!decode_message(f.payload, f.payload_bytes, m, error)) {
-          reject("malformed", error);  // the framing held: skip this frame only
-          continue;
-        }
-        handle(c, m, arrival_ns);
-      }
-      c.in.erase(c.in.begin(), c.in.begin() + static_cast<std::ptrdiff_t>(std::min(at, c.in.size())));
-    }
-  }
-
-  void accept_all() {
-    for (;;) {
-      const int fd = ::accept4(listen_fd, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
-      if (fd < 0) return;
-      if (connections.size() >= kMaxConnections) {
-        ::close(fd);
-        ++stats.refused;
-        reject("too_many_clients", "more than " + std::to_string(kMaxConnections) + " clients at once: refused");
-        continue;
-      }
-      limit_send_buffer(fd, kSendBufferBytes);
-      auto c = std::make_unique<Connection>();
-      c->fd = fd;
-      c->window_start_ns = now_ns();
-      ++stats.connections;
-      c->number = stats.connections;
-      announce(*c);
-      flush(*c);
-      spdlog::info("bridge {}: client {} connected ({} now)", path, c->number, connections.size() + 1);
-      connections.push_back(std::move(c));
-    }
-  }
-
-  void close_dropped() {
-    for (auto it = connections.begin(); it != connections.end();) {
-      if (!(*it)->drop) {
-        ++it;
-        continue;
-      }
-      push_invalid(**it);
-      ::close((*it)->fd);
-      const std::uint64_t number = (*it)->number;
-      it = connections.erase(it);
-      spdlog::info("bridge {}: client {} left ({} now)", path, number, connections.size());
-    }
-  }
-
-  void run() {
-    std::vector<pollfd> fds;
-    while (!stop_flag.load()) {
-      fds.clear();
-      {
-        std::lock_guard lock(mutex);
-        fds.push_back({listen_fd, POLLIN, 0});
-        fds.push_back({wake_fd, POLLIN, 0});
-        for (const auto& c : connections)
-          fds.push_back({c->fd, static_cast<short>(POLLIN | (c->out.empty() ? 0 : POLLOUT)), 0});
-      }
-      if (::poll(fds.data(), fds.size(), 100) < 0 && errno != EINTR) break;
-      std::lock_guard lock(mutex);
-      if (fds[1].revents & POLLIN) {
-        std::uint64_t v;
-        (void)!::read(wake_fd, &v, sizeof v);
-      }
-      // Connections may have changed between the two locks (publish drops only by flag), so
-      // match by fd.
-      for (std::size_t i = 2; i < fds.size(); ++i) {
-        if (fds[i].revents == 0) continue;
-        for (auto& c : connections) {
-          if (c->fd != fds[i].fd || c->drop) continue;
-          if (fds[i].revents & (POLLIN | POLLHUP | POLLERR)) read(*c);
-          if (!c->drop && !c->out.empty()) flush(*c);
-        }
-      }
-      if (fds[0].revents & POLLIN) accept_all();
-      close_dropped();
-    }
-  }
-
-  void wake() const {
-    const std::uint64_t one = 1;
-    (void)!::write(wake_fd, &one, sizeof one);
-  }
 };
 
-BridgeServer::BridgeServer(std::string path) : path_(std::move(path)), impl_(std::make_unique<Impl>()) {
-  impl_->path = path_;
-  impl_->stats.path = path_;
-}
+BridgeServer::BridgeServer(std::string path) : path_(std::move(path)), impl_(std::make_unique<Impl>(path_)) {}
 
 BridgeServer::~BridgeServer() {
   {
-    std::lock_guard lock(impl_->mutex);
+    std::lock_guard lock(impl_->mutex());
     impl_->users = std::min(impl_->users, 1);
   }
   stop();
 }
 
 std::string BridgeServer::start() {
-  std::lock_guard lock(impl_->mutex);
+  std::lock_guard lock(impl_->mutex());
   if (impl_->users++ > 0) return {};
-  const auto fail = [&](std::string e) {
+  if (std::string e = impl_->server.start(); !e.empty()) {
     impl_->users = 0;
     return "bridge socket " + path_ + ": " + e;
-  };
-  std::string e;
-  impl_->listen_fd = listen_unix(path_, e);
-  if (impl_->listen_fd < 0) return fail(e);
-  impl_->wake_fd = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
-  if (impl_->wake_fd < 0) {
-    ::close(impl_->listen_fd);
-    impl_->listen_fd = -1;
-    return fail(std::string("eventfd: ") + std::strerror(errno));
   }
-  impl_->stop_flag.store(false);
   impl_->stats.listening = true;
-  impl_->thread = std::thread([this] { impl_->run(); });
   spdlog::info("bridge: listening on {} (SlimeVR driver protocol)", path_);
   return {};
 }
 
 void BridgeServer::stop() {
   {
-    std::lock_guard lock(impl_->mutex);
+    std::lock_guard lock(impl_->mutex());
     if (impl_->users == 0 || --impl_->users > 0) return;
-    impl_->stop_flag.store(true);
   }
-  if (impl_->thread.joinable()) {
-    impl_->wake();
-    impl_->thread.join();
-  }
-  std::lock_guard lock(impl_->mutex);
-  for (auto& c : impl_->connections) {
-    impl_->push_invalid(*c);
-    ::close(c->fd);
-  }
-  impl_->connections.clear();
-  if (impl_->listen_fd >= 0) {
-    ::close(impl_->listen_fd);
-    impl_->listen_fd = -1;
-    ::unlink(path_.c_str());
-  }
-  if (impl_->wake_fd >= 0) ::close(impl_->wake_fd), impl_->wake_fd = -1;
+  impl_->server.stop();
+  std::lock_guard lock(impl_->mutex());
   impl_->stats.listening = false;
 }
 
 void BridgeServer::attach_sink(SampleSink* sink, std::uint16_t source_index) {
-  std::lock_guard lock(impl_->mutex);
+  std::lock_guard lock(impl_->mutex());
   impl_->sink = sink;
   impl_->source_index = source_index;
 }
 
 void BridgeServer::set_trackers(std::vector<AnnouncedTracker> trackers) {
-  std::lock_guard lock(impl_->mutex);
+  std::lock_guard lock(impl_->mutex());
   impl_->trackers = std::move(trackers);
-  for (auto& c : impl_->connections) {
+  for (const auto& c : impl_->server.connections()) {
     for (const AnnouncedTracker& t : impl_->trackers) {
       impl_->encoder.tracker_added(c->out, t.id, t.serial, t.name, t.role, "bodyd");
       impl_->encoder.tracker_status(c->out, t.id, status::kOk);
     }
-    impl_->flush(*c);
+    impl_->server.flush(*c);
   }
-  if (impl_->wake_fd >= 0) impl_->wake();
+  impl_->server.wake();
 }
 
 bool BridgeServer::publish(const TrackerPoseOut* poses, std::size_t count, std::string& out_error) {
-  std::lock_guard lock(impl_->mutex);
+  std::lock_guard lock(impl_->mutex());
   ++impl_->stats.publishes;
   bool dropped = false, any = false;
-  for (auto& c : impl_->connections) {
+  for (const auto& c : impl_->server.connections()) {
     if (c->drop) continue;
     any = true;
     for (std::size_t i = 0; i < count; ++i) impl_->encoder.position(c->out, poses[i].id, poses[i].position_m, poses[i].rotation);
     impl_->stats.frames_out += count;
-    impl_->flush(*c);
+    impl_->server.flush(*c);
     dropped |= c->drop;
   }
-  if (dropped) impl_->wake();
+  if (dropped) impl_->server.wake();
   if (!any) ++impl_->stats.publishes_without_client;
   if (dropped) {
     out_error = "a client that does not read was dropped";
@@ -538,9 +409,10 @@ bool BridgeServer::publish(const TrackerPoseOut* poses, std::size_t count, std::
 }
 
 BridgeStats BridgeServer::stats() const {
-  std::lock_guard lock(impl_->mutex);
+  std::lock_guard lock(impl_->mutex());
   BridgeStats s = impl_->stats;
-  s.clients = impl_->connections.size();
+  s.clients = impl_->server.connections().size();
+  s.frames_in = impl_->server.frames_in();
   return s;
 }
 
