@@ -88,6 +88,18 @@ zmq::socket_t subscribe_all(zmq::context_t& ctx, const std::string& pub) {
   return sub;
 }
 
+// The daemon's answer to {"cmd":"status"} on `control`; nullopt when none came within 5 s.
+std::optional<std::string> status_reply(zmq::context_t& ctx, const std::string& control) {
+  zmq::socket_t req(ctx, zmq::socket_type::req);
+  req.set(zmq::sockopt::linger, 0);
+  req.set(zmq::sockopt::rcvtimeo, 5000);
+  req.connect(control);
+  req.send(zmq::buffer(std::string(R"({"cmd":"status"})")));
+  zmq::message_t reply;
+  if (!req.recv(reply)) return std::nullopt;
+  return reply.to_string();
+}
+
 using test::osc_floats;
 using test::osc_serialise;
 using test::osc_vmc;
@@ -184,15 +196,10 @@ TEST(DaemonNetworkInputs, BadPacketsAreCountedWhilePosesKeepComing) {
   EXPECT_GT(poses_after_bad, 10) << "the daemon stopped publishing after the bad packets\n" << daemon.err();
   EXPECT_EQ(non_finite, 0);
 
-  zmq::socket_t req(ctx, zmq::socket_type::req);
-  req.set(zmq::sockopt::linger, 0);
-  req.set(zmq::sockopt::rcvtimeo, 5000);
-  req.connect(endpoints["control"].get<std::string>());
-  req.send(zmq::buffer(std::string(R"({"cmd":"status"})")));
-  zmq::message_t reply;
-  ASSERT_TRUE(req.recv(reply)) << daemon.err();
-  const auto status = nlohmann::json::parse(reply.to_string(), nullptr, false);
-  ASSERT_TRUE(status.contains("sources")) << reply.to_string();
+  const std::optional<std::string> reply = status_reply(ctx, endpoints["control"].get<std::string>());
+  ASSERT_TRUE(reply) << daemon.err();
+  const auto status = nlohmann::json::parse(*reply, nullptr, false);
+  ASSERT_TRUE(status.contains("sources")) << *reply;
   ASSERT_EQ(status["sources"].size(), 3u) << status.dump(2);
   std::map<std::string, int> expected[3];
   for (const Bad& b : bad) ++expected[b.port_index][b.reason];
@@ -329,15 +336,10 @@ TEST(DaemonNetworkInputs, AForgedVmcSerialCannotKeepOrStealTheHead) {
   // kept the head and no pose came after the first).
   EXPECT_GE(tracked, 60) << poses << " poses\n" << daemon.err();
 
-  zmq::socket_t req(ctx, zmq::socket_type::req);
-  req.set(zmq::sockopt::linger, 0);
-  req.set(zmq::sockopt::rcvtimeo, 5000);
-  req.connect(endpoints["control"].get<std::string>());
-  req.send(zmq::buffer(std::string(R"({"cmd":"status"})")));
-  zmq::message_t reply;
-  ASSERT_TRUE(req.recv(reply)) << daemon.err();
-  const auto status = nlohmann::json::parse(reply.to_string(), nullptr, false);
-  ASSERT_TRUE(status.contains("sources")) << reply.to_string();
+  const std::optional<std::string> reply = status_reply(ctx, endpoints["control"].get<std::string>());
+  ASSERT_TRUE(reply) << daemon.err();
+  const auto status = nlohmann::json::parse(*reply, nullptr, false);
+  ASSERT_TRUE(status.contains("sources")) << *reply;
   // FORGED-2's 15 poses were dropped, never used as the head.
   EXPECT_GE(status["sources"][0]["counters"]["unassigned"].get<int>(), 15) << status.dump(2);
   EXPECT_EQ(daemon.stop(5000), 0) << daemon.err();
