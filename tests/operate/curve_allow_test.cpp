@@ -28,6 +28,14 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
+// bodyd with CURVE on both sockets: its key pair in dir/server, the allow-list dir/allow,
+// ephemeral ports, the endpoints written to dir/endpoints.json.
+std::vector<std::string> curve_bodyd_args(const fs::path& dir) {
+  return {kBodyd, "--method", "ik", "--pub", "tcp://127.0.0.1:0", "--control", "tcp://127.0.0.1:0",
+          "--curve-secret-key", (dir / "server/server.secret").string(), "--curve-allow", (dir / "allow").string(),
+          "--endpoints-file", (dir / "endpoints.json").string()};
+}
+
 std::string key_of(const fs::path& file) {
   std::string key;
   if (std::string e = daemon::read_curve_key_file(file, key); !e.empty()) throw std::runtime_error(e);
@@ -69,10 +77,7 @@ TEST(CurveAllowList, ListedKeyGetsPosesUnknownKeyGetsNothing) {
   fs::create_directories(dir.path / "allow");
   fs::copy_file(dir.path / "clients/alice.public", dir.path / "allow/alice.public");
 
-  Process bodyd({kBodyd, "--method", "ik", "--pub", "tcp://127.0.0.1:0", "--control", "tcp://127.0.0.1:0",
-                 "--curve-secret-key", (dir.path / "server/server.secret").string(), "--curve-allow",
-                 (dir.path / "allow").string(), "--endpoints-file", (dir.path / "endpoints.json").string()},
-                {.output_dir = dir.path, .name = "bodyd"});
+  Process bodyd(curve_bodyd_args(dir.path), {.output_dir = dir.path, .name = "bodyd"});
   const auto endpoints = wait_for_file(dir.path / "endpoints.json", 20000);
   ASSERT_TRUE(endpoints) << bodyd.log();
   const json e = json::parse(*endpoints);
@@ -170,10 +175,7 @@ TEST(CurveAllowList, WarningsOnceAndRefusalsAtALimitedRate) {
   ASSERT_EQ(run({kBodyd, "--gen-keys", (dir.path / "allow").string(), "--client", "alice"}, {.output_dir = dir.path})
                 .exit_code,
             0);  // alice.secret stays in the allow-list directory: a mistake worth a warning
-  Process bodyd({kBodyd, "--method", "ik", "--pub", "tcp://127.0.0.1:0", "--control", "tcp://127.0.0.1:0",
-                 "--curve-secret-key", (dir.path / "server/server.secret").string(), "--curve-allow",
-                 (dir.path / "allow").string(), "--endpoints-file", (dir.path / "endpoints.json").string()},
-                {.output_dir = dir.path, .name = "bodyd"});
+  Process bodyd(curve_bodyd_args(dir.path), {.output_dir = dir.path, .name = "bodyd"});
   const auto endpoints = wait_for_file(dir.path / "endpoints.json", 20000);
   ASSERT_TRUE(endpoints) << bodyd.log();
   const json e = json::parse(*endpoints);
