@@ -11,6 +11,7 @@
 #include "bodyd/daemon/solarxr.h"
 #include "bodyd/drivers/framed_server.h"
 #include "bodyd/drivers/slimevr_bridge.h"
+#include "output_parts.h"
 
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
@@ -31,57 +32,23 @@ constexpr std::size_t kMaxPendingBytes = 256 * 1024;   // about a second of upda
 constexpr int kRpcSendBufferBytes = 64 * 1024;
 constexpr std::uint32_t kMaxFramesPerSecond = 2000;
 
-struct MonadoTracker {
-  std::string_view name;
-  std::uint8_t body_part;
-  std::string_view joint;
-};
-constexpr std::array<MonadoTracker, 8> kTrackers{{{"waist", sx::part::kHip, "Hips"},
-                                                   {"left_foot", sx::part::kLeftFoot, "Foot_L"},
-                                                   {"right_foot", sx::part::kRightFoot, "Foot_R"},
-                                                   {"chest", sx::part::kChest, "Chest"},
-                                                   {"left_knee", sx::part::kLeftLowerLeg, "LowerLeg_L"},
-                                                   {"right_knee", sx::part::kRightLowerLeg, "LowerLeg_R"},
-                                                   {"left_elbow", sx::part::kLeftLowerArm, "LowerArm_L"},
-                                                   {"right_elbow", sx::part::kRightLowerArm, "LowerArm_R"}}};
-
-bool parse_trackers(std::string_view text, std::uint16_t& out, std::string& error) {
-  out = 0;
-  std::string_view rest = text;
-  while (true) {
-    const auto comma = rest.find(',');
-    const std::string_view name = rest.substr(0, comma);
-    std::uint16_t bits = 0;
-    if (name == "feet") bits = 0b0000'0110;
-    else if (name == "knees") bits = 0b0011'0000;
-    else if (name == "elbows") bits = 0b1100'0000;
-    else if (name == "hip") bits = 1;
-    for (std::size_t i = 0; i < kTrackers.size(); ++i)
-      if (kTrackers[i].name == name) bits = static_cast<std::uint16_t>(1u << i);
-    if (bits == 0) {
-      error = "tracker \"" + std::string(name) +
-              "\": expected waist, feet, knees, chest, elbows, left_foot, right_foot, left_knee, right_knee, "
-              "left_elbow or right_elbow";
-      return false;
-    }
-    out |= bits;
-    if (comma == std::string_view::npos) return true;
-    rest = rest.substr(comma + 1);
-  }
-}
+// SolarXR's body parts of kBodyTrackers (output_parts.h), in its order; tracker i is number i + 1.
+constexpr std::array<std::uint8_t, kBodyTrackers.size()> kBodyParts{sx::part::kHip,          sx::part::kLeftFoot,
+                                                                    sx::part::kRightFoot,    sx::part::kChest,
+                                                                    sx::part::kLeftLowerLeg, sx::part::kRightLowerLeg,
+                                                                    sx::part::kLeftLowerArm, sx::part::kRightLowerArm};
 
 class MonadoOutput final : public Output, sv::FramedHandler {
  public:
   MonadoOutput(std::string path, std::uint16_t mask)
-      : path_(std::move(path)), mask_(mask), server_(path_, kLimits, *this) {
-    for (std::size_t i = 0; i < kTrackers.size(); ++i) {
+      : path_(std::move(path)), mask_(mask), names_(place_names(kBodyTrackers, mask_)), server_(path_, kLimits, *this) {
+    for (std::size_t i = 0; i < kBodyTrackers.size(); ++i) {
       if (!(mask_ & (1u << i))) continue;
       sx::SyntheticTracker t;
       t.tracker_num = static_cast<std::uint8_t>(i + 1);
-      t.body_part = kTrackers[i].body_part;
-      t.display_name = "bodyd " + std::string(kTrackers[i].name);
+      t.body_part = kBodyParts[i];
+      t.display_name = "bodyd " + std::string(kBodyTrackers[i].name);
       latest_trackers_.push_back(t);
-      names_ += (names_.empty() ? "" : ",") + std::string(kTrackers[i].name);
     }
     work_trackers_ = latest_trackers_;
     toggles_.waist = mask_ & 1;
@@ -108,9 +75,8 @@ class MonadoOutput final : public Output, sv::FramedHandler {
     std::string error;
     if (!bones_.build(skeleton, error))
       spdlog::error("--output {}: {}; no bones are sent (the synthetic trackers are)", name(), error);
-    joints_.clear();
-    for (std::size_t i = 0; i < kTrackers.size(); ++i)
-      if (mask_ & (1u << i)) joints_.push_back(skeleton.find(kTrackers[i].joint));
+    std::string missing;  // -1 for them: those trackers are sent without a pose
+    joints_ = place_joints(skeleton, kBodyTrackers, mask_, missing);
   }
 
   bool send(const OutputFrame& frame, std::string& out_error) override {
@@ -282,27 +248,15 @@ class MonadoOutput final : public Output, sv::FramedHandler {
 
 }  // namespace
 
-std::unique_ptr<Output> make_monado_output(const OutputSpec& spec, const OutputEnv& env, std::string& error) {
-  (void)env;
-  if (std::string e = check_options(spec, {"trackers"}); !e.empty()) {
-    error = e;
-    return nullptr;
-  }
-  std::uint16_t mask = 0b0000'0111;  // waist and feet
-  if (const auto it = spec.options.find("trackers"); it != spec.options.end()) {
-    if (!parse_trackers(it->second, mask, error)) {
-      error = "--output " + spec.text + ": " + error;
-      return nullptr;
-    }
-  }
-  std::string e;
-  std::string dir = spec.target;
-  if (dir.empty()) dir = sv::default_socket_dir(e);
-  const std::string path = dir.empty() ? std::string() : sv::socket_path(dir + "/" + std::string(sv::kMonadoRpcSocketName), {}, e);
-  if (path.empty()) {
-    error = "--output " + spec.text + ": " + e;
-    return nullptr;
-  }
+std::unique_ptr<Output> make_monado_output(const OutputSpec& spec, const OutputEnv&, std::string& error) {
+  // DIR/SlimeVRRpc, DIR by default $XDG_RUNTIME_DIR.
+  const SocketOfTarget rpc_socket = [](const std::string& target, std::string& e) {
+    const std::string dir = target.empty() ? sv::default_socket_dir(e) : target;
+    return dir.empty() ? std::string() : sv::socket_path(dir + "/" + std::string(sv::kMonadoRpcSocketName), {}, e);
+  };
+  PlaceMask mask = 0;
+  std::string path;
+  if (!body_tracker_output_spec(spec, rpc_socket, mask, path, error)) return nullptr;
   return std::make_unique<MonadoOutput>(path, mask);
 }
 

@@ -2,6 +2,7 @@
 // SlimeVR's OpenVR driver (drivers/slimevr_bridge.h, docs/outputs.md "steamvr").
 #include "bodyd/daemon/output.h"
 #include "bodyd/drivers/slimevr_bridge.h"
+#include "output_parts.h"
 
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
@@ -15,57 +16,22 @@ namespace {
 
 namespace sv = drivers::slimevr;
 
-// The trackers bodyd can announce: SlimeVR's role numbers (also the tracker ids, so they are
-// stable across connections and restarts), and the joint each follows (docs/outputs.md).
-struct SteamvrTracker {
-  std::string_view name;   // the `trackers` option's name; the serial is "bodyd-" + name
-  std::int32_t role;
-  std::string_view joint;
-};
-constexpr std::array<SteamvrTracker, 8> kTrackers{{{"waist", sv::role::kWaist, "Hips"},
-                                                    {"left_foot", sv::role::kLeftFoot, "Foot_L"},
-                                                    {"right_foot", sv::role::kRightFoot, "Foot_R"},
-                                                    {"chest", sv::role::kChest, "Chest"},
-                                                    {"left_knee", sv::role::kLeftKnee, "LowerLeg_L"},
-                                                    {"right_knee", sv::role::kRightKnee, "LowerLeg_R"},
-                                                    {"left_elbow", sv::role::kLeftElbow, "LowerArm_L"},
-                                                    {"right_elbow", sv::role::kRightElbow, "LowerArm_R"}}};
-using TrackerMask = std::uint16_t;
-constexpr TrackerMask kDefaultTrackers = 0b0000'0111;  // waist and feet
-
-bool parse_trackers(std::string_view text, TrackerMask& out, std::string& error) {
-  out = 0;
-  std::string_view rest = text;
-  while (true) {
-    const auto comma = rest.find(',');
-    const std::string_view name = rest.substr(0, comma);
-    TrackerMask bits = 0;
-    if (name == "feet") bits = 0b0000'0110;
-    else if (name == "knees") bits = 0b0011'0000;
-    else if (name == "elbows") bits = 0b1100'0000;
-    else if (name == "hip") bits = 0b0000'0001;  // VRChat's slot name, accepted too
-    for (std::size_t i = 0; i < kTrackers.size(); ++i)
-      if (kTrackers[i].name == name) bits = static_cast<TrackerMask>(1u << i);
-    if (bits == 0) {
-      error = "tracker \"" + std::string(name) +
-              "\": expected waist, feet, knees, chest, elbows, left_foot, right_foot, left_knee, right_knee, "
-              "left_elbow or right_elbow";
-      return false;
-    }
-    out |= bits;
-    if (comma == std::string_view::npos) return true;
-    rest = rest.substr(comma + 1);
-  }
-}
+// SlimeVR's role numbers of kBodyTrackers (output_parts.h), in its order: also the tracker ids,
+// so they are stable across connections and restarts (docs/outputs.md). The serial is
+// "bodyd-" + the tracker's name.
+constexpr std::array<std::int32_t, kBodyTrackers.size()> kRoles{sv::role::kWaist,     sv::role::kLeftFoot,
+                                                               sv::role::kRightFoot, sv::role::kChest,
+                                                               sv::role::kLeftKnee,  sv::role::kRightKnee,
+                                                               sv::role::kLeftElbow, sv::role::kRightElbow};
 
 class SteamvrOutput final : public Output {
  public:
-  SteamvrOutput(std::string path, TrackerMask mask) : path_(std::move(path)), mask_(mask), server_(sv::shared_bridge(path_)) {
-    for (std::size_t i = 0; i < kTrackers.size(); ++i) {
+  SteamvrOutput(std::string path, PlaceMask mask)
+      : path_(std::move(path)), mask_(mask), server_(sv::shared_bridge(path_)), names_(place_names(kBodyTrackers, mask_)) {
+    for (std::size_t i = 0; i < kBodyTrackers.size(); ++i) {
       if (!(mask_ & (1u << i))) continue;
-      const SteamvrTracker& t = kTrackers[i];
-      announced_.push_back({t.role, "bodyd-" + std::string(t.name), "bodyd " + std::string(t.name), t.role});
-      names_ += (names_.empty() ? "" : ",") + std::string(t.name);
+      const std::string name(kBodyTrackers[i].name);
+      announced_.push_back({kRoles[i], "bodyd-" + name, "bodyd " + name, kRoles[i]});
     }
   }
   ~SteamvrOutput() override { close(); }
@@ -81,28 +47,16 @@ class SteamvrOutput final : public Output {
   }
 
   void set_skeleton(const Skeleton& skeleton, const std::vector<std::uint8_t>&) override {
-    joints_.clear();
-    missing_.clear();
-    for (std::size_t i = 0; i < kTrackers.size(); ++i) {
-      if (!(mask_ & (1u << i))) continue;
-      const int j = skeleton.find(kTrackers[i].joint);
-      if (j < 0) missing_ += (missing_.empty() ? "" : ", ") + std::string(kTrackers[i].joint);
-      joints_.push_back(j);
-    }
-    if (!missing_.empty())
-      spdlog::error("--output {}: the skeleton has no joint {} for the configured trackers; nothing is sent", name(), missing_);
+    joints_.find(skeleton, kBodyTrackers, mask_, name(), "trackers");
   }
 
   bool send(const OutputFrame& frame, std::string& out_error) override {
-    if (!missing_.empty()) {
-      out_error = "the skeleton has no joint " + missing_;
-      return false;
-    }
+    if (!joints_.complete(out_error)) return false;
     const GlobalPose& g = frame.body.global;
     // Back to the driver's space (the one the headset's samples came in): undo the re-centring.
     const Quat undo = frame.recentre_rotation.conjugate();
     std::size_t n = 0;
-    for (int j : joints_) {
+    for (int j : joints_.indices()) {
       if (j < 0 || j >= static_cast<int>(g.positions.size()) || j >= static_cast<int>(g.rotations.size())) {
         out_error = "the pose has fewer joints than its skeleton";
         return false;
@@ -138,37 +92,25 @@ class SteamvrOutput final : public Output {
 
  private:
   std::string path_;
-  TrackerMask mask_;
+  PlaceMask mask_;
   std::shared_ptr<sv::BridgeServer> server_;
   std::vector<sv::AnnouncedTracker> announced_;
   std::string names_;
-  std::vector<int> joints_;
-  std::string missing_;
-  std::array<sv::TrackerPoseOut, kTrackers.size()> poses_{};
+  PlaceJoints joints_;
+  std::array<sv::TrackerPoseOut, kBodyTrackers.size()> poses_{};
   bool open_ = false;
 };
 
 }  // namespace
 
-std::unique_ptr<Output> make_steamvr_output(const OutputSpec& spec, const OutputEnv& env, std::string& error) {
-  (void)env;
-  if (std::string e = check_options(spec, {"trackers"}); !e.empty()) {
-    error = e;
-    return nullptr;
-  }
-  TrackerMask mask = kDefaultTrackers;
-  if (const auto it = spec.options.find("trackers"); it != spec.options.end()) {
-    if (!parse_trackers(it->second, mask, error)) {
-      error = "--output " + spec.text + ": " + error;
-      return nullptr;
-    }
-  }
-  std::string e;
-  const std::string path = sv::socket_path(spec.target, sv::kDriverSocketName, e);
-  if (path.empty()) {
-    error = "--output " + spec.text + ": " + e;
-    return nullptr;
-  }
+std::unique_ptr<Output> make_steamvr_output(const OutputSpec& spec, const OutputEnv&, std::string& error) {
+  // SOCKET, default $XDG_RUNTIME_DIR/SlimeVRDriver.
+  const SocketOfTarget driver_socket = [](const std::string& target, std::string& e) {
+    return sv::socket_path(target, sv::kDriverSocketName, e);
+  };
+  PlaceMask mask = 0;
+  std::string path;
+  if (!body_tracker_output_spec(spec, driver_socket, mask, path, error)) return nullptr;
   return std::make_unique<SteamvrOutput>(path, mask);
 }
 

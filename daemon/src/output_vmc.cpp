@@ -5,7 +5,7 @@
 
 #include "bodyd/daemon/config.h"
 #include "bodyd/daemon/output.h"
-#include "osc_sender.h"
+#include "output_parts.h"
 
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
@@ -16,14 +16,10 @@
 namespace bodyd::daemon {
 namespace {
 
-class VmcOutput final : public Output {
+class VmcOutput final : public OscOutput {
  public:
-  VmcOutput(std::string host, std::string port) : host_(std::move(host)), port_(std::move(port)) {}
-
-  std::string name() const override { return "vmc:" + (sender_.address().empty() ? host_ + ":" + port_ : sender_.address()); }
-
-  std::string open() override { return sender_.open(host_, port_, "--output vmc:" + host_ + ":" + port_, allow_remote_); }
-  void allow_many_receivers(bool allow) { allow_remote_ = allow; }  // --allow-remote (osc_sender.h)
+  VmcOutput(std::string host, std::string port, const OutputEnv& env)
+      : OscOutput("vmc", std::move(host), std::move(port), env) {}
 
   // The rig is rebuilt for every new skeleton (calibration scales the bones).
   void set_skeleton(const Skeleton& skeleton, const std::vector<std::uint8_t>&) override {
@@ -59,12 +55,8 @@ class VmcOutput final : public Output {
     return j;
   }
 
-  void close() override { sender_.close(); }
 
  private:
-  std::string host_, port_;
-  OscSender sender_;
-  bool allow_remote_ = false;
   vmc::BundleEncoder encoder_;
   UnityRig rig_;
   bool rig_ok_ = false;
@@ -83,11 +75,8 @@ std::unique_ptr<Output> make_vmc_output(const OutputSpec& spec, const OutputEnv&
     return nullptr;
   }
   std::string host, port;
-  if (!split_host_port(spec.target, vmc::kDefaultHost, vmc::kDefaultPort, host, port, "--output " + spec.text, error))
-    return nullptr;
-  auto output = std::make_unique<VmcOutput>(host, port);
-  output->allow_many_receivers(env.config.allow_remote);
-  return output;
+  if (!osc_target(spec, vmc::kDefaultHost, vmc::kDefaultPort, host, port, error)) return nullptr;
+  return std::make_unique<VmcOutput>(host, port, env);
 }
 
 }  // namespace bodyd::daemon

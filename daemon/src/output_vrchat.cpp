@@ -4,7 +4,7 @@
 #include "bodyd/daemon/config.h"
 #include "bodyd/daemon/output.h"
 #include "bodyd/motion/humanoid.h"
-#include "osc_sender.h"
+#include "output_parts.h"
 
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
@@ -17,36 +17,33 @@ namespace bodyd::daemon {
 
 namespace vrchat {
 
+namespace {
+
+// kSlots as places (output_parts.h): slot N is bit N - 1.
+constexpr std::array<NamedPlace, kSlots.size()> kSlotPlaces = [] {
+  std::array<NamedPlace, kSlots.size()> places{};
+  for (std::size_t i = 0; i < kSlots.size(); ++i) places[i] = {kSlots[i].name, kSlots[i].joint};
+  return places;
+}();
+static_assert([] {
+  for (std::size_t i = 0; i < kSlots.size(); ++i)
+    if (kSlots[i].number != static_cast<int>(i) + 1) return false;
+  return true;
+}());
+constexpr std::array<PlaceGroup, 3> kSlotGroups{{{"feet", 0b0000'0110}, {"knees", 0b0001'1000}, {"elbows", 0b1100'0000}}};
+constexpr std::string_view kSlotsExpected =
+    "hip, feet, knees, chest, elbows, left_foot, right_foot, left_knee, right_knee, left_elbow or right_elbow";
+
+}  // namespace
+
 bool parse_slots(std::string_view text, SlotMask& out, std::string& error) {
-  out = 0;
-  std::string_view rest = text;
-  while (true) {
-    const auto comma = rest.find(',');
-    const std::string_view name = rest.substr(0, comma);
-    SlotMask bits = 0;
-    if (name == "feet") bits = 0b0000'0110;
-    else if (name == "knees") bits = 0b0001'1000;
-    else if (name == "elbows") bits = 0b1100'0000;
-    for (const TrackerSlot& s : kSlots)
-      if (s.name == name) bits = static_cast<SlotMask>(1u << (s.number - 1));
-    if (bits == 0) {
-      error = "slot \"" + std::string(name) +
-              "\": expected hip, feet, knees, chest, elbows, left_foot, right_foot, left_knee, right_knee, left_elbow "
-              "or right_elbow";
-      return false;
-    }
-    out |= bits;
-    if (comma == std::string_view::npos) return true;
-    rest = rest.substr(comma + 1);
-  }
+  PlaceMask mask = 0;
+  const bool ok = parse_places(text, kSlotPlaces, kSlotGroups, "slot", kSlotsExpected, mask, error);
+  out = static_cast<SlotMask>(mask);
+  return ok;
 }
 
-std::string slot_names(SlotMask mask) {
-  std::string names;
-  for (const TrackerSlot& s : kSlots)
-    if (mask & (1u << (s.number - 1))) names += (names.empty() ? "" : ",") + std::string(s.name);
-  return names;
-}
+std::string slot_names(SlotMask mask) { return place_names(kSlotPlaces, mask); }
 
 Vec3 unity_euler_deg_from_quat(const Quat& q_unity) {
   const Eigen::Matrix3d r = q_unity.normalized().toRotationMatrix();
@@ -78,10 +75,10 @@ TrackerPose tracker_from_bodyd(const Vec3& position_m, const Quat& rotation) {
 
 namespace {
 
-class VrchatOutput final : public Output {
+class VrchatOutput final : public OscOutput {
  public:
-  VrchatOutput(std::string host, std::string port, vrchat::SlotMask slots)
-      : host_(std::move(host)), port_(std::move(port)), slots_(slots) {
+  VrchatOutput(std::string host, std::string port, vrchat::SlotMask slots, const OutputEnv& env)
+      : OscOutput("vrchat", std::move(host), std::move(port), env), slots_(slots) {
     // Two fixed bundles: with the head messages (valid head sample) and without.
     for (OscBundle* bundle : {&with_head_, &without_head_}) {
       for (const vrchat::TrackerSlot& s : vrchat::kSlots) {
@@ -95,34 +92,17 @@ class VrchatOutput final : public Output {
     with_head_.add_floats("/tracking/trackers/head/rotation", 3);
   }
 
-  std::string name() const override { return "vrchat:" + (sender_.address().empty() ? host_ + ":" + port_ : sender_.address()); }
-
-  std::string open() override { return sender_.open(host_, port_, "--output vrchat:" + host_ + ":" + port_, allow_remote_); }
-  void allow_many_receivers(bool allow) { allow_remote_ = allow; }  // --allow-remote (osc_sender.h)
-
   void set_skeleton(const Skeleton& skeleton, const std::vector<std::uint8_t>&) override {
-    missing_.clear();
-    joints_.clear();
-    for (const vrchat::TrackerSlot& s : vrchat::kSlots) {
-      if (!(slots_ & (1u << (s.number - 1)))) continue;
-      const int j = skeleton.find(s.joint);
-      if (j < 0) missing_ += (missing_.empty() ? "" : ", ") + std::string(s.joint);
-      joints_.push_back(j);
-    }
-    if (!missing_.empty())
-      spdlog::error("--output {}: the skeleton has no joint {} for the configured slots; nothing is sent", name(), missing_);
+    joints_.find(skeleton, vrchat::kSlotPlaces, slots_, name(), "slots");
   }
 
   bool send(const OutputFrame& frame, std::string& out_error) override {
-    if (!missing_.empty()) {
-      out_error = "the skeleton has no joint " + missing_;
-      return false;
-    }
+    if (!joints_.complete(out_error)) return false;
     const TrackerSample& head = frame.head_as_received;
     OscBundle& bundle = head.valid ? with_head_ : without_head_;
     const GlobalPose& g = frame.body.global;
     int message = 0;
-    for (int j : joints_) {
+    for (int j : joints_.indices()) {
       if (j >= static_cast<int>(g.positions.size())) {
         out_error = "the pose has fewer joints than its skeleton";
         return false;
@@ -138,7 +118,6 @@ class VrchatOutput final : public Output {
     return {{"slots", vrchat::slot_names(slots_)}, {"bundles_sent", sender_.bundles_sent()}};
   }
 
-  void close() override { sender_.close(); }
 
  private:
   static void write(OscBundle& bundle, int message, const vrchat::TrackerPose& t) {
@@ -148,13 +127,9 @@ class VrchatOutput final : public Output {
     }
   }
 
-  std::string host_, port_;
   vrchat::SlotMask slots_;
-  OscSender sender_;
-  bool allow_remote_ = false;
   OscBundle with_head_, without_head_;
-  std::vector<int> joints_;  // per configured slot, in slot order
-  std::string missing_;      // joints the skeleton lacks ("" when all are there)
+  PlaceJoints joints_;  // per configured slot, in slot order
 };
 
 }  // namespace
@@ -165,18 +140,11 @@ std::unique_ptr<Output> make_vrchat_output(const OutputSpec& spec, const OutputE
     return nullptr;
   }
   std::string host, port;
-  if (!split_host_port(spec.target, vrchat::kDefaultHost, vrchat::kDefaultPort, host, port, "--output " + spec.text, error))
+  if (!osc_target(spec, vrchat::kDefaultHost, vrchat::kDefaultPort, host, port, error)) return nullptr;
+  PlaceMask slots = vrchat::kDefaultSlots;
+  if (!place_option(spec, "slots", vrchat::kSlotPlaces, vrchat::kSlotGroups, "slot", vrchat::kSlotsExpected, slots, error))
     return nullptr;
-  vrchat::SlotMask slots = vrchat::kDefaultSlots;
-  if (const auto it = spec.options.find("slots"); it != spec.options.end()) {
-    if (!vrchat::parse_slots(it->second, slots, error)) {
-      error = "--output " + spec.text + ": " + error;
-      return nullptr;
-    }
-  }
-  auto output = std::make_unique<VrchatOutput>(host, port, slots);
-  output->allow_many_receivers(env.config.allow_remote);
-  return output;
+  return std::make_unique<VrchatOutput>(host, port, static_cast<vrchat::SlotMask>(slots), env);
 }
 
 }  // namespace bodyd::daemon

@@ -19,6 +19,8 @@
 //      that checks spec.target and spec.options (unknown option: an error naming it) and
 //      returns nullptr with `error` set (what is wrong, what to do) when the spec is bad.
 //      Sending OSC over UDP: daemon/src/osc_sender.h (liblo messages, a non-blocking socket).
+//      What outputs share (a `trackers`/`slots` list option and its joints, an OSC output's
+//      host, port and sender): daemon/src/output_parts.h.
 //   2. One line in the table of daemon/src/outputs.cpp: {"NAME", make_NAME_output, "help"}.
 //   3. The file in daemon/CMakeLists.txt; the scheme, its options and its conversions in
 //      docs/outputs.md.
