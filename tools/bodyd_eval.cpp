@@ -75,12 +75,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   std::string device_frames = "joint", calibration_pose = "first-still", reference_path;
   bool method_pose_eye = false;
-  app.add_option("--device-frames", device_frames,
-                 "joint: the trackers are the skeleton's joints (default); xr: what a headset and controllers send "
-                 "(the headset at the eyes in the XR axes, the controllers' grip poses, a random mounting per clip), "
-                 "mapped through the default mounting and the calibration pose (docs/evaluation.md)")
-      ->check(CLI::IsMember({"joint", "xr"}))
-      ->capture_default_str();
+  bodyd::add_device_frames_flag(app, device_frames,
+      "joint: the trackers are the skeleton's joints (default); xr: what a headset and controllers send "
+      "(the headset at the eyes in the XR axes, the controllers' grip poses, a random mounting per clip), "
+      "mapped through the default mounting and the calibration pose (docs/evaluation.md)");
   app.add_option("--calibration-pose", calibration_pose,
                  "with --device-frames xr: first-still (the clip's first still second, default), none (the default "
                  "mounting only), a frame number N (that frame's pose held for 1.2 s before the clip starts), reference (the "

@@ -30,12 +30,10 @@ int main(int argc, char** argv) {
   app.add_option("--hands-rate-hz", hands_rate_hz, "both hands' sample rate, Hz (sets --left-hand-rate-hz and "
                                                    "--right-hand-rate-hz)");
   std::string device_frames = "joint", reference_path;
-  app.add_option("--device-frames", device_frames,
-                 "joint: the skeleton's joints (default); xr: what a headset and controllers send (the headset at the "
-                 "eyes in the XR axes, the controllers' grip poses), with a mounting drawn from the seed "
-                 "(docs/simulator.md)")
-      ->check(CLI::IsMember({"joint", "xr"}))
-      ->capture_default_str();
+  bodyd::add_device_frames_flag(app, device_frames,
+      "joint: the skeleton's joints (default); xr: what a headset and controllers send (the headset at the "
+      "eyes in the XR axes, the controllers' grip poses), with a mounting drawn from the seed "
+      "(docs/simulator.md)");
   app.add_option("--reference", reference_path, "body reference of the default mounting (default: the bundled data/body-reference.json)");
   app.add_flag("--quiet,-q", quiet, "print no summary");
   try {

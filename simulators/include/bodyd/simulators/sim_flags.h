@@ -36,4 +36,11 @@ inline void add_sim_flags(CLI::App& app, SimOptions& options, const SimFlagStyle
   }
 }
 
+// --device-frames joint|xr (default: what `device_frames` holds, "joint"): whether the simulated
+// trackers are the skeleton's joints or what a headset and controllers send (docs/simulator.md);
+// `help` says what the tool does with each.
+inline void add_device_frames_flag(CLI::App& app, std::string& device_frames, const std::string& help) {
+  app.add_option("--device-frames", device_frames, help)->check(CLI::IsMember({"joint", "xr"}))->capture_default_str();
+}
+
 }  // namespace bodyd
