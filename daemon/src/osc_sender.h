@@ -13,6 +13,8 @@
 // buffer owned by the bundle: the per-pose path does not allocate.
 #pragma once
 
+#include "bodyd/base/non_copyable.h"
+
 #include <lo/lo_lowlevel.h>
 
 #include <atomic>
@@ -30,12 +32,10 @@ namespace bodyd::daemon {
 [[nodiscard]] bool split_host_port(std::string_view target, std::string_view default_host, int default_port,
                                    std::string& out_host, std::string& out_port, std::string_view what, std::string& error);
 
-class OscSender {
+class OscSender : NonCopyable {
  public:
   OscSender() = default;
   ~OscSender() { close(); }
-  OscSender(const OscSender&) = delete;
-  OscSender& operator=(const OscSender&) = delete;
 
   // Resolves host:port (numeric or a name, IPv4 or IPv6) and opens the socket. Logs once
   // when the address is not a loopback one (OSC has neither authentication nor encryption).
@@ -61,12 +61,10 @@ class OscSender {
   std::atomic<std::uint64_t> bundles_sent_{0};
 };
 
-class OscBundle {
+class OscBundle : NonCopyable {
  public:
   OscBundle();
   ~OscBundle();
-  OscBundle(const OscBundle&) = delete;
-  OscBundle& operator=(const OscBundle&) = delete;
 
   // Adds a message at `path` with `float_count` float arguments (all 0). Returns its index.
   int add_floats(const std::string& path, int float_count);

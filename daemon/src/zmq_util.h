@@ -2,6 +2,8 @@
 // socket (RAII), binding with bodyd's endpoint policy (endpoint.h), and CURVE server keys.
 #pragma once
 
+#include "bodyd/base/non_copyable.h"
+
 #include <memory>
 #include <string>
 
@@ -12,12 +14,10 @@ class ZapAllowList;
 std::string zmq_error_text();
 
 // A ZeroMQ context and one socket of it, closed (socket, then context) on destruction.
-class ZmqSocket {
+class ZmqSocket : NonCopyable {
  public:
   ZmqSocket();
   ~ZmqSocket();
-  ZmqSocket(const ZmqSocket&) = delete;
-  ZmqSocket& operator=(const ZmqSocket&) = delete;
 
   // Creates the context and a socket of `type` (ZMQ_XPUB, ZMQ_REP). Empty or the error.
   [[nodiscard]] std::string open(int type, const char* type_name);

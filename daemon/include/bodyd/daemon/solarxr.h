@@ -15,6 +15,7 @@
 // tail is always head + rotation_g * (0, -length, 0) (for limb bones: the child joint).
 #pragma once
 
+#include "bodyd/base/non_copyable.h"
 #include "bodyd/motion/skeleton.h"
 
 #include <array>
@@ -110,12 +111,10 @@ struct SteamvrToggles {
 
 // Builds MessageBundles. Reuses its buffer: no allocation once warmed up. The returned span is
 // valid until the next call.
-class Encoder {
+class Encoder : NonCopyable {
  public:
   Encoder();
   ~Encoder();
-  Encoder(const Encoder&) = delete;
-  Encoder& operator=(const Encoder&) = delete;
   // One DataFeedUpdate with `trackers` (their info when with_info) and `bones`.
   std::pair<const std::uint8_t*, std::size_t> update(const std::vector<SyntheticTracker>& trackers, bool with_info,
                                                      const std::vector<Bone>& bones);

@@ -10,6 +10,7 @@
 // The bundle's time tag is "immediately" (1): receivers apply it on arrival.
 #pragma once
 
+#include "bodyd/base/non_copyable.h"
 #include "bodyd/daemon/output.h"
 #include "bodyd/motion/humanoid.h"
 
@@ -29,12 +30,10 @@ inline constexpr std::size_t kMessagesPerBundle = 3 + kHumanoidBones.size();
 // Encodes the bundle of one pose (pure: no I/O). The bundle's messages are built once, at
 // construction (liblo, daemon/src/osc_sender.h); encode() rewrites their numbers in place, so
 // it does not allocate.
-class BundleEncoder {
+class BundleEncoder : NonCopyable {
  public:
   BundleEncoder();
   ~BundleEncoder();
-  BundleEncoder(const BundleEncoder&) = delete;
-  BundleEncoder& operator=(const BundleEncoder&) = delete;
 
   // The serialised bundle; valid until the next call. Empty if liblo failed (out of memory).
   [[nodiscard]] const std::vector<std::uint8_t>& encode(const UnityPose& pose, float time_s);

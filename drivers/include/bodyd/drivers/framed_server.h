@@ -11,6 +11,7 @@
 // then flush(); what the socket does not take now the thread writes when it is writable).
 #pragma once
 
+#include "bodyd/base/non_copyable.h"
 #include "bodyd/drivers/slimevr_bridge.h"
 
 #include <atomic>
@@ -74,12 +75,10 @@ class FramedHandler {
   }
 };
 
-class FramedServer {
+class FramedServer : NonCopyable {
  public:
   FramedServer(std::string path, FramedServerLimits limits, FramedHandler& handler);
   ~FramedServer();  // stop()
-  FramedServer(const FramedServer&) = delete;
-  FramedServer& operator=(const FramedServer&) = delete;
 
   [[nodiscard]] const std::string& path() const { return path_; }
   // Binds and listens (listen_unix) and starts the thread. Empty, or what is wrong (not yet

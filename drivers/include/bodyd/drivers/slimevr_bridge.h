@@ -19,6 +19,7 @@
 // the user, no access for others: $XDG_RUNTIME_DIR is; a missing directory is made with 0700).
 #pragma once
 
+#include "bodyd/base/non_copyable.h"
 #include "bodyd/drivers/source.h"
 #include "bodyd/motion/rotation.h"
 
@@ -100,12 +101,10 @@ struct Message {
 
 // Encodes framed messages, appending to `out`. Reuses its protobuf objects, so encoding
 // positions does not allocate once `out` has capacity. Not thread-safe (one per user).
-class Encoder {
+class Encoder : NonCopyable {
  public:
   Encoder();
   ~Encoder();
-  Encoder(const Encoder&) = delete;
-  Encoder& operator=(const Encoder&) = delete;
 
   void version(std::vector<std::uint8_t>& out, std::int32_t protocol_version);
   void tracker_added(std::vector<std::uint8_t>& out, std::int32_t id, const std::string& serial,
@@ -183,12 +182,10 @@ struct BridgeStats {
   std::string last_error;
 };
 
-class BridgeServer {
+class BridgeServer : NonCopyable {
  public:
   explicit BridgeServer(std::string path);
   ~BridgeServer();
-  BridgeServer(const BridgeServer&) = delete;
-  BridgeServer& operator=(const BridgeServer&) = delete;
 
   [[nodiscard]] const std::string& path() const { return path_; }
   // Binds, listens and starts the thread on the first call; later calls only count users.
