@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes the PyTorch <-> C++ parity fixture of tests/inference_engine (docs/model-file.md, "Parity fixture").
+"""Writes the PyTorch <-> C++ parity fixture of tests/model (docs/model-file.md, "Parity fixture").
 
   /usr/bin/python3 training/export_fixture.py [--out-dir tests/data]
 

@@ -2,7 +2,7 @@
 """The bodyd diffusion networks ("mlpwin-v1", "tcn-v1"), their noise schedule, DDIM sampler and model-file writer.
 
 The C++ runtime (model/src/network.cpp, tcn.cpp, sampler.cpp, model_file.cpp) implements exactly the
-same networks and sampler; tests/inference_engine checks the two against fixtures written by
+same networks and sampler; tests/model checks the two against fixtures written by
 training/export_fixture.py. The model file layout is specified in docs/model-file.md.
 
 Method: CondMDI-style masked conditional diffusion (Cohan et al., "Flexible Motion In-betweening

@@ -2,7 +2,7 @@
 //
 // x0_hat = f(x, m, t): x (W x D) the noisy window with observed entries already replaced by the
 // observations, m (W x D) the mask (1 = observed), t the diffusion step in [0, T). Identical to
-// training/model_net.py's MlpWin; tests/inference_engine checks both against each other and against
+// training/model_net.py's MlpWin; tests/model checks both against each other and against
 // a plain double-precision reference.
 //
 // Model apart from state: a Network holds only weights (immutable after construction, share it

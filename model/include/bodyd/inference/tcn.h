@@ -7,7 +7,7 @@
 // frame), SiLU and a per-frame linear layer, then a per-frame decoder. Frame w's output depends on
 // frames w-F+1..w only, F = receptive_field(); with F <= W the newest frame's output is that of an
 // unbounded stream, which TcnStream computes at a cost per frame that does not grow with W.
-// Identical to training/model_net.py's TcnCausal; tests/inference_engine checks the two.
+// Identical to training/model_net.py's TcnCausal; tests/model checks the two.
 //
 // Like Network: a Tcn holds only weights (immutable, shared between sessions); every buffer lives
 // in a TcnScratch (or a TcnStream) owned by one session. forward() does not allocate.
