@@ -7,7 +7,7 @@
 #include "bodyd/test/files.h"
 #include "bodyd/test/process.h"
 #include "bodyd/test/temp_dir.h"
-#include "operate_helpers.h"
+#include "../daemon_programs.h"
 #include "../test_paths.h"
 
 #include <gtest/gtest.h>

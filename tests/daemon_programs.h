@@ -1,7 +1,8 @@
-// What the operate tests share: the programs they run and a pose subscriber.
+// What the tests that run bodyd and bodyd-ctl as processes share (tests/daemon, tests/tools):
+// the programs and a pose subscriber.
 #pragma once
 
-#include "../test_paths.h"
+#include "test_paths.h"
 
 #include "bodyd/protocol/pose_message.h"
 
