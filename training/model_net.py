@@ -324,6 +324,23 @@ def _write_container(path: str, blobs: list[tuple[str, list[int], bytes]], metad
 def restamp(path: str) -> None:
     """Rewrites a container written before checksums with the checksum; tensors and metadata are
     kept byte for byte (the header is re-serialised compactly, in the same order)."""
+    blobs, meta = _read_container(path)
+    _write_container(path, blobs, meta)
+
+
+def read_tensor_file(path: str) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
+    """Reads a file written by write_tensor_file (F32 only). For tests and tools."""
+    import numpy as np
+    blobs, meta = _read_container(path)
+    out = {}
+    for name, shape, b in blobs:
+        out[name] = torch.from_numpy(np.frombuffer(b, dtype="<f4").reshape(shape).copy())
+    return out, meta
+
+
+def _read_container(path: str) -> tuple[list[tuple[str, list[int], bytes]], dict[str, str]]:
+    """The tensors of a container as (name, shape, raw little-endian F32 bytes) in file order, and
+    its metadata (F32 only)."""
     with open(path, "rb") as f:
         raw = f.read()
     (n,) = struct.unpack("<Q", raw[:8])
@@ -336,26 +353,7 @@ def restamp(path: str) -> None:
             raise ValueError(f"{path}: tensor {name}: dtype {info['dtype']} not supported")
         b, e = info["data_offsets"]
         blobs.append((name, list(info["shape"]), data[b:e]))
-    _write_container(path, blobs, meta)
-
-
-def read_tensor_file(path: str) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
-    """Reads a file written by write_tensor_file (F32 only). For tests and tools."""
-    import numpy as np
-    with open(path, "rb") as f:
-        raw = f.read()
-    (n,) = struct.unpack("<Q", raw[:8])
-    header = json.loads(raw[8:8 + n].decode("utf-8"))
-    meta = header.pop("__metadata__", {})
-    data = raw[8 + n:]
-    out = {}
-    for name, info in header.items():
-        if info["dtype"] != "F32":
-            raise ValueError(f"{path}: tensor {name}: dtype {info['dtype']} not supported")
-        b, e = info["data_offsets"]
-        arr = np.frombuffer(data[b:e], dtype="<f4").reshape(info["shape"]).copy()
-        out[name] = torch.from_numpy(arr)
-    return out, meta
+    return blobs, meta
 
 
 def _skeleton_json(skeleton: Any) -> str:
