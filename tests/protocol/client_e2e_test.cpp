@@ -4,6 +4,7 @@
 #include "bodyd_client.h"
 #include "bodyd/protocol/recording.h"
 #include "bodyd/protocol/synthetic.h"
+#include "bodyd/test/pose_message.h"
 #include "../test_paths.h"
 #include "test_publisher.h"
 
@@ -45,19 +46,23 @@ client::Received receive_pose(client::Client& c, PoseMessage& out) {
   return r;
 }
 
-void expect_synthetic(const PoseMessage& p) {
-  const PoseMessage e = synthetic_pose(p.seq);
-  EXPECT_EQ(p.t_ns, e.t_ns);
-  EXPECT_EQ(p.publish_t_ns, e.publish_t_ns);
-  EXPECT_EQ(p.flags, e.flags);
-  EXPECT_EQ(p.skeleton_id, e.skeleton_id);
-  EXPECT_EQ(p.foot_contact, e.foot_contact);
-  EXPECT_EQ(p.root_position_m, e.root_position_m);
-  ASSERT_EQ(p.joints.size(), e.joints.size());
-  for (std::size_t i = 0; i < p.joints.size(); ++i) {
-    EXPECT_EQ(p.joints[i].position_m, e.joints[i].position_m);
-    EXPECT_EQ(p.joints[i].rotation_xyzw, e.joints[i].rotation_xyzw);
+// A received pose is the synthetic pose of its seq, field by field and bit for bit.
+void expect_synthetic(const PoseMessage& p) { EXPECT_TRUE(test::same_pose(p, synthetic_pose(p.seq))); }
+
+// A subscriber's JSON line k: its seq is newer than the line before's (`last`), and its times
+// and flags are those of the synthetic pose of that seq, which is returned.
+template <class Json>
+PoseMessage expect_synthetic_line(const Json& j, std::size_t k, std::uint64_t& last) {
+  const std::uint64_t seq = j["seq"];
+  if (k > 0) {
+    EXPECT_GT(seq, last);
   }
+  last = seq;
+  const PoseMessage e = synthetic_pose(seq);
+  EXPECT_EQ(j["t_ns"].template get<std::int64_t>(), e.t_ns);
+  EXPECT_EQ(j["publish_t_ns"].template get<std::int64_t>(), e.publish_t_ns);
+  EXPECT_EQ(j["flags"].template get<std::uint32_t>(), e.flags);
+  return e;
 }
 
 std::string quoted(const std::string& s) { return "'" + s + "'"; }
@@ -321,15 +326,8 @@ TEST(PythonSubscriber, DecodesEveryField) {
   bool named = false;
   for (std::size_t k = 0; k < lines.size(); ++k) {
     const auto j = nlohmann::json::parse(lines[k]);
-    const std::uint64_t seq = j["seq"];
-    if (k > 0) {
-      EXPECT_GT(seq, last);
-    }
-    last = seq;
-    const PoseMessage e = synthetic_pose(seq);
-    EXPECT_EQ(j["t_ns"].get<std::int64_t>(), e.t_ns);
-    EXPECT_EQ(j["publish_t_ns"].get<std::int64_t>(), e.publish_t_ns);
-    EXPECT_EQ(j["flags"].get<std::uint32_t>(), e.flags);
+    const PoseMessage e = expect_synthetic_line(j, k, last);
+    const std::uint64_t seq = e.seq;
     EXPECT_EQ(j["skeleton_id"].get<std::uint32_t>(), e.skeleton_id);
     EXPECT_EQ(j["root_joint"].get<int>(), 1);
     EXPECT_EQ(j["foot_contact"][0].get<bool>(), (e.foot_contact & 1) != 0);
@@ -362,15 +360,7 @@ void check_bodyd_sub_json(const std::string& endpoint) {
   for (std::size_t k = 0; k < lines.size(); ++k) {
     const auto j = nlohmann::ordered_json::parse(lines[k]);
     EXPECT_EQ(j.begin().key(), "seq");
-    const std::uint64_t seq = j["seq"];
-    if (k > 0) {
-      EXPECT_GT(seq, last);
-    }
-    last = seq;
-    const PoseMessage e = synthetic_pose(seq);
-    EXPECT_EQ(j["t_ns"].get<std::int64_t>(), e.t_ns);
-    EXPECT_EQ(j["publish_t_ns"].get<std::int64_t>(), e.publish_t_ns);
-    EXPECT_EQ(j["flags"].get<std::uint32_t>(), e.flags);
+    const PoseMessage e = expect_synthetic_line(j, k, last);
     ASSERT_TRUE(j["joints"].is_object()) << lines[k];
     for (std::size_t i = 0; i < names.size(); ++i) {
       EXPECT_EQ(j["joints"][names[i]].get<F3>(), e.joints[i].position_m);

@@ -1,6 +1,7 @@
 // Pose and skeleton messages: golden bytes, round trips, every malformed case, fuzzing.
 #include "bodyd/protocol/pose_message.h"
 #include "bodyd/protocol/synthetic.h"
+#include "bodyd/test/pose_message.h"
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -63,6 +64,35 @@ void fix_skeleton_id(Bytes& b) {
 
 // ---- Golden bytes: the layout of docs/protocol.md, written out by hand ------------------
 
+// FNV-1a 32 of a skeleton's joint table, computed independently of the library.
+std::uint32_t fnv1a(const Bytes& table) {
+  std::uint32_t h = 2166136261u;
+  for (std::uint8_t c : table) h = (h ^ c) * 16777619u;
+  return h;
+}
+
+// The skeleton of the golden-bytes tests: "R" at the origin and "Ab" under it at (0, 1, -2).
+SkeletonMessage two_joints() {
+  SkeletonMessage s;
+  s.names = {"R", "Ab"};
+  s.parents = {-1, 0};
+  s.offsets_m = {{0.0f, 0.0f, 0.0f}, {0.0f, 1.0f, -2.0f}};
+  return s;
+}
+
+// A skeleton message written out by hand: the header (magic, version, joint count, the
+// table's FNV-1a as the id, reserved), then the joint table.
+Bytes skeleton_bytes(std::uint8_t version, std::uint8_t joint_count, const Bytes& table) {
+  const std::uint32_t h = fnv1a(table);
+  Bytes b = {'B', 'D', 'S', 'K', version, 0x00, joint_count, 0x00,
+             static_cast<std::uint8_t>(h), static_cast<std::uint8_t>(h >> 8),
+             static_cast<std::uint8_t>(h >> 16), static_cast<std::uint8_t>(h >> 24),
+             0x00, 0x00, 0x00, 0x00};
+  b.insert(b.end(), table.begin(), table.end());
+  return b;
+}
+
+
 TEST(PoseMessage, GoldenBytesMatchTheDocumentedLayout) {
   PoseMessage p;
   p.seq = 0x0102030405060708ull;
@@ -94,10 +124,7 @@ TEST(PoseMessage, GoldenBytesMatchTheDocumentedLayout) {
 }
 
 TEST(SkeletonMessage, GoldenBytesMatchTheDocumentedLayout) {
-  SkeletonMessage s;
-  s.names = {"R", "Ab"};
-  s.parents = {-1, 0};
-  s.offsets_m = {{0.0f, 0.0f, 0.0f}, {0.0f, 1.0f, -2.0f}};
+  SkeletonMessage s = two_joints();
   const Bytes table = {
       0xff, 0xff, 0x01, 0x00,                                            // parent -1, name_length 1
       0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,                                // offset 0, 0, 0
@@ -105,14 +132,8 @@ TEST(SkeletonMessage, GoldenBytesMatchTheDocumentedLayout) {
       0x00, 0x00, 0x02, 0x00,                                            // parent 0, name_length 2
       0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0x00, 0xc0,  // offset 0, 1, -2
       'A', 'b'};
-  // FNV-1a 32 of the table, computed independently of the library.
-  std::uint32_t h = 2166136261u;
-  for (std::uint8_t c : table) h = (h ^ c) * 16777619u;
-  Bytes expected = {'B', 'D', 'S', 'K', 0x01, 0x00, 0x02, 0x00,
-                    static_cast<std::uint8_t>(h), static_cast<std::uint8_t>(h >> 8),
-                    static_cast<std::uint8_t>(h >> 16), static_cast<std::uint8_t>(h >> 24),
-                    0x00, 0x00, 0x00, 0x00};
-  expected.insert(expected.end(), table.begin(), table.end());
+  const std::uint32_t h = fnv1a(table);
+  const Bytes expected = skeleton_bytes(1, 2, table);
   EXPECT_EQ(encoded(s), expected);
   EXPECT_EQ(skeleton_id_of(s), h);
 }
@@ -120,10 +141,7 @@ TEST(SkeletonMessage, GoldenBytesMatchTheDocumentedLayout) {
 // Version 2 (a skeleton with rest rotations): each joint entry has the rest rotation between
 // the offset and the name. The same skeleton without rest rotations is the version-1 message above.
 TEST(SkeletonMessage, Version2GoldenBytes) {
-  SkeletonMessage s;
-  s.names = {"R", "Ab"};
-  s.parents = {-1, 0};
-  s.offsets_m = {{0.0f, 0.0f, 0.0f}, {0.0f, 1.0f, -2.0f}};
+  SkeletonMessage s = two_joints();
   s.rest_rotations_xyzw = {{0.0f, 0.0f, 0.0f, 1.0f}, {0.0f, -1.0f, 0.0f, 0.0f}};
   const Bytes table = {
       0xff, 0xff, 0x01, 0x00,                                            // parent -1, name_length 1
@@ -134,13 +152,8 @@ TEST(SkeletonMessage, Version2GoldenBytes) {
       0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0x00, 0xc0,  // offset 0, 1, -2
       0, 0, 0, 0, 0x00, 0x00, 0x80, 0xbf, 0, 0, 0, 0, 0, 0, 0, 0,        // rest rotation 0, -1, 0, 0
       'A', 'b'};
-  std::uint32_t h = 2166136261u;
-  for (std::uint8_t c : table) h = (h ^ c) * 16777619u;
-  Bytes expected = {'B', 'D', 'S', 'K', 0x02, 0x00, 0x02, 0x00,
-                    static_cast<std::uint8_t>(h), static_cast<std::uint8_t>(h >> 8),
-                    static_cast<std::uint8_t>(h >> 16), static_cast<std::uint8_t>(h >> 24),
-                    0x00, 0x00, 0x00, 0x00};
-  expected.insert(expected.end(), table.begin(), table.end());
+  const std::uint32_t h = fnv1a(table);
+  const Bytes expected = skeleton_bytes(2, 2, table);
   EXPECT_EQ(encoded(s), expected);
   EXPECT_EQ(skeleton_id_of(s), h);
   SkeletonMessage back;
@@ -185,30 +198,13 @@ TEST(SkeletonMessageMalformed, Version2RestRotations) {
 
 // ---- Round trips -------------------------------------------------------------------------
 
-void expect_pose_eq(const PoseMessage& a, const PoseMessage& b) {
-  EXPECT_EQ(a.seq, b.seq);
-  EXPECT_EQ(a.t_ns, b.t_ns);
-  EXPECT_EQ(a.publish_t_ns, b.publish_t_ns);
-  EXPECT_EQ(a.flags, b.flags);
-  EXPECT_EQ(a.skeleton_id, b.skeleton_id);
-  EXPECT_EQ(a.root_joint, b.root_joint);
-  EXPECT_EQ(a.foot_contact, b.foot_contact);
-  EXPECT_EQ(a.root_position_m, b.root_position_m);
-  EXPECT_EQ(a.root_heading_rad, b.root_heading_rad);
-  ASSERT_EQ(a.joints.size(), b.joints.size());
-  for (std::size_t i = 0; i < a.joints.size(); ++i) {
-    EXPECT_EQ(a.joints[i].position_m, b.joints[i].position_m) << "joint " << i;
-    EXPECT_EQ(a.joints[i].rotation_xyzw, b.joints[i].rotation_xyzw) << "joint " << i;
-  }
-}
-
 TEST(PoseMessage, RoundTripIsBitExact) {
   for (std::uint64_t seq : {0ull, 1ull, 77ull, 123456ull}) {
     const PoseMessage p = synthetic_pose(seq);
     PoseMessage back;
     back.joints.resize(3);  // stale content must be replaced
     ASSERT_TRUE(decode_pose(encoded(p), back).ok());
-    expect_pose_eq(p, back);
+    EXPECT_TRUE(test::same_pose(p, back));
   }
 }
 
@@ -231,7 +227,7 @@ TEST(PoseMessage, RoundTripExtremes) {
   p.root_joint = static_cast<std::uint16_t>(kMaxJoints - 1);
   PoseMessage back;
   ASSERT_TRUE(decode_pose(encoded(p), back).ok());
-  expect_pose_eq(p, back);
+  EXPECT_TRUE(test::same_pose(p, back));
   EXPECT_TRUE(std::signbit(back.root_position_m[2]));
 }
 
@@ -254,7 +250,7 @@ TEST(PoseMessage, DecodesFromAnUnalignedBuffer) {
     shifted.insert(shifted.end(), b.begin(), b.end());
     PoseMessage back;
     ASSERT_TRUE(decode_pose(std::span(shifted).subspan(shift), back).ok());
-    expect_pose_eq(synthetic_pose(42), back);
+    EXPECT_TRUE(test::same_pose(synthetic_pose(42), back));
   }
 }
 
@@ -394,7 +390,7 @@ TEST(PoseMessageMalformed, ReservedFieldsAreIgnored) {
   set_u32(b, 60, 0xDEADBEEF);
   PoseMessage back;
   ASSERT_TRUE(decode_pose(b, back).ok());
-  expect_pose_eq(synthetic_pose(3), back);
+  EXPECT_TRUE(test::same_pose(synthetic_pose(3), back));
 }
 
 TEST(PoseMessageEncode, RefusesWhatCannotBeRepresented) {
