@@ -13,6 +13,12 @@ std::string format_device_id(DeviceId id) {
   return text;
 }
 
+std::string format_device_ids(const std::vector<DeviceId>& ids) {
+  std::string text;
+  for (const DeviceId id : ids) text += (text.empty() ? "" : ", ") + format_device_id(id);
+  return text;
+}
+
 // ---------------------------------------------------------------------------------------
 void DeviceContext::push(const TrackerSample& sample, std::int64_t device_t_ns, bool has_device_time) {
   SourceSample s;

@@ -146,5 +146,7 @@ class DeviceSourceBase : public DeviceSource {
 
 // "1209:B0D1" (upper-case hex).
 [[nodiscard]] std::string format_device_id(DeviceId id);
+// "1209:B0D1, 1532:0300": the ids of a source's devices, for its messages.
+[[nodiscard]] std::string format_device_ids(const std::vector<DeviceId>& ids);
 
 }  // namespace bodyd::drivers::detail

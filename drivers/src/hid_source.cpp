@@ -3,6 +3,7 @@
 
 #include "device_protocol.h"
 #include "device_source_base.h"
+#include "report_device.h"
 
 #include <spdlog/spdlog.h>
 
@@ -18,29 +19,8 @@ using detail::ReadOutcome;
 // transport and then rejected for its size).
 constexpr std::size_t kReadBufferSize = 256;
 
-class BodydHidDevice final : public detail::OpenDevice {
- public:
-  BodydHidDevice(std::unique_ptr<HidDevice> device, std::string description, int timeout_ms)
-      : device_(std::move(device)), stream_(std::move(description)), timeout_ms_(timeout_ms) {}
-
-  ReadOutcome read_once(DeviceContext& ctx, std::string& error) override {
-    const ReadResult r = device_->read(buffer_.data(), buffer_.size(), timeout_ms_);
-    if (r.status == ReadStatus::Gone) {
-      error = r.error;
-      return ReadOutcome::Gone;
-    }
-    if (r.status == ReadStatus::Timeout) return ReadOutcome::Nothing;
-    const std::int64_t t_ns = monotonic_ns();  // stamped as read, before decoding
-    stream_.handle(buffer_.data(), r.size, t_ns, /*allow_several=*/false, ctx);
-    return ReadOutcome::Data;
-  }
-
- private:
-  std::unique_ptr<HidDevice> device_;
-  detail::ReportStream stream_;
-  int timeout_ms_;
-  std::array<std::uint8_t, kReadBufferSize> buffer_{};
-};
+// The bodyd report: one report per read.
+using BodydHidDevice = detail::ReportDevice<HidDevice, kReadBufferSize>;
 
 // The Hydra streams nothing on its data interface until it is told to enter motion mode
 // (feature report on the control interface). As the public drivers do: wait 1 s for
@@ -137,7 +117,8 @@ void open_bodyd_report_hid(const HidOpenContext& context, std::vector<HidDeviceI
                      std::unique_ptr<HidDevice> d = context.transport->open(info, error);
                      if (!d) return std::unique_ptr<OpenDevice>();
                      return std::unique_ptr<OpenDevice>(
-                         std::make_unique<BodydHidDevice>(std::move(d), description, context.options->read_timeout_ms));
+                         std::make_unique<BodydHidDevice>(std::move(d), description, context.options->read_timeout_ms,
+                                                         /*transfers=*/false));
                    }});
   }
 }
@@ -206,9 +187,7 @@ class HidSource final : public detail::DeviceSourceBase {
   }
 
   std::string waiting_message() const override {
-    std::string ids;
-    for (const DeviceId id : options_.devices) ids += (ids.empty() ? "" : ", ") + detail::format_device_id(id);
-    return "no HID device " + ids + " found (" + transport_->name() +
+    return "no HID device " + detail::format_device_ids(options_.devices) + " found (" + transport_->name() +
            "); waiting for one to be plugged in (bodyd --list-devices shows what is visible; "
            "a device that is plugged in but not listed may need the udev rule, docs/drivers.md)";
   }

@@ -117,15 +117,8 @@ std::array<std::uint8_t, kHydraReportSize> encode_hydra_report(const HydraReport
 
 TrackerSample hydra_sample(const HydraReport& report, int index, const HydraOptions& options, std::int64_t t_ns) {
   const HydraController& c = report.controllers[static_cast<std::size_t>(index & 1)];
-  TrackerSample s;
-  s.t_ns = t_ns;
-  s.role = options.controller_roles[static_cast<std::size_t>(index & 1)];
-  s.valid = c.valid;
-  if (c.valid) {
-    s.position_m = c.position_m;
-    s.rotation = c.rotation;
-  }
-  return s;
+  return decoded_sample(t_ns, options.controller_roles[static_cast<std::size_t>(index & 1)], c.valid, c.position_m,
+                        c.rotation);
 }
 
 }  // namespace bodyd::drivers

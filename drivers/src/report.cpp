@@ -139,16 +139,20 @@ ReportError encode_tracker_report(const TrackerReport& report,
   return ReportError::None;
 }
 
-TrackerSample sample_from_report(const TrackerReport& report, std::int64_t t_ns) {
+TrackerSample decoded_sample(std::int64_t t_ns, Role role, bool valid, const Vec3& position_m, const Quat& rotation) {
   TrackerSample s;
   s.t_ns = t_ns;
-  s.role = report.role;
-  s.valid = report.valid;
-  if (report.valid) {
-    s.position_m = report.position_m;
-    s.rotation = report.rotation;
+  s.role = role;
+  s.valid = valid;
+  if (valid) {
+    s.position_m = position_m;
+    s.rotation = rotation;
   }
   return s;
+}
+
+TrackerSample sample_from_report(const TrackerReport& report, std::int64_t t_ns) {
+  return decoded_sample(t_ns, report.role, report.valid, report.position_m, report.rotation);
 }
 
 }  // namespace bodyd::drivers

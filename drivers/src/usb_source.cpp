@@ -2,6 +2,7 @@
 #include "bodyd/drivers/usb_source.h"
 
 #include "device_source_base.h"
+#include "report_device.h"
 
 namespace bodyd::drivers {
 namespace {
@@ -12,29 +13,8 @@ using detail::ReadOutcome;
 // A full-speed bulk packet is 64 bytes, high-speed 512; a transfer of up to 16 reports.
 constexpr std::size_t kTransferSize = 512;
 
-class BodydUsbDevice final : public detail::OpenDevice {
- public:
-  BodydUsbDevice(std::unique_ptr<UsbDevice> device, std::string description, int timeout_ms)
-      : device_(std::move(device)), stream_(std::move(description)), timeout_ms_(timeout_ms) {}
-
-  ReadOutcome read_once(DeviceContext& ctx, std::string& error) override {
-    const ReadResult r = device_->read(buffer_.data(), buffer_.size(), timeout_ms_);
-    if (r.status == ReadStatus::Gone) {
-      error = r.error;
-      return ReadOutcome::Gone;
-    }
-    if (r.status == ReadStatus::Timeout || r.size == 0) return ReadOutcome::Nothing;
-    const std::int64_t t_ns = monotonic_ns();  // when the transfer completed
-    stream_.handle(buffer_.data(), r.size, t_ns, /*allow_several=*/true, ctx);
-    return ReadOutcome::Data;
-  }
-
- private:
-  std::unique_ptr<UsbDevice> device_;
-  detail::ReportStream stream_;
-  int timeout_ms_;
-  std::array<std::uint8_t, kTransferSize> buffer_{};
-};
+// The bodyd report: transfers of one or more reports.
+using BodydUsbDevice = detail::ReportDevice<UsbDevice, kTransferSize>;
 
 class UsbSource final : public detail::DeviceSourceBase {
  public:
@@ -63,7 +43,8 @@ class UsbSource final : public detail::DeviceSourceBase {
                          std::unique_ptr<UsbDevice> d = transport_->open(info, error);
                          if (!d) return std::unique_ptr<detail::OpenDevice>();
                          return std::unique_ptr<detail::OpenDevice>(
-                             std::make_unique<BodydUsbDevice>(std::move(d), description, options_.read_timeout_ms));
+                             std::make_unique<BodydUsbDevice>(std::move(d), description, options_.read_timeout_ms,
+                                                              /*transfers=*/true));
                        }});
       }
     }
@@ -79,9 +60,7 @@ class UsbSource final : public detail::DeviceSourceBase {
   }
 
   std::string waiting_message() const override {
-    std::string ids;
-    for (const DeviceId id : options_.devices) ids += (ids.empty() ? "" : ", ") + detail::format_device_id(id);
-    return "no USB device " + ids + " found (" + transport_->name() + ", " +
+    return "no USB device " + detail::format_device_ids(options_.devices) + " found (" + transport_->name() + ", " +
            (watches_.empty() ? "re-enumerating every " + std::to_string(rescan_interval_ms_) + " ms"
                              : std::string("hotplug")) +
            "); waiting for one to be plugged in (bodyd --list-devices shows what is visible)";

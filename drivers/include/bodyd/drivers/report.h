@@ -101,6 +101,11 @@ enum class ReportError : std::uint8_t {
 [[nodiscard]] ReportError encode_tracker_report(const TrackerReport& report,
                                                 std::array<std::uint8_t, kTrackerReportSize>& out_bytes);
 
+// A decoded pose as a sample stamped with `t_ns`; an invalid one keeps the default position and
+// rotation. The one place the device decoders (this report, the Hydra) build their samples.
+[[nodiscard]] TrackerSample decoded_sample(std::int64_t t_ns, Role role, bool valid, const Vec3& position_m,
+                                           const Quat& rotation);
+
 // The TrackerSample a report carries, stamped with `t_ns` (host monotonic time at read).
 [[nodiscard]] TrackerSample sample_from_report(const TrackerReport& report, std::int64_t t_ns);
 
