@@ -1,5 +1,5 @@
 // What the tests that run bodyd and bodyd-ctl as processes share (tests/daemon, tests/tools):
-// the programs and a pose subscriber.
+// the programs, a pose subscriber and the status request.
 #pragma once
 
 #include "test_paths.h"
@@ -8,6 +8,7 @@
 
 #include <zmq.hpp>
 
+#include <optional>
 #include <string>
 
 namespace bodyd::test {
@@ -23,6 +24,19 @@ inline zmq::socket_t pose_subscriber(zmq::context_t& ctx, const std::string& pub
   sub.set(zmq::sockopt::subscribe, std::string(protocol::kPoseTopic));
   sub.connect(pub);
   return sub;
+}
+
+// The daemon's answer to {"cmd":"status"} on `control` (a fresh REQ socket); nullopt when none
+// came within timeout_ms.
+inline std::optional<std::string> status_reply(zmq::context_t& ctx, const std::string& control, int timeout_ms = 5000) {
+  zmq::socket_t req(ctx, zmq::socket_type::req);
+  req.set(zmq::sockopt::linger, 0);
+  req.set(zmq::sockopt::rcvtimeo, timeout_ms);
+  req.connect(control);
+  req.send(zmq::buffer(std::string(R"({"cmd":"status"})")));
+  zmq::message_t reply;
+  if (!req.recv(reply)) return std::nullopt;
+  return reply.to_string();
 }
 
 }  // namespace bodyd::test

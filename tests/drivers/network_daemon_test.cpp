@@ -7,6 +7,7 @@
 #include "bodyd/protocol/pose_message.h"
 #include "bodyd/simulators/tracker_sim.h"
 
+#include "../daemon_programs.h"
 #include "../test_paths.h"
 #include "pose_sub_helpers.h"
 #include "osc_helpers.h"
@@ -88,16 +89,28 @@ zmq::socket_t subscribe_all(zmq::context_t& ctx, const std::string& pub) {
   return sub;
 }
 
-// The daemon's answer to {"cmd":"status"} on `control`; nullopt when none came within 5 s.
-std::optional<std::string> status_reply(zmq::context_t& ctx, const std::string& control) {
-  zmq::socket_t req(ctx, zmq::socket_type::req);
-  req.set(zmq::sockopt::linger, 0);
-  req.set(zmq::sockopt::rcvtimeo, 5000);
-  req.connect(control);
-  req.send(zmq::buffer(std::string(R"({"cmd":"status"})")));
-  zmq::message_t reply;
-  if (!req.recv(reply)) return std::nullopt;
-  return reply.to_string();
+// Calls on_pose with every pose that arrives on `sub` for `duration`; returns how many came.
+template <class OnPose>
+int collect_poses(zmq::socket_t& sub, std::chrono::seconds duration, OnPose&& on_pose) {
+  int poses = 0;
+  const auto end = std::chrono::steady_clock::now() + duration;
+  while (std::chrono::steady_clock::now() < end) {
+    const std::optional<protocol::PoseMessage> next = test::poll_pose(sub, std::chrono::milliseconds(50));
+    if (!next) continue;
+    ++poses;
+    on_pose(*next);
+  }
+  return poses;
+}
+
+// The daemon's status (a {"cmd":"status"} request on its control endpoint), with its sources.
+nlohmann::json daemon_status(zmq::context_t& ctx, const nlohmann::json& endpoints, const Daemon& daemon) {
+  const std::optional<std::string> reply = test::status_reply(ctx, endpoints["control"].get<std::string>());
+  EXPECT_TRUE(reply) << daemon.err();
+  if (!reply) return {};
+  const auto status = nlohmann::json::parse(*reply, nullptr, false);
+  EXPECT_TRUE(status.contains("sources")) << *reply;
+  return status;
 }
 
 using test::osc_floats;
@@ -180,26 +193,19 @@ TEST(DaemonNetworkInputs, BadPacketsAreCountedWhilePosesKeepComing) {
     close(fd);
   });
 
-  int poses = 0, poses_after_bad = 0, non_finite = 0;
-  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(4);
-  while (std::chrono::steady_clock::now() < end) {
-    const std::optional<protocol::PoseMessage> next = test::poll_pose(sub, std::chrono::milliseconds(50));
-    if (!next) continue;
-    const protocol::PoseMessage& pose = *next;
-    ++poses;
+  int poses_after_bad = 0, non_finite = 0;
+  const int poses = collect_poses(sub, std::chrono::seconds(4), [&](const protocol::PoseMessage& pose) {
     if (bad_sent.load()) ++poses_after_bad;
     for (const auto& j : pose.joints)
       for (float v : j.position_m) non_finite += !std::isfinite(v);
-  }
+  });
   sender.join();
   EXPECT_GT(poses, 60) << daemon.err();
   EXPECT_GT(poses_after_bad, 10) << "the daemon stopped publishing after the bad packets\n" << daemon.err();
   EXPECT_EQ(non_finite, 0);
 
-  const std::optional<std::string> reply = status_reply(ctx, endpoints["control"].get<std::string>());
-  ASSERT_TRUE(reply) << daemon.err();
-  const auto status = nlohmann::json::parse(*reply, nullptr, false);
-  ASSERT_TRUE(status.contains("sources")) << *reply;
+  const nlohmann::json status = daemon_status(ctx, endpoints, daemon);
+  ASSERT_TRUE(status.contains("sources"));
   ASSERT_EQ(status["sources"].size(), 3u) << status.dump(2);
   std::map<std::string, int> expected[3];
   for (const Bad& b : bad) ++expected[b.port_index][b.reason];
@@ -253,15 +259,10 @@ TEST(DaemonNetworkInputs, VrchatSenderDrivesThePoseStream) {
     EXPECT_EQ(std::system(command.c_str()), 0) << read_file(dir / "sender.txt");
   });
   const std::uint32_t all = protocol::kFlagHeadValid | protocol::kFlagLeftHandValid | protocol::kFlagRightHandValid;
-  int poses = 0, tracked = 0;
-  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(5);
-  while (std::chrono::steady_clock::now() < end) {
-    const std::optional<protocol::PoseMessage> next = test::poll_pose(sub, std::chrono::milliseconds(50));
-    if (!next) continue;
-    const protocol::PoseMessage& pose = *next;
-    ++poses;
+  int tracked = 0;
+  const int poses = collect_poses(sub, std::chrono::seconds(5), [&](const protocol::PoseMessage& pose) {
     if ((pose.flags & all) == all) ++tracked;
-  }
+  });
   sender.join();
   const int frames = static_cast<int>(samples.size() / 3);
   EXPECT_GE(tracked, frames * 8 / 10) << poses << " poses, " << tracked << " with all trackers, of " << frames
@@ -320,14 +321,10 @@ TEST(DaemonNetworkInputs, AForgedVmcSerialCannotKeepOrStealTheHead) {
     }
   });
   const std::uint32_t all = protocol::kFlagHeadValid | protocol::kFlagLeftHandValid | protocol::kFlagRightHandValid;
-  int poses = 0, tracked = 0;
-  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(5);
-  while (std::chrono::steady_clock::now() < end) {
-    const std::optional<protocol::PoseMessage> next = test::poll_pose(sub, std::chrono::milliseconds(50));
-    if (!next) continue;
-    ++poses;
-    if ((next->flags & all) == all) ++tracked;
-  }
+  int tracked = 0;
+  const int poses = collect_poses(sub, std::chrono::seconds(5), [&](const protocol::PoseMessage& pose) {
+    if ((pose.flags & all) == all) ++tracked;
+  });
   sender.join();
   forger.join();
   close(fd);
@@ -336,10 +333,8 @@ TEST(DaemonNetworkInputs, AForgedVmcSerialCannotKeepOrStealTheHead) {
   // kept the head and no pose came after the first).
   EXPECT_GE(tracked, 60) << poses << " poses\n" << daemon.err();
 
-  const std::optional<std::string> reply = status_reply(ctx, endpoints["control"].get<std::string>());
-  ASSERT_TRUE(reply) << daemon.err();
-  const auto status = nlohmann::json::parse(*reply, nullptr, false);
-  ASSERT_TRUE(status.contains("sources")) << *reply;
+  const nlohmann::json status = daemon_status(ctx, endpoints, daemon);
+  ASSERT_TRUE(status.contains("sources"));
   // FORGED-2's 15 poses were dropped, never used as the head.
   EXPECT_GE(status["sources"][0]["counters"]["unassigned"].get<int>(), 15) << status.dump(2);
   EXPECT_EQ(daemon.stop(5000), 0) << daemon.err();

@@ -5,6 +5,7 @@
 #include "bodyd/test/files.h"
 #include "bodyd/test/net.h"
 #include "bodyd/test/process.h"
+#include "bodyd/test/pose_message.h"
 #include "bodyd/test/temp_dir.h"
 #include "../daemon_programs.h"
 #include "../test_paths.h"
@@ -25,6 +26,7 @@
 #include <cstring>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <memory>
 #include <sstream>
 #include <thread>
@@ -94,18 +96,8 @@ TEST(RecordTrackers, LiveSessionReplaysToBitIdenticalPoses) {
   ASSERT_EQ(replay.size(), live.size()) << replay_log;
   for (std::size_t i = 0; i < live.size(); ++i) {
     SCOPED_TRACE("pose " + std::to_string(i));
-    const auto& a = live[i];
-    const auto& b = replay[i];
-    ASSERT_EQ(a.seq, b.seq);
-    ASSERT_EQ(a.t_ns, b.t_ns);
-    ASSERT_EQ(a.flags, b.flags);
-    ASSERT_EQ(a.skeleton_id, b.skeleton_id);
-    ASSERT_EQ(a.foot_contact, b.foot_contact);
-    ASSERT_EQ(a.root_joint, b.root_joint);
-    ASSERT_EQ(a.joints.size(), b.joints.size());
-    // Bit-identical floats (memcmp: also tells -0 from 0).
-    ASSERT_EQ(std::memcmp(a.joints.data(), b.joints.data(), a.joints.size() * sizeof(a.joints[0])), 0);
-    ASSERT_EQ(std::memcmp(a.root_position_m.data(), b.root_position_m.data(), sizeof(a.root_position_m)), 0);
+    // Every field but the publish time, the floats bit-identical (also telling -0 from 0).
+    ASSERT_TRUE(same_pose(live[i], replay[i], /*compare_publish_time=*/false));
   }
 }
 
@@ -155,16 +147,11 @@ TEST(RecordTrackers, LiveUdpSessionReplaysToBitIdenticalPoses) {
   }
   close(fd);
   // Every sample in (UDP on loopback loses nothing here), then stop bodyd.
-  zmq::socket_t req(ctx, zmq::socket_type::req);
-  req.set(zmq::sockopt::linger, 0);
-  req.set(zmq::sockopt::rcvtimeo, 3000);
-  req.connect(control);
   std::uint64_t samples_in = 0;
   for (int i = 0; i < 100 && samples_in < samples.size(); ++i) {
-    req.send(zmq::buffer(std::string(R"({"cmd":"status"})")));
-    zmq::message_t reply;
-    ASSERT_TRUE(req.recv(reply));
-    samples_in = nlohmann::json::parse(reply.to_string())["samples_in"].get<std::uint64_t>();
+    const std::optional<std::string> reply = status_reply(ctx, control, 3000);
+    ASSERT_TRUE(reply);
+    samples_in = nlohmann::json::parse(*reply)["samples_in"].get<std::uint64_t>();
     if (samples_in < samples.size()) std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   ASSERT_EQ(samples_in, samples.size()) << bodyd.log();
@@ -238,16 +225,11 @@ class UdpRecording {
   // The daemon's samples_in once it reaches `n` (or the last value seen after ~10 s).
   std::uint64_t wait_samples_in(std::uint64_t n) {
     zmq::context_t ctx;
-    zmq::socket_t req(ctx, zmq::socket_type::req);
-    req.set(zmq::sockopt::linger, 0);
-    req.set(zmq::sockopt::rcvtimeo, 3000);
-    req.connect(control_);
     std::uint64_t in = 0;
     for (int i = 0; i < 200 && in < n; ++i) {
-      req.send(zmq::buffer(std::string(R"({"cmd":"status"})")));
-      zmq::message_t reply;
-      if (!req.recv(reply)) break;
-      in = nlohmann::json::parse(reply.to_string())["samples_in"].get<std::uint64_t>();
+      const std::optional<std::string> reply = status_reply(ctx, control_, 3000);
+      if (!reply) break;
+      in = nlohmann::json::parse(*reply)["samples_in"].get<std::uint64_t>();
       if (in < n) std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }
     return in;
@@ -387,13 +369,7 @@ TEST(Signals, UsrAndAlrmAreIgnoredQuitStopsCleanly) {
   ASSERT_TRUE(wait_for_file(dir.path / "e.json", 20000)) << bodyd.log();
   for (int sig : {SIGUSR1, SIGUSR2, SIGALRM}) bodyd.signal(sig);
   zmq::context_t ctx;
-  zmq::socket_t req(ctx, zmq::socket_type::req);
-  req.set(zmq::sockopt::linger, 0);
-  req.set(zmq::sockopt::rcvtimeo, 5000);
-  req.connect(control);
-  req.send(zmq::buffer(std::string(R"({"cmd":"status"})")));
-  zmq::message_t reply;
-  ASSERT_TRUE(req.recv(reply)) << bodyd.log();  // still there
+  ASSERT_TRUE(status_reply(ctx, control)) << bodyd.log();  // still there
   EXPECT_FALSE(bodyd.wait(0)) << bodyd.log();
   bodyd.signal(SIGQUIT);
   ASSERT_EQ(bodyd.wait(20000), 0) << bodyd.log();  // 131 (core dump) before
