@@ -95,13 +95,18 @@ class PeekingReconstructor final : public Reconstructor {
   TrackerHistory history_;
 };
 
+// The clip's trackers simulated at its frame rate, with the simulator's other defaults.
+std::vector<TrackerSample> trackers_at_clip_rate(const Motion& clip) {
+  SimOptions o;
+  o.rate_hz = clip.fps();
+  return simulate_trackers(clip, o);
+}
+
 }  // namespace
 
 TEST(Evaluation, FrameTimesMatchTheSimulatorsSampleTimes) {
   const Motion clip = read_bvh(kWalk);
-  SimOptions o;
-  o.rate_hz = clip.fps();
-  const std::vector<TrackerSample> samples = simulate_trackers(clip, o);
+  const std::vector<TrackerSample> samples = trackers_at_clip_rate(clip);
   const std::vector<std::int64_t> times = clip_frame_times_ns(clip);
   ASSERT_EQ(times.size(), 60u);
   ASSERT_EQ(samples.size(), 3u * times.size());
@@ -155,9 +160,7 @@ TEST(Evaluation, IkOnWalkWithoutNoise) {
 
 TEST(Evaluation, CausalityHelperPassesIkAndCatchesAPeekingReconstructor) {
   const Motion clip = read_bvh(kWalk);
-  SimOptions o;
-  o.rate_hz = clip.fps();
-  const std::vector<TrackerSample> samples = simulate_trackers(clip, o);
+  const std::vector<TrackerSample> samples = trackers_at_clip_rate(clip);
   const std::vector<std::int64_t> times = clip_frame_times_ns(clip);
   const std::int64_t t_star = times[29];
 

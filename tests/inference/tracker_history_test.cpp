@@ -1,6 +1,7 @@
 #include "bodyd/inference/tracker_history.h"
 
 #include "bodyd/test/alloc_counter.h"
+#include "bodyd/test/tracker_sample.h"
 
 #include <gtest/gtest.h>
 
@@ -14,16 +15,7 @@ namespace {
 
 constexpr std::int64_t kMs = 1'000'000;
 
-TrackerSample sample(Role role, std::int64_t t_ns, bool valid, const Vec3& p = Vec3::Zero(),
-                     const Quat& q = Quat::Identity()) {
-  TrackerSample s;
-  s.role = role;
-  s.t_ns = t_ns;
-  s.valid = valid;
-  s.position_m = p;
-  s.rotation = q;
-  return s;
-}
+using test::tracker_sample;
 
 Quat yaw_deg(double deg) { return quat_from_yaw(deg * M_PI / 180.0); }
 
@@ -31,8 +23,8 @@ Quat yaw_deg(double deg) { return quat_from_yaw(deg * M_PI / 180.0); }
 
 TEST(TrackerHistory, InterpolatesBetweenSamplesWhenNowAllowsIt) {
   TrackerHistory h;
-  ASSERT_TRUE(h.push(sample(Role::LeftHand, 100 * kMs, true, Vec3(0, 1, 0), yaw_deg(0))));
-  ASSERT_TRUE(h.push(sample(Role::LeftHand, 200 * kMs, true, Vec3(1, 1, -2), yaw_deg(90))));
+  ASSERT_TRUE(h.push(tracker_sample(Role::LeftHand, 100 * kMs, true, Vec3(0, 1, 0), yaw_deg(0))));
+  ASSERT_TRUE(h.push(tracker_sample(Role::LeftHand, 200 * kMs, true, Vec3(1, 1, -2), yaw_deg(90))));
   TrackerSample out;
   // A quarter of the way from the first to the second sample; both are <= now.
   ASSERT_TRUE(h.query(Role::LeftHand, 125 * kMs, 200 * kMs, out));
@@ -44,8 +36,8 @@ TEST(TrackerHistory, InterpolatesBetweenSamplesWhenNowAllowsIt) {
 
 TEST(TrackerHistory, DefaultQueryIsCausalAndHoldsTheNewestEarlierSample) {
   TrackerHistory h;
-  ASSERT_TRUE(h.push(sample(Role::Head, 100 * kMs, true, Vec3(0, 1, 0))));
-  ASSERT_TRUE(h.push(sample(Role::Head, 200 * kMs, true, Vec3(1, 1, 0))));
+  ASSERT_TRUE(h.push(tracker_sample(Role::Head, 100 * kMs, true, Vec3(0, 1, 0))));
+  ASSERT_TRUE(h.push(tracker_sample(Role::Head, 200 * kMs, true, Vec3(1, 1, 0))));
   TrackerSample out;
   // The sample at 200 ms is already pushed but later than 150 ms: it must not be used.
   ASSERT_TRUE(h.query(Role::Head, 150 * kMs, out));
@@ -67,13 +59,13 @@ TEST(TrackerHistory, HeldSampleExpiresAfterTheTimeout) {
   TrackerHistoryOptions o;
   o.timeout_ns = 250 * kMs;
   TrackerHistory h(o);
-  ASSERT_TRUE(h.push(sample(Role::Head, 1000 * kMs, true, Vec3(0, 1.5, 0))));
+  ASSERT_TRUE(h.push(tracker_sample(Role::Head, 1000 * kMs, true, Vec3(0, 1.5, 0))));
   TrackerSample out;
   EXPECT_TRUE(h.query(Role::Head, 1250 * kMs, out));
   EXPECT_EQ(out.position_m, Vec3(0, 1.5, 0));
   EXPECT_FALSE(h.query(Role::Head, 1251 * kMs, out));
   // Two valid samples further apart than the timeout are not interpolated: the nearer decides.
-  ASSERT_TRUE(h.push(sample(Role::Head, 2000 * kMs, true, Vec3(0, 1.0, 0))));
+  ASSERT_TRUE(h.push(tracker_sample(Role::Head, 2000 * kMs, true, Vec3(0, 1.0, 0))));
   EXPECT_TRUE(h.query(Role::Head, 1100 * kMs, 2000 * kMs, out));
   EXPECT_EQ(out.position_m, Vec3(0, 1.5, 0));
   EXPECT_FALSE(h.query(Role::Head, 1500 * kMs, 2000 * kMs, out));  // 500 ms from both
@@ -83,9 +75,9 @@ TEST(TrackerHistory, HeldSampleExpiresAfterTheTimeout) {
 
 TEST(TrackerHistory, InvalidSamplesMakeTheirNeighbourhoodInvalid) {
   TrackerHistory h;
-  ASSERT_TRUE(h.push(sample(Role::RightHand, 0, true, Vec3(1, 0, 0))));
-  ASSERT_TRUE(h.push(sample(Role::RightHand, 100 * kMs, false)));
-  ASSERT_TRUE(h.push(sample(Role::RightHand, 200 * kMs, true, Vec3(3, 0, 0))));
+  ASSERT_TRUE(h.push(tracker_sample(Role::RightHand, 0, true, Vec3(1, 0, 0))));
+  ASSERT_TRUE(h.push(tracker_sample(Role::RightHand, 100 * kMs, false)));
+  ASSERT_TRUE(h.push(tracker_sample(Role::RightHand, 200 * kMs, true, Vec3(3, 0, 0))));
   TrackerSample out;
   // Holding an invalid sample: invalid, although an older valid one is within the timeout.
   EXPECT_FALSE(h.query(Role::RightHand, 150 * kMs, out));
@@ -103,13 +95,13 @@ TEST(TrackerHistory, InvalidSamplesMakeTheirNeighbourhoodInvalid) {
 
 TEST(TrackerHistory, IgnoresAndCountsOlderSamplesPerRole) {
   TrackerHistory h;
-  EXPECT_TRUE(h.push(sample(Role::Head, 100, true)));
-  EXPECT_TRUE(h.push(sample(Role::LeftHand, 50, true)));  // roles are independent
-  EXPECT_FALSE(h.push(sample(Role::Head, 99, true, Vec3(9, 9, 9))));
+  EXPECT_TRUE(h.push(tracker_sample(Role::Head, 100, true)));
+  EXPECT_TRUE(h.push(tracker_sample(Role::LeftHand, 50, true)));  // roles are independent
+  EXPECT_FALSE(h.push(tracker_sample(Role::Head, 99, true, Vec3(9, 9, 9))));
   EXPECT_EQ(h.ignored_count(), 1);
   EXPECT_EQ(h.size(Role::Head), 1);
   // Equal time is kept; the later arrival wins.
-  EXPECT_TRUE(h.push(sample(Role::Head, 100, true, Vec3(2, 0, 0))));
+  EXPECT_TRUE(h.push(tracker_sample(Role::Head, 100, true, Vec3(2, 0, 0))));
   TrackerSample out;
   ASSERT_TRUE(h.query(Role::Head, 100, out));
   EXPECT_EQ(out.position_m, Vec3(2, 0, 0));
@@ -126,8 +118,8 @@ TEST(TrackerHistory, RingKeepsTheNewestAndFirstValidSurvives) {
   TrackerHistoryOptions o;
   o.capacity = 4;
   TrackerHistory h(o);
-  EXPECT_TRUE(h.push(sample(Role::Head, 0, false)));
-  for (int i = 1; i <= 10; ++i) EXPECT_TRUE(h.push(sample(Role::Head, i * 10 * kMs, true, Vec3(i, 0, 0))));
+  EXPECT_TRUE(h.push(tracker_sample(Role::Head, 0, false)));
+  for (int i = 1; i <= 10; ++i) EXPECT_TRUE(h.push(tracker_sample(Role::Head, i * 10 * kMs, true, Vec3(i, 0, 0))));
   EXPECT_EQ(h.size(Role::Head), 4);
   TrackerSample out;
   // Samples 7..10 (70..100 ms) remain: 65 ms has nothing at or before it any more.
@@ -160,7 +152,7 @@ TEST(TrackerHistory, PushAndQueryDoNotAllocate) {
   {
     test::AllocationCounter counter;
     for (int i = 0; i < 100; ++i) {
-      (void)h.push(sample(Role::LeftHand, i * 11 * kMs, i % 7 != 0, Vec3(i, 0, 0), yaw_deg(i)));
+      (void)h.push(tracker_sample(Role::LeftHand, i * 11 * kMs, i % 7 != 0, Vec3(i, 0, 0), yaw_deg(i)));
       (void)h.query(Role::LeftHand, i * 11 * kMs - 5 * kMs, i * 11 * kMs, out);
       (void)h.first_valid(Role::LeftHand);
     }
@@ -173,20 +165,20 @@ TEST(TrackerHistory, PushAndQueryDoNotAllocate) {
 // queries see only the good samples around it.
 TEST(TrackerHistory, RefusesNonFiniteAndAbsurdSamplesAndCountsThem) {
   TrackerHistory h;
-  ASSERT_TRUE(h.push(sample(Role::Head, 100 * kMs, true, Vec3(0, 1.6, 0))));
+  ASSERT_TRUE(h.push(tracker_sample(Role::Head, 100 * kMs, true, Vec3(0, 1.6, 0))));
   const double nan = std::nan("");
-  EXPECT_FALSE(h.push(sample(Role::Head, 110 * kMs, true, Vec3(1e300, 1.6, 0))));
-  EXPECT_FALSE(h.push(sample(Role::Head, 120 * kMs, true, Vec3(0, nan, 0))));
-  EXPECT_FALSE(h.push(sample(Role::Head, 130 * kMs, true, Vec3(0, 0, -101.0))));
-  EXPECT_FALSE(h.push(sample(Role::Head, 140 * kMs, true, Vec3(0, 1.6, 0), Quat(5, 0, 0, 0))));
-  EXPECT_FALSE(h.push(sample(Role::Head, 150 * kMs, true, Vec3(0, 1.6, 0), Quat(nan, 0, 0, 1))));
-  EXPECT_FALSE(h.push(sample(Role::Head, std::numeric_limits<std::int64_t>::max(), false)));
+  EXPECT_FALSE(h.push(tracker_sample(Role::Head, 110 * kMs, true, Vec3(1e300, 1.6, 0))));
+  EXPECT_FALSE(h.push(tracker_sample(Role::Head, 120 * kMs, true, Vec3(0, nan, 0))));
+  EXPECT_FALSE(h.push(tracker_sample(Role::Head, 130 * kMs, true, Vec3(0, 0, -101.0))));
+  EXPECT_FALSE(h.push(tracker_sample(Role::Head, 140 * kMs, true, Vec3(0, 1.6, 0), Quat(5, 0, 0, 0))));
+  EXPECT_FALSE(h.push(tracker_sample(Role::Head, 150 * kMs, true, Vec3(0, 1.6, 0), Quat(nan, 0, 0, 1))));
+  EXPECT_FALSE(h.push(tracker_sample(Role::Head, std::numeric_limits<std::int64_t>::max(), false)));
   EXPECT_EQ(h.refused_count(), 6);
   EXPECT_EQ(h.ignored_count(), 0);
   EXPECT_EQ(h.size(Role::Head), 1);
   // At the limit is still accepted; an invalid sample's (unused) pose is not checked.
-  EXPECT_TRUE(h.push(sample(Role::Head, 200 * kMs, true, Vec3(100.0, 1.6, -100.0))));
-  EXPECT_TRUE(h.push(sample(Role::LeftHand, 200 * kMs, false, Vec3(nan, nan, nan))));
+  EXPECT_TRUE(h.push(tracker_sample(Role::Head, 200 * kMs, true, Vec3(100.0, 1.6, -100.0))));
+  EXPECT_TRUE(h.push(tracker_sample(Role::LeftHand, 200 * kMs, false, Vec3(nan, nan, nan))));
   TrackerSample out;
   ASSERT_TRUE(h.query(Role::Head, 150 * kMs, 200 * kMs, out));
   EXPECT_TRUE(out.position_m.allFinite());

@@ -2,6 +2,7 @@
 
 #include "../test_paths.h"
 #include "bodyd/test/temp_dir.h"
+#include "bodyd/test/tracker_sample.h"
 
 #include <gtest/gtest.h>
 
@@ -18,13 +19,7 @@ using namespace bodyd;
 namespace {
 
 TrackerSample make(std::int64_t t_ns, Role role, bool valid, Vec3 p = Vec3::Zero(), Quat q = Quat::Identity()) {
-  TrackerSample s;
-  s.t_ns = t_ns;
-  s.role = role;
-  s.valid = valid;
-  s.position_m = p;
-  s.rotation = q;
-  return s;
+  return test::tracker_sample(role, t_ns, valid, p, q);
 }
 
 // Samples with awkward numbers: negative zero, tiny and huge magnitudes, a rotation by
