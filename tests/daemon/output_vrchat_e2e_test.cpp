@@ -139,12 +139,34 @@ void compare(const std::vector<protocol::PoseMessage>& poses, const std::vector<
   }
 }
 
-TEST(VrchatOutput, OscJsReceivesTheZmqPoseAndTheHeadAsReceived) {
+// Every bundle matched to a pose (compare): each slot within 1 mm and 0.1 degree of its joint,
+// the head message within 1 mm and 0.1 degree of the head sample; prints the worst.
+void expect_bundles_match(const std::vector<protocol::PoseMessage>& poses, const std::vector<nlohmann::json>& bundles,
+                          const protocol::SkeletonMessage& skeleton, const std::vector<TrackerSample>& heads) {
+  Worst w;
+  compare(poses, bundles, skeleton, heads, w);
+  EXPECT_LE(w.slot_mm, 1.0);
+  EXPECT_LE(w.slot_deg, 0.1);
+  EXPECT_LE(w.head_mm, 1.0);
+  EXPECT_LE(w.head_deg, 0.1);
+  EXPECT_EQ(w.matched, bundles.size());
+  std::cout << bundles.size() << " bundles for " << poses.size() << " poses; worst slot " << w.slot_mm << " mm, "
+            << w.slot_deg << " deg; head " << w.head_mm << " mm, " << w.head_deg << " deg\n";
+}
+
+// Each test: node (or a skip), a temporary directory and the osc.js receiver running in it.
+class VrchatOutput : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (std::string why = node_or_skip_reason(node); !why.empty()) GTEST_SKIP() << why;
+    ASSERT_TRUE(start_receiver(node, dir.path, receiver));
+  }
   std::string node;
-  if (std::string why = node_or_skip_reason(node); !why.empty()) GTEST_SKIP() << why;
   test::TempDir dir;
   Receiver receiver;
-  ASSERT_TRUE(start_receiver(node, dir.path, receiver));
+};
+
+TEST_F(VrchatOutput, OscJsReceivesTheZmqPoseAndTheHeadAsReceived) {
 
   const fs::path log_path = test::source_dir() / "data" / "demo" / "walk.csv";
   // A head offset of 8 cm: the head message must carry the headset's pose before it.
@@ -152,10 +174,9 @@ TEST(VrchatOutput, OscJsReceivesTheZmqPoseAndTheHeadAsReceived) {
                       "--endpoints-file", (dir.path / "endpoints.json").string(), "--offset", "head=0,-0.08,0.05",
                       "--output", "vrchat:127.0.0.1:" + receiver.port + "?slots=hip,feet,knees,chest,elbows"},
                      dir.path / "bodyd.err");
-  const auto endpoints = test::wait_endpoints(dir.path / "endpoints.json", 20000);
-  ASSERT_TRUE(endpoints) << daemon.log();
   zmq::context_t ctx;
-  zmq::socket_t sub = test::sub_socket(ctx, (*endpoints)["pub"].get<std::string>());
+  zmq::socket_t sub;
+  ASSERT_TRUE(test::subscribe_when_up(ctx, dir.path / "endpoints.json", daemon, sub));
   protocol::SkeletonMessage skeleton;
   std::vector<protocol::PoseMessage> poses;
   collect_until_quiet(sub, skeleton, poses, daemon);  // every pose: the daemon ends with the log
@@ -176,28 +197,15 @@ TEST(VrchatOutput, OscJsReceivesTheZmqPoseAndTheHeadAsReceived) {
   double offset_min_mm = 1e9;  // how far the offset head (the pose stream's Head) is from the raw one
   for (const TrackerSample& h : heads)
     offset_min_mm = std::min(offset_min_mm, (h.rotation * Vec3(0, -0.08, 0.05)).norm() * 1000.0);
-  Worst w;
-  compare(poses, bundles, skeleton, heads, w);
-  EXPECT_LE(w.slot_mm, 1.0);
-  EXPECT_LE(w.slot_deg, 0.1);
-  EXPECT_LE(w.head_mm, 1.0);
-  EXPECT_LE(w.head_deg, 0.1);
+  expect_bundles_match(poses, bundles, skeleton, heads);
   // The head messages matched the raw head samples within 1 mm, which are ~94 mm from the
   // offset ones: the head message is the headset's pose before the device offset.
   EXPECT_GT(offset_min_mm, 50.0);
-  EXPECT_EQ(w.matched, bundles.size());
-  std::cout << bundles.size() << " bundles for " << poses.size() << " poses; worst slot " << w.slot_mm << " mm, " << w.slot_deg << " deg; head " << w.head_mm
-            << " mm, " << w.head_deg << " deg\n";
 }
 
 // Issue 9's loop: osc.js plays a clip's head and wrists as VRChat sends them (90 Hz) into
 // bodyd --source vrchat: --output vrchat:, and receives the tracker bundles.
-TEST(VrchatOutput, FullLoopFromVrchatInputToVrchatTrackers) {
-  std::string node;
-  if (std::string why = node_or_skip_reason(node); !why.empty()) GTEST_SKIP() << why;
-  test::TempDir dir;
-  Receiver receiver;
-  ASSERT_TRUE(start_receiver(node, dir.path, receiver));
+TEST_F(VrchatOutput, FullLoopFromVrchatInputToVrchatTrackers) {
   SimOptions sim;  // 90 Hz, the clip's motion without noise or dropouts
   sim.position_noise_mm = 0;
   sim.rotation_noise_deg = 0;
@@ -214,11 +222,9 @@ TEST(VrchatOutput, FullLoopFromVrchatInputToVrchatTrackers) {
                       "vrchat:127.0.0.1:" + receiver.port + "?slots=hip,feet,knees,chest,elbows", "--pub",
                       "tcp://127.0.0.1:*", "--control", "none", "--endpoints-file", (dir.path / "endpoints.json").string()},
                      dir.path / "bodyd.err");
-  const auto endpoints = test::wait_endpoints(dir.path / "endpoints.json", 20000);
-  ASSERT_TRUE(endpoints) << daemon.log();
   zmq::context_t ctx;
-  zmq::socket_t sub = test::sub_socket(ctx, (*endpoints)["pub"].get<std::string>());
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the subscription reaches the publisher
+  zmq::socket_t sub;
+  ASSERT_TRUE(test::subscribe_when_up(ctx, dir.path / "endpoints.json", daemon, sub));
 
   ::setenv("NODE_PATH", (test::source_dir() / "tests" / "node" / "node_modules").c_str(), 1);  // for send_trackers.js
   test::Child sender({node, (test::source_dir() / "tests" / "drivers" / "node" / "send_trackers.js").string(), "vrchat",
@@ -237,17 +243,9 @@ TEST(VrchatOutput, FullLoopFromVrchatInputToVrchatTrackers) {
   ASSERT_EQ(poses.size(), heads.size()) << daemon.log();
   const std::vector<nlohmann::json> bundles = read_bundles(receiver.bundles);
   EXPECT_GE(bundles.size() * 100, poses.size() * 95) << bundles.size() << " bundles for " << poses.size() << " poses";
-  Worst w;
-  compare(poses, bundles, skeleton, heads, w);
-  EXPECT_LE(w.slot_mm, 1.0);
-  EXPECT_LE(w.slot_deg, 0.1);
   // The head alignment message equals what "VRChat" sent (through Unity Euler angles in
   // float, both ways).
-  EXPECT_LE(w.head_mm, 1.0);
-  EXPECT_LE(w.head_deg, 0.1);
-  EXPECT_EQ(w.matched, bundles.size());
-  std::cout << bundles.size() << " bundles for " << poses.size() << " poses; worst slot " << w.slot_mm << " mm, " << w.slot_deg << " deg; head " << w.head_mm
-            << " mm, " << w.head_deg << " deg\n";
+  expect_bundles_match(poses, bundles, skeleton, heads);
 }
 
 }  // namespace

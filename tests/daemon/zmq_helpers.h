@@ -145,4 +145,16 @@ inline std::optional<nlohmann::json> wait_endpoints(const std::filesystem::path&
   return std::nullopt;
 }
 
+// Once a daemon started with --endpoints-file `endpoints_file` has written it (within 20 s):
+// `sub` subscribed to its pub endpoint, given 300 ms for the subscription to reach the publisher.
+// The failure, when the file did not come, is the daemon's log.
+inline ::testing::AssertionResult subscribe_when_up(zmq::context_t& ctx, const std::filesystem::path& endpoints_file,
+                                                    const Child& daemon, zmq::socket_t& sub) {
+  const auto endpoints = wait_endpoints(endpoints_file, 20000);
+  if (!endpoints) return ::testing::AssertionFailure() << daemon.log();
+  sub = sub_socket(ctx, (*endpoints)["pub"].get<std::string>());
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the subscription reaches the publisher
+  return ::testing::AssertionSuccess();
+}
+
 }  // namespace bodyd::test
