@@ -25,6 +25,11 @@ void set_u16(Bytes& b, std::size_t at, std::uint16_t v) {
 void set_u32(Bytes& b, std::size_t at, std::uint32_t v) {
   for (int i = 0; i < 4; ++i) b[at + i] = static_cast<std::uint8_t>(v >> (8 * i));
 }
+// `b` with the u16 at `at` made `v`.
+Bytes with_u16(Bytes b, std::size_t at, std::uint16_t v) {
+  set_u16(b, at, v);
+  return b;
+}
 void set_f32(Bytes& b, std::size_t at, float v) { set_u32(b, at, std::bit_cast<std::uint32_t>(v)); }
 
 Bytes encoded(const PoseMessage& p) {
@@ -329,21 +334,16 @@ TEST(PoseMessageMalformed, WrongMagic) {
 }
 
 TEST(PoseMessageMalformed, WrongVersion) {
-  Bytes b = encoded(synthetic_pose(3));
-  set_u16(b, 4, 2);
-  EXPECT_THAT(pose_error(b), HasSubstr("unsupported version 2"));
-  set_u16(b, 4, 0);
-  EXPECT_THAT(pose_error(b), HasSubstr("unsupported version 0"));
+  const Bytes b = encoded(synthetic_pose(3));
+  EXPECT_THAT(pose_error(with_u16(b, 4, 2)), HasSubstr("unsupported version 2"));
+  EXPECT_THAT(pose_error(with_u16(b, 4, 0)), HasSubstr("unsupported version 0"));
 }
 
 TEST(PoseMessageMalformed, WrongCounts) {
-  Bytes b = encoded(synthetic_pose(3));  // 22 joints
-  set_u16(b, 6, 23);
-  EXPECT_THAT(pose_error(b), HasSubstr("truncated"));
-  set_u16(b, 6, 21);
-  EXPECT_THAT(pose_error(b), HasSubstr("trailing bytes"));
-  set_u16(b, 6, 0xFFFF);
-  EXPECT_THAT(pose_error(b), HasSubstr("joint_count 65535 exceeds the maximum 128"));
+  const Bytes b = encoded(synthetic_pose(3));  // 22 joints
+  EXPECT_THAT(pose_error(with_u16(b, 6, 23)), HasSubstr("truncated"));
+  EXPECT_THAT(pose_error(with_u16(b, 6, 21)), HasSubstr("trailing bytes"));
+  EXPECT_THAT(pose_error(with_u16(b, 6, 0xFFFF)), HasSubstr("joint_count 65535 exceeds the maximum 128"));
   // Too many joints even when the size is consistent.
   Bytes big(kPoseHeaderSize + kPoseJointSize * 129, 0);
   std::copy(b.begin(), b.begin() + 64, big.begin());
@@ -433,16 +433,11 @@ TEST(SkeletonMessageMalformed, ShortWrongMagicWrongVersion) {
 TEST(SkeletonMessageMalformed, Counts) {
   const SkeletonMessage s = synthetic_skeleton();
   const Bytes good = encoded(s);
+  EXPECT_THAT(skeleton_error(with_u16(good, 6, 0)), HasSubstr("joint_count is 0"));
+  EXPECT_THAT(skeleton_error(with_u16(good, 6, 129)), HasSubstr("joint_count 129 exceeds the maximum 128"));
+  EXPECT_THAT(skeleton_error(with_u16(good, 6, 23)), HasSubstr("truncated in joint 22 of 23"));
+  EXPECT_THAT(skeleton_error(with_u16(good, 6, 21)), HasSubstr("trailing bytes after 21 joints"));
   Bytes b = good;
-  set_u16(b, 6, 0);
-  EXPECT_THAT(skeleton_error(b), HasSubstr("joint_count is 0"));
-  set_u16(b, 6, 129);
-  EXPECT_THAT(skeleton_error(b), HasSubstr("joint_count 129 exceeds the maximum 128"));
-  set_u16(b, 6, 23);
-  EXPECT_THAT(skeleton_error(b), HasSubstr("truncated in joint 22 of 23"));
-  set_u16(b, 6, 21);
-  EXPECT_THAT(skeleton_error(b), HasSubstr("trailing bytes after 21 joints"));
-  b = good;
   b.push_back('!');
   EXPECT_THAT(skeleton_error(b), HasSubstr("1 trailing bytes"));
 }
