@@ -49,9 +49,15 @@ HidSourceOptions hid_options(DeviceId id = {0x1209, 0xB0D1}) {
   return o;
 }
 
-TEST(HidSource, StreamsEveryRoleOfOneDeviceStampedAtRead) {
+// A simulated device sampling at `hz`, the rest at its defaults.
+SimulatedDeviceConfig at_rate(double hz) {
   SimulatedDeviceConfig c;
-  c.sim.rate_hz = 100.0;
+  c.sim.rate_hz = hz;
+  return c;
+}
+
+TEST(HidSource, StreamsEveryRoleOfOneDeviceStampedAtRead) {
+  SimulatedDeviceConfig c = at_rate(100.0);
   auto transport = std::make_shared<FakeHidTransport>();
   transport->add(device(c));
   CollectingSink sink;
@@ -98,8 +104,7 @@ TEST(HidSource, StreamsEveryRoleOfOneDeviceStampedAtRead) {
 }
 
 TEST(HidSource, MisbehavingDeviceIsCountedAndSurvived) {
-  SimulatedDeviceConfig c;
-  c.sim.rate_hz = 200.0;
+  SimulatedDeviceConfig c = at_rate(200.0);
   c.faults.short_report_probability = 0.1;
   c.faults.garbage_probability = 0.1;
   c.faults.drop_probability = 0.1;
@@ -159,8 +164,7 @@ TEST(HidSource, DeviceAppearsDisappearsAndReappears) {
 }
 
 TEST(HidSource, HandDropsOutAndReturns) {
-  SimulatedDeviceConfig c;
-  c.sim.rate_hz = 120.0;
+  SimulatedDeviceConfig c = at_rate(120.0);
   c.sim.dropout_rate_hz = 3.0;
   c.sim.dropout_mean_ms = 150.0;
   c.sim.seed = 3;
@@ -311,8 +315,7 @@ class UsbSourceTest : public ::testing::TestWithParam<bool> {};
 
 TEST_P(UsbSourceTest, StreamsPackedTransfersAndSurvivesADisconnect) {
   const bool hotplug = GetParam();
-  SimulatedDeviceConfig c;
-  c.sim.rate_hz = 100.0;
+  SimulatedDeviceConfig c = at_rate(100.0);
   c.faults.disconnect_at_s = 0.3;
   c.faults.reconnect_after_s = 0.3;
   auto transport = std::make_shared<FakeUsbTransport>(hotplug);
