@@ -89,6 +89,25 @@ zmq::socket_t subscribe_all(zmq::context_t& ctx, const std::string& pub) {
   return sub;
 }
 
+// Why a test that plays trackers with osc.js cannot run (node or the npm package osc is
+// missing); empty when it can.
+std::string osc_js_skip_reason() {
+  if (std::system("node --version > /dev/null 2>&1") != 0) return "node is not installed (scripts/setup)";
+  if (!fs::exists(test::source_dir() / "tests/node/node_modules/osc/package.json"))
+    return "the npm package osc is not installed in tests/node (scripts/setup runs npm ci there)";
+  return "";
+}
+
+// Plays dir/walk.csv to 127.0.0.1:port as `kind` (vrchat, vmc) sends it, one time step each
+// 11 ms (tests/drivers/node/send_trackers.js); its output goes to dir/sender.txt.
+void play_tracker_log(const std::string& kind, int port, const fs::path& dir) {
+  const std::string command = "NODE_PATH='" + (test::source_dir() / "tests/node/node_modules").string() + "' node '" +
+                              (test::source_dir() / "tests/drivers/node/send_trackers.js").string() + "' " + kind +
+                              " 127.0.0.1 " + std::to_string(port) + " '" + (dir / "walk.csv").string() + "' 11 > '" +
+                              (dir / "sender.txt").string() + "' 2>&1";
+  EXPECT_EQ(std::system(command.c_str()), 0) << test::read_file(dir / "sender.txt");
+}
+
 // Calls on_pose with every pose that arrives on `sub` for `duration`; returns how many came.
 template <class OnPose>
 int collect_poses(zmq::socket_t& sub, std::chrono::seconds duration, OnPose&& on_pose) {
@@ -231,9 +250,7 @@ TEST(DaemonNetworkInputs, BadPacketsAreCountedWhilePosesKeepComing) {
 // bodyd --source vrchat:, and a ZeroMQ subscriber receives poses with all three trackers valid.
 // (The full VRChat loop, with --output vrchat:, is tested with the outputs: docs/outputs.md.)
 TEST(DaemonNetworkInputs, VrchatSenderDrivesThePoseStream) {
-  if (std::system("node --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "node is not installed (scripts/setup)";
-  if (!fs::exists(test::source_dir() / "tests/node/node_modules/osc/package.json"))
-    GTEST_SKIP() << "the npm package osc is not installed in tests/node (scripts/setup runs npm ci there)";
+  if (const std::string why = osc_js_skip_reason(); !why.empty()) GTEST_SKIP() << why;
   const test::TempDir tmp("bodyd-net-vrc");
   const fs::path& dir = tmp.path;
   SimOptions sim;  // 90 Hz, the clip's motion without noise
@@ -251,13 +268,7 @@ TEST(DaemonNetworkInputs, VrchatSenderDrivesThePoseStream) {
   zmq::context_t ctx;
   zmq::socket_t sub = subscribe_all(ctx, endpoints["pub"].get<std::string>());
 
-  std::thread sender([&] {
-    const std::string command = "NODE_PATH='" + (test::source_dir() / "tests/node/node_modules").string() + "' node '" +
-                                (test::source_dir() / "tests/drivers/node/send_trackers.js").string() +
-                                "' vrchat 127.0.0.1 " + std::to_string(port) + " '" + (dir / "walk.csv").string() +
-                                "' 11 > '" + (dir / "sender.txt").string() + "' 2>&1";
-    EXPECT_EQ(std::system(command.c_str()), 0) << read_file(dir / "sender.txt");
-  });
+  std::thread sender([&] { play_tracker_log("vrchat", port, dir); });
   const std::uint32_t all = protocol::kFlagHeadValid | protocol::kFlagLeftHandValid | protocol::kFlagRightHandValid;
   int tracked = 0;
   const int poses = collect_poses(sub, std::chrono::seconds(5), [&](const protocol::PoseMessage& pose) {
@@ -277,9 +288,7 @@ TEST(DaemonNetworkInputs, VrchatSenderDrivesThePoseStream) {
 // for a second; then the real headset (osc.js playing the bundled recording) gets it and keeps
 // it while a second forged serial sends; the forged serials reach the log escaped.
 TEST(DaemonNetworkInputs, AForgedVmcSerialCannotKeepOrStealTheHead) {
-  if (std::system("node --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "node is not installed (scripts/setup)";
-  if (!fs::exists(test::source_dir() / "tests/node/node_modules/osc/package.json"))
-    GTEST_SKIP() << "the npm package osc is not installed in tests/node (scripts/setup runs npm ci there)";
+  if (const std::string why = osc_js_skip_reason(); !why.empty()) GTEST_SKIP() << why;
   const test::TempDir tmp("bodyd-net-vmc");
   const fs::path& dir = tmp.path;
   std::vector<TrackerSample> samples = read_tracker_log(test::source_dir() / "data/demo/walk.csv").samples;
@@ -305,13 +314,7 @@ TEST(DaemonNetworkInputs, AForgedVmcSerialCannotKeepOrStealTheHead) {
   send(osc_vmc("/VMC/Ext/Hmd/Pos", forged, {5, 3, 5, 0, 0, 0, 1}));
   std::this_thread::sleep_for(std::chrono::milliseconds(50));
 
-  std::thread sender([&] {
-    const std::string command = "NODE_PATH='" + (test::source_dir() / "tests/node/node_modules").string() + "' node '" +
-                                (test::source_dir() / "tests/drivers/node/send_trackers.js").string() +
-                                "' vmc 127.0.0.1 " + std::to_string(port) + " '" + (dir / "walk.csv").string() +
-                                "' 11 > '" + (dir / "sender.txt").string() + "' 2>&1";
-    EXPECT_EQ(std::system(command.c_str()), 0) << read_file(dir / "sender.txt");
-  });
+  std::thread sender([&] { play_tracker_log("vmc", port, dir); });
   // While the real headset streams (from about 2.5 s on): a second forged serial at 30 Hz.
   std::thread forger([&] {
     std::this_thread::sleep_for(std::chrono::milliseconds(2500));
