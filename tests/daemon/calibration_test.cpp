@@ -63,6 +63,13 @@ std::vector<protocol::PoseMessage> all_poses(zmq::socket_t& sub) {
   return poses;
 }
 
+// `bvh`'s trackers scaled by `scale` (scaled_samples), written as dir/scaled.csv.
+std::vector<TrackerSample> write_scaled(const std::filesystem::path& dir, const std::filesystem::path& bvh, double scale) {
+  std::vector<TrackerSample> samples = scaled_samples(bvh, scale);
+  write_tracker_log(dir / "scaled.csv", samples);
+  return samples;
+}
+
 std::size_t head_count(const std::vector<TrackerSample>& samples) {
   std::size_t n = 0;
   for (const TrackerSample& s : samples) n += s.role == Role::Head;
@@ -72,8 +79,7 @@ std::size_t head_count(const std::vector<TrackerSample>& samples) {
 TEST(AutoCalibration, AScaledReplayCalibratesFromTheStillStartAndAManualCalibrationReplacesIt) {
   test::TempDir dir;
   const std::filesystem::path bow = test::fixtures() / "bow_30.bvh";
-  const auto samples = scaled_samples(bow, 0.8);
-  write_tracker_log(dir.path / "scaled.csv", samples);
+  const auto samples = write_scaled(dir.path, bow, 0.8);
   DaemonConfig c = replay_config(dir.path / "scaled.csv", dir.path);
   c.record_trackers_file = (dir.path / "recorded.csv").string();
   Daemon d(c, daemon::make_default_factory(bow));
@@ -125,8 +131,7 @@ TEST(AutoCalibration, AScaledReplayCalibratesFromTheStillStartAndAManualCalibrat
 TEST(AutoCalibration, AManualOrConfiguredHeightWinsAndTheFlagTurnsItOff) {
   test::TempDir dir;
   const std::filesystem::path walk = test::fixtures() / "walk_60.bvh";
-  const auto samples = scaled_samples(walk, 1.2);
-  write_tracker_log(dir.path / "scaled.csv", samples);
+  const auto samples = write_scaled(dir.path, walk, 1.2);
   zmq::context_t ctx;
   // Each way: the configuration, the calibration source and auto state after the replay, and the
   // standing head height then (0: the model's own).
@@ -286,8 +291,7 @@ std::optional<std::pair<std::string, std::vector<std::uint8_t>>> recv_any(zmq::s
 TEST(ZmqOutputs, AnOutputZmqSubscriberGetsEachSkeletonBeforeThePosesNamingIt) {
   test::TempDir dir;
   const std::filesystem::path bow = test::fixtures() / "bow_30.bvh";
-  const auto samples = scaled_samples(bow, 0.8);
-  write_tracker_log(dir.path / "scaled.csv", samples);
+  const auto samples = write_scaled(dir.path, bow, 0.8);
   DaemonConfig c = replay_config(dir.path / "scaled.csv", dir.path);
   const std::string extra = "ipc://" + (dir.path / "extra").string();
   c.outputs = {"zmq:" + extra};

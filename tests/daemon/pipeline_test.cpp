@@ -50,6 +50,18 @@ DaemonConfig base_config(const std::filesystem::path& log) {
   return c;
 }
 
+// 90 synthetic samples written as dir/log.csv, replayed at their pace in a loop until stopped,
+// without waiting for a subscriber.
+DaemonConfig looping_config(const std::filesystem::path& dir) {
+  write_tracker_log(dir / "log.csv", test::synthetic_samples(90));
+  DaemonConfig c = base_config(dir / "log.csv");
+  c.fast = false;
+  c.exit_at_end = false;
+  c.loop = true;
+  c.wait_for_subscriber = false;
+  return c;
+}
+
 zmq::socket_t subscriber(zmq::context_t& ctx, const std::string& endpoint, std::string_view topic = "pose",
                          int rcvhwm = 0) {
   zmq::socket_t sub(ctx, zmq::socket_type::sub);
@@ -173,12 +185,7 @@ TEST(Pipeline, CurveClientWithTheServerKeyReceivesOthersDoNot) {
   test::TempDir dir;
   daemon::CurveKeyPair server;
   ASSERT_EQ(daemon::generate_curve_keys(dir.path / "keys", server), "");
-  write_tracker_log(dir.path / "log.csv", test::synthetic_samples(90));
-  DaemonConfig c = base_config(dir.path / "log.csv");
-  c.fast = false;
-  c.exit_at_end = false;
-  c.loop = true;
-  c.wait_for_subscriber = false;
+  DaemonConfig c = looping_config(dir.path);
   c.curve_secret_key_file = (dir.path / "keys" / "server.secret").string();
   Daemon d(c, fake_factory());
   ASSERT_EQ(d.start(), "");
@@ -256,12 +263,7 @@ TEST(Pipeline, RemoteBindRefusedUnlessAllowedAndBusyEndpointsExplained) {
 class ControlSocket : public ::testing::Test {
  protected:
   void SetUp() override {
-    write_tracker_log(dir.path / "log.csv", test::synthetic_samples(90));
-    DaemonConfig c = base_config(dir.path / "log.csv");
-    c.fast = false;
-    c.exit_at_end = false;
-    c.loop = true;
-    c.wait_for_subscriber = false;
+    DaemonConfig c = looping_config(dir.path);
     c.control_endpoint = "ipc://" + (dir.path / "control").string();
     c.pub_endpoint = "ipc://" + (dir.path / "pose").string();
     daemon_ = std::make_unique<Daemon>(c, fake_factory(&factory_calls));

@@ -685,12 +685,17 @@ TEST(ReplaySource, FastIsLosslessThroughATinyQueueAndKeepsLogTime) {
   EXPECT_EQ(queue.dropped(), 0u);
 }
 
-TEST(ReplaySource, LoopKeepsTimeIncreasingAndStopIsPrompt) {
-  const auto samples = test::synthetic_samples(10);
+// A replay source that loops `samples` as fast as it can.
+std::unique_ptr<drivers::TrackerSource> fast_loop_source(const std::string& name, const std::vector<TrackerSample>& samples) {
   drivers::ReplayOptions options;
   options.paced = false;
   options.loop = true;
-  auto source = drivers::make_replay_source("test", samples, options);
+  return drivers::make_replay_source(name, samples, options);
+}
+
+TEST(ReplaySource, LoopKeepsTimeIncreasingAndStopIsPrompt) {
+  const auto samples = test::synthetic_samples(10);
+  auto source = fast_loop_source("test", samples);
   SampleQueue queue(8);
   ASSERT_EQ(source->start(queue, 0), "");
   std::array<std::int64_t, kRoleCount> last{INT64_MIN, INT64_MIN, INT64_MIN};
@@ -744,10 +749,7 @@ TEST(ReplaySource, PacedJumpForwardIsReplayedAsAGapAndReported) {
 TEST(ReplaySource, FastLoopNearTheTimeLimitNeverOverflows) {
   const std::int64_t t0 = limits::kMaxAbsTimeNs - 200'000'000;  // 0.2 s before the limit
   const auto samples = test::synthetic_samples(10, 90.0, t0);
-  drivers::ReplayOptions options;
-  options.paced = false;
-  options.loop = true;
-  auto source = drivers::make_replay_source("edge", samples, options);
+  auto source = fast_loop_source("edge", samples);
   SampleQueue queue(64);
   ASSERT_EQ(source->start(queue, 0), "");
   SourceSample s;
