@@ -1,7 +1,7 @@
 // Fuzz targets of the SlimeVR bridges' decoders (issue 17): the driver protocol's frames and
 // ProtobufMessages (drivers/slimevr_bridge.h), and SolarXR MessageBundles
 // (daemon/solarxr.h). Shared by the brief fixed-seed run in `make test` (brief_fuzz_test.cpp)
-// and the libFuzzer executables (fuzz_bridge_main.cpp; make fuzz). A broken promise aborts.
+// and the libFuzzer executables (fuzz_main.cpp; make fuzz). A broken promise aborts.
 #pragma once
 
 #include "bodyd/daemon/solarxr.h"
