@@ -1,18 +1,24 @@
 // Internal: the float building blocks the Eigen networks share (network.cpp, tcn.cpp): tensors to
-// Eigen, SiLU and LayerNorm exactly as PyTorch computes them (docs/model-file.md).
+// Eigen, their layers' tensor lists and loading, SiLU and LayerNorm exactly as PyTorch computes
+// them (docs/model-file.md), the input encoder and linear layers, the step-embedding table and the
+// checks of forward(). Each network calls these in its own order; the arithmetic is theirs.
 #pragma once
 
+#include "bodyd/base/require.h"
+#include "bodyd/inference/denoiser.h"
+#include "bodyd/inference/eigen_denoiser.h"
 #include "bodyd/inference/model_file.h"
 
 #include <Eigen/Core>
 
 #include <cmath>
+#include <cstdint>
+#include <span>
+#include <string>
 
 namespace bodyd::inference::detail {
 
 inline constexpr float kLayerNormEps = 1e-5f;
-
-using RowMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
 inline RowMatrix to_matrix(const TensorF32& t) {
   const auto rows = static_cast<Eigen::Index>(t.shape.at(0));
@@ -40,6 +46,73 @@ void layer_norm(const Eigen::MatrixBase<In>& in, const Eigen::VectorXf& gamma, c
     const float rstd = 1.0f / std::sqrt(var + kLayerNormEps);
     out.col(c).array() = (in.col(c).array() - mean) * rstd * gamma.array() + beta.array();
   }
+}
+
+// Tensor lists (Architecture::tensors): a Linear's weight [out, in] and bias [out]; a LayerNorm's
+// weight and bias [n].
+inline void add_linear(TensorShapes& v, const std::string& name, std::int64_t in, std::int64_t out) {
+  v.emplace_back(name + ".weight", std::vector<std::int64_t>{out, in});
+  v.emplace_back(name + ".bias", std::vector<std::int64_t>{out});
+}
+inline void add_layer_norm(TensorShapes& v, const std::string& name, std::int64_t n) {
+  v.emplace_back(name + ".weight", std::vector<std::int64_t>{n});
+  v.emplace_back(name + ".bias", std::vector<std::int64_t>{n});
+}
+
+inline Linear load_linear(const Model& model, const std::string& name) {
+  return Linear{to_matrix(model.tensor(name + ".weight")), to_vector(model.tensor(name + ".bias"))};
+}
+inline LayerNorm load_layer_norm(const Model& model, const std::string& name) {
+  return LayerNorm{to_vector(model.tensor(name + ".weight")), to_vector(model.tensor(name + ".bias"))};
+}
+// A Linear over [u; v], u of `u_size` rows.
+inline SplitLinear load_split_linear(const Model& model, const std::string& name, Eigen::Index u_size) {
+  const RowMatrix w = to_matrix(model.tensor(name + ".weight"));
+  return SplitLinear{w.leftCols(u_size), w.rightCols(w.cols() - u_size), to_vector(model.tensor(name + ".bias"))};
+}
+
+// out = layer.weight * in + layer.bias, column by column.
+template <typename In, typename Out>
+void linear(const Linear& layer, const Eigen::MatrixBase<In>& in, Eigen::MatrixBase<Out>& out) {
+  out.noalias() = layer.weight * in;
+  out.colwise() += layer.bias;
+}
+
+// out = SiLU(layer [u; v] + bias), column by column (the encoders: u = x, v = m).
+template <typename U, typename V, typename Out>
+void split_linear_silu(const SplitLinear& layer, const Eigen::MatrixBase<U>& u, const Eigen::MatrixBase<V>& v,
+                       Eigen::MatrixBase<Out>& out) {
+  out.noalias() = layer.u * u;
+  out.noalias() += layer.v * v;
+  out.colwise() += layer.bias;
+  silu_inplace(out);
+}
+
+// Column t (t in [0, T)): time2(SiLU(time1(sinusoid_TE(t)))), plus `added` when given, evaluated in
+// double and then rounded to float (network.cpp).
+[[nodiscard]] Eigen::MatrixXf time_table(const Linear& time1, const Linear& time2, int TE, int T,
+                                         const Eigen::VectorXf* added);
+
+// The requirements of every forward() (a bug if broken: abort with a message) on windows of W * D
+// floats at a step in [0, T), for a scratch of `max_batch`; returns the batch.
+inline Eigen::Index checked_batch(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+                                  int W, int D, int T, int max_batch) {
+  const std::size_t window = static_cast<std::size_t>(W) * static_cast<std::size_t>(D);
+  BODYD_REQUIRE(window > 0 && x.size() % window == 0, "x must hold whole windows of W * D floats");
+  const auto batch = static_cast<Eigen::Index>(x.size() / window);
+  BODYD_REQUIRE(batch >= 1 && batch <= max_batch, "batch must be in [1, scratch.max_batch()]");
+  BODYD_REQUIRE(m.size() == x.size() && out.size() == x.size(), "x, m and out must have the same size");
+  BODYD_REQUIRE(t >= 0 && t < T, "t must be in [0, T)");
+  BODYD_REQUIRE(out.data() != x.data() && out.data() != m.data(), "out may not alias x or m");
+  return batch;
+}
+
+// The Denoiser entry point's scratch as the network's own type (another is a bug: abort with `what`).
+template <typename Scratch>
+Scratch& scratch_as(DenoiserScratch& scratch, const char* what) {
+  auto* s = dynamic_cast<Scratch*>(&scratch);
+  BODYD_REQUIRE(s != nullptr, what);
+  return *s;
 }
 
 }  // namespace bodyd::inference::detail

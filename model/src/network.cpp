@@ -16,11 +16,12 @@
 
 namespace bodyd::inference {
 
+using detail::add_layer_norm;
+using detail::add_linear;
 using detail::layer_norm;
-using detail::RowMatrix;
+using detail::load_layer_norm;
+using detail::load_linear;
 using detail::silu_inplace;
-using detail::to_matrix;
-using detail::to_vector;
 
 void timestep_embedding(int t, std::span<double> out) {
   const std::size_t half = out.size() / 2;
@@ -39,78 +40,64 @@ ModelConfig MlpWinConfig::to_model_config() const {
   return ModelConfig{{"W", W}, {"D", D}, {"E", E}, {"H", H}, {"L", L}, {"TE", TE}, {"T", T}};
 }
 
+Eigen::MatrixXf detail::time_table(const Linear& time1, const Linear& time2, int TE, int T,
+                                   const Eigen::VectorXf* added) {
+  Eigen::MatrixXf table(time2.bias.size(), T);
+  std::vector<double> emb(static_cast<std::size_t>(TE));
+  for (int t = 0; t < T; ++t) {
+    timestep_embedding(t, emb);
+    const Eigen::VectorXd s = Eigen::Map<const Eigen::VectorXd>(emb.data(), TE);
+    Eigen::VectorXd a = time1.weight.cast<double>() * s + time1.bias.cast<double>();
+    a.array() = a.array() / (1.0 + (-a.array()).exp());
+    const Eigen::VectorXd temb = time2.weight.cast<double>() * a + time2.bias.cast<double>();
+    if (added != nullptr)
+      table.col(t) = (temb + added->cast<double>()).cast<float>();
+    else
+      table.col(t) = temb.cast<float>();
+  }
+  return table;
+}
+
 TensorShapes Network::tensors(const ModelConfig& config) {
-  using Shape = std::vector<std::int64_t>;
   const MlpWinConfig c = MlpWinConfig::from(config);
   TensorShapes v;
   // In 64 bits: config values are at most 2^16, so products like W * E cannot overflow.
   const std::int64_t W = c.W, D = c.D, E = c.E, H = c.H, TE = c.TE;
-  auto linear = [&](const std::string& name, std::int64_t in, std::int64_t out) {
-    v.emplace_back(name + ".weight", Shape{out, in});
-    v.emplace_back(name + ".bias", Shape{out});
-  };
-  auto norm = [&](const std::string& name, std::int64_t n) {
-    v.emplace_back(name + ".weight", Shape{n});
-    v.emplace_back(name + ".bias", Shape{n});
-  };
-  linear("enc", 2 * D, E);
-  linear("inp", W * E, H);
-  linear("time1", TE, H);
-  linear("time2", H, H);
+  add_linear(v, "enc", 2 * D, E);
+  add_linear(v, "inp", W * E, H);
+  add_linear(v, "time1", TE, H);
+  add_linear(v, "time2", H, H);
   for (int b = 0; b < c.L; ++b) {
     const std::string p = "blocks." + std::to_string(b) + ".";
-    norm(p + "norm", H);
-    linear(p + "fc1", H, H);
-    linear(p + "fc2", H, H);
+    add_layer_norm(v, p + "norm", H);
+    add_linear(v, p + "fc1", H, H);
+    add_linear(v, p + "fc2", H, H);
   }
-  norm("out_norm", H);
-  linear("out", H, W * E);
-  linear("dec1", 2 * E, E);
-  linear("dec2", E, D);
+  add_layer_norm(v, "out_norm", H);
+  add_linear(v, "out", H, W * E);
+  add_linear(v, "dec1", 2 * E, E);
+  add_linear(v, "dec2", E, D);
   return v;
 }
 
 std::shared_ptr<const Denoiser> Network::make(const Model& model) { return std::make_shared<const Network>(model); }
 
-Network::Network(const Model& model)
-    : config_(MlpWinConfig::from(model.config)), alpha_bar_(model.alpha_bar), norm_mean_(model.norm_mean), norm_std_(model.norm_std) {
+Network::Network(const Model& model) : EigenDenoiser(model) {
   const MlpWinConfig& c = config_;
-  const auto linear = [&](const std::string& name) {
-    return Linear{to_matrix(model.tensor(name + ".weight")), to_vector(model.tensor(name + ".bias"))};
-  };
-  const auto norm = [&](const std::string& name) {
-    return LayerNorm{to_vector(model.tensor(name + ".weight")), to_vector(model.tensor(name + ".bias"))};
-  };
-  const RowMatrix enc = to_matrix(model.tensor("enc.weight"));
-  enc_x_ = enc.leftCols(c.D);
-  enc_m_ = enc.rightCols(c.D);
-  enc_b_ = to_vector(model.tensor("enc.bias"));
-  inp_ = linear("inp");
+  enc_ = detail::load_split_linear(model, "enc", c.D);
+  inp_ = load_linear(model, "inp");
   for (int b = 0; b < c.L; ++b) {
     const std::string p = "blocks." + std::to_string(b) + ".";
-    blocks_.push_back(Block{norm(p + "norm"), linear(p + "fc1"), linear(p + "fc2")});
+    blocks_.push_back(Block{load_layer_norm(model, p + "norm"), load_linear(model, p + "fc1"), load_linear(model, p + "fc2")});
   }
-  out_norm_ = norm("out_norm");
-  out_ = linear("out");
-  const RowMatrix dec1 = to_matrix(model.tensor("dec1.weight"));
-  dec1_z_ = dec1.leftCols(c.E);
-  dec1_e_ = dec1.rightCols(c.E);
-  dec1_b_ = to_vector(model.tensor("dec1.bias"));
-  dec2_ = linear("dec2");
+  out_norm_ = load_layer_norm(model, "out_norm");
+  out_ = load_linear(model, "out");
+  dec1_ = detail::load_split_linear(model, "dec1", c.E);
+  dec2_ = load_linear(model, "dec2");
 
-  // The time MLP depends on t alone: evaluate it once per step here (in double, then rounded).
-  const Linear time1 = linear("time1");
-  const Linear time2 = linear("time2");
-  time_table_.resize(c.H, c.T);
-  std::vector<double> emb(static_cast<std::size_t>(c.TE));
-  for (int t = 0; t < c.T; ++t) {
-    timestep_embedding(t, emb);
-    const Eigen::VectorXd s = Eigen::Map<const Eigen::VectorXd>(emb.data(), c.TE);
-    Eigen::VectorXd a = time1.weight.cast<double>() * s + time1.bias.cast<double>();
-    a.array() = a.array() / (1.0 + (-a.array()).exp());
-    const Eigen::VectorXd temb = time2.weight.cast<double>() * a + time2.bias.cast<double>();
-    time_table_.col(t) = (temb + inp_.bias.cast<double>()).cast<float>();
-  }
+  // The time MLP depends on t alone: evaluate it once per step here (in double, then rounded),
+  // with inp.bias folded in.
+  time_table_ = detail::time_table(load_linear(model, "time1"), load_linear(model, "time2"), c.TE, c.T, &inp_.bias);
 }
 
 NetworkScratch::NetworkScratch(const Network& network, int max_batch) : config_(network.config()), max_batch_(max_batch) {
@@ -130,23 +117,17 @@ std::unique_ptr<DenoiserScratch> Network::make_scratch(int max_batch) const {
 
 void Network::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                       DenoiserScratch& scratch) const {
-  auto* s = dynamic_cast<NetworkScratch*>(&scratch);
-  BODYD_REQUIRE(s != nullptr, "Network::forward needs a NetworkScratch (made by Network::make_scratch)");
-  forward(x, m, t, out, *s);
+  forward(x, m, t, out,
+          detail::scratch_as<NetworkScratch>(scratch,
+                                             "Network::forward needs a NetworkScratch (made by Network::make_scratch)"));
 }
 
 void Network::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                       NetworkScratch& s) const {
   const MlpWinConfig& c = config_;
-  const std::size_t window = static_cast<std::size_t>(c.W) * static_cast<std::size_t>(c.D);
   BODYD_REQUIRE(s.config_.W == c.W && s.config_.D == c.D && s.config_.E == c.E && s.config_.H == c.H,
                     "NetworkScratch was made for another network");
-  BODYD_REQUIRE(window > 0 && x.size() % window == 0, "x must hold whole windows of W * D floats");
-  const auto batch = static_cast<Eigen::Index>(x.size() / window);
-  BODYD_REQUIRE(batch >= 1 && batch <= s.max_batch_, "batch must be in [1, scratch.max_batch()]");
-  BODYD_REQUIRE(m.size() == x.size() && out.size() == x.size(), "x, m and out must have the same size");
-  BODYD_REQUIRE(t >= 0 && t < c.T, "t must be in [0, T)");
-  BODYD_REQUIRE(out.data() != x.data() && out.data() != m.data(), "out may not alias x or m");
+  const Eigen::Index batch = detail::checked_batch(x, m, t, out, c.W, c.D, c.T, s.max_batch_);
 
   const Eigen::Index frames = c.W * batch;
   const Eigen::Map<const Eigen::MatrixXf> X(x.data(), c.D, frames);
@@ -158,10 +139,7 @@ void Network::forward(std::span<const float> x, std::span<const float> m, int t,
   auto d = s.d_.leftCols(frames);
 
   // 1. e_w = SiLU(enc [x_w; m_w] + b), all frames at once.
-  e.noalias() = enc_x_ * X;
-  e.noalias() += enc_m_ * M;
-  e.colwise() += enc_b_;
-  silu_inplace(e);
+  detail::split_linear_silu(enc_, X, M, e);
 
   // 2-3. h = inp concat(e_w) + inp.bias + temb(t). A window's e columns are contiguous, so the
   // concatenation is a reshape: (E x W) column-major == (W * E) vector, frame-major.
@@ -194,12 +172,8 @@ void Network::forward(std::span<const float> x, std::span<const float> m, int t,
 
   // 6. y_w = dec2(SiLU(dec1 [z_w; e_w])); z viewed as E x (W * batch), frame-major like e.
   Eigen::Map<const Eigen::MatrixXf> Z(s.z_.data(), c.E, frames);
-  d.noalias() = dec1_z_ * Z;
-  d.noalias() += dec1_e_ * e;
-  d.colwise() += dec1_b_;
-  silu_inplace(d);
-  Y.noalias() = dec2_.weight * d;
-  Y.colwise() += dec2_.bias;
+  detail::split_linear_silu(dec1_, Z, e, d);
+  detail::linear(dec2_, d, Y);
 }
 
 }  // namespace bodyd::inference

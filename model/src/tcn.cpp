@@ -6,17 +6,18 @@
 #include "bodyd/inference/tcn.h"
 
 #include "bodyd/base/require.h"
-#include "bodyd/inference/network.h"  // timestep_embedding
 #include "eigen_ops.h"
 
 #include <string>
 
 namespace bodyd::inference {
 
+using detail::add_layer_norm;
+using detail::add_linear;
 using detail::layer_norm;
+using detail::load_layer_norm;
+using detail::load_linear;
 using detail::silu_inplace;
-using detail::to_matrix;
-using detail::to_vector;
 
 TcnConfig TcnConfig::from(const ModelConfig& c) {
   return TcnConfig{c.at("W"), c.at("D"), c.at("C"), c.at("K"), c.at("L"), c.at("R"), c.at("TE"), c.at("T")};
@@ -37,52 +38,31 @@ TensorShapes Tcn::tensors(const ModelConfig& config) {
   const TcnConfig c = TcnConfig::from(config);
   TensorShapes v;
   const std::int64_t D = c.D, C = c.C, K = c.K, TE = c.TE;
-  auto linear = [&](const std::string& name, std::int64_t in, std::int64_t out) {
-    v.emplace_back(name + ".weight", Shape{out, in});
-    v.emplace_back(name + ".bias", Shape{out});
-  };
-  auto norm = [&](const std::string& name) {
-    v.emplace_back(name + ".weight", Shape{C});
-    v.emplace_back(name + ".bias", Shape{C});
-  };
-  linear("enc", 2 * D, C);
-  linear("time1", TE, C);
-  linear("time2", C, C);
+  add_linear(v, "enc", 2 * D, C);
+  add_linear(v, "time1", TE, C);
+  add_linear(v, "time2", C, C);
   for (int b = 0; b < c.L; ++b) {
     const std::string p = "blocks." + std::to_string(b) + ".";
-    norm(p + "norm");
+    add_layer_norm(v, p + "norm", C);
     v.emplace_back(p + "conv.weight", Shape{C, C, K});
     v.emplace_back(p + "conv.bias", Shape{C});
-    linear(p + "fc", C, C);
+    add_linear(v, p + "fc", C, C);
   }
-  norm("out_norm");
-  linear("dec1", C, C);
-  linear("dec2", C, D);
+  add_layer_norm(v, "out_norm", C);
+  add_linear(v, "dec1", C, C);
+  add_linear(v, "dec2", C, D);
   return v;
 }
 
 std::shared_ptr<const Denoiser> Tcn::make(const Model& model) { return std::make_shared<const Tcn>(model); }
 
-Tcn::Tcn(const Model& model)
-    : config_(TcnConfig::from(model.config)),
-      alpha_bar_(model.alpha_bar),
-      norm_mean_(model.norm_mean),
-      norm_std_(model.norm_std) {
+Tcn::Tcn(const Model& model) : EigenDenoiser(model) {
   const TcnConfig& c = config_;
-  const auto linear = [&](const std::string& name) {
-    return Linear{to_matrix(model.tensor(name + ".weight")), to_vector(model.tensor(name + ".bias"))};
-  };
-  const auto norm = [&](const std::string& name) {
-    return LayerNorm{to_vector(model.tensor(name + ".weight")), to_vector(model.tensor(name + ".bias"))};
-  };
-  const RowMatrix enc = to_matrix(model.tensor("enc.weight"));
-  enc_x_ = enc.leftCols(c.D);
-  enc_m_ = enc.rightCols(c.D);
-  enc_b_ = to_vector(model.tensor("enc.bias"));
+  enc_ = detail::load_split_linear(model, "enc", c.D);
   for (int b = 0; b < c.L; ++b) {
     const std::string p = "blocks." + std::to_string(b) + ".";
     Block blk;
-    blk.norm = norm(p + "norm");
+    blk.norm = load_layer_norm(model, p + "norm");
     // PyTorch's Conv1d weight [out, in, K]: tap k of output o and input i at (o * C + i) * K + k.
     const TensorF32& w = model.tensor(p + "conv.weight");
     blk.taps.assign(static_cast<std::size_t>(c.K), RowMatrix(c.C, c.C));
@@ -93,27 +73,17 @@ Tcn::Tcn(const Model& model)
               w.data[(static_cast<std::size_t>(o) * static_cast<std::size_t>(c.C) + static_cast<std::size_t>(i)) *
                          static_cast<std::size_t>(c.K) +
                      static_cast<std::size_t>(k)];
-    blk.conv_bias = to_vector(model.tensor(p + "conv.bias"));
-    blk.fc = linear(p + "fc");
+    blk.conv_bias = detail::to_vector(model.tensor(p + "conv.bias"));
+    blk.fc = load_linear(model, p + "fc");
     blk.dilation = c.dilation(b);
     blocks_.push_back(std::move(blk));
   }
-  out_norm_ = norm("out_norm");
-  dec1_ = linear("dec1");
-  dec2_ = linear("dec2");
+  out_norm_ = load_layer_norm(model, "out_norm");
+  dec1_ = load_linear(model, "dec1");
+  dec2_ = load_linear(model, "dec2");
 
   // The time MLP depends on t alone: evaluated once per step here (in double, then rounded).
-  const Linear time1 = linear("time1");
-  const Linear time2 = linear("time2");
-  time_table_.resize(c.C, c.T);
-  std::vector<double> emb(static_cast<std::size_t>(c.TE));
-  for (int t = 0; t < c.T; ++t) {
-    timestep_embedding(t, emb);
-    const Eigen::VectorXd s = Eigen::Map<const Eigen::VectorXd>(emb.data(), c.TE);
-    Eigen::VectorXd a = time1.weight.cast<double>() * s + time1.bias.cast<double>();
-    a.array() = a.array() / (1.0 + (-a.array()).exp());
-    time_table_.col(t) = (time2.weight.cast<double>() * a + time2.bias.cast<double>()).cast<float>();
-  }
+  time_table_ = detail::time_table(load_linear(model, "time1"), load_linear(model, "time2"), c.TE, c.T, nullptr);
 }
 
 TcnScratch::TcnScratch(const Tcn& network, int max_batch) : config_(network.config()), max_batch_(max_batch) {
@@ -131,22 +101,14 @@ std::unique_ptr<DenoiserScratch> Tcn::make_scratch(int max_batch) const {
 
 void Tcn::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                   DenoiserScratch& scratch) const {
-  auto* s = dynamic_cast<TcnScratch*>(&scratch);
-  BODYD_REQUIRE(s != nullptr, "Tcn::forward needs a TcnScratch (made by Tcn::make_scratch)");
-  forward(x, m, t, out, *s);
+  forward(x, m, t, out, detail::scratch_as<TcnScratch>(scratch, "Tcn::forward needs a TcnScratch (made by Tcn::make_scratch)"));
 }
 
 void Tcn::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                   TcnScratch& s) const {
   const TcnConfig& c = config_;
-  const std::size_t window = static_cast<std::size_t>(c.W) * static_cast<std::size_t>(c.D);
   BODYD_REQUIRE(s.config_.W == c.W && s.config_.D == c.D && s.config_.C == c.C, "TcnScratch was made for another network");
-  BODYD_REQUIRE(window > 0 && x.size() % window == 0, "x must hold whole windows of W * D floats");
-  const auto batch = static_cast<Eigen::Index>(x.size() / window);
-  BODYD_REQUIRE(batch >= 1 && batch <= s.max_batch_, "batch must be in [1, scratch.max_batch()]");
-  BODYD_REQUIRE(m.size() == x.size() && out.size() == x.size(), "x, m and out must have the same size");
-  BODYD_REQUIRE(t >= 0 && t < c.T, "t must be in [0, T)");
-  BODYD_REQUIRE(out.data() != x.data() && out.data() != m.data(), "out may not alias x or m");
+  const Eigen::Index batch = detail::checked_batch(x, m, t, out, c.W, c.D, c.T, s.max_batch_);
 
   const Eigen::Index W = c.W;
   const Eigen::Index frames = W * batch;
@@ -159,10 +121,7 @@ void Tcn::forward(std::span<const float> x, std::span<const float> m, int t, std
   auto d = s.d_.leftCols(frames);
 
   // h_w = SiLU(enc [x_w; m_w] + b) + temb(t).
-  h.noalias() = enc_x_ * X;
-  h.noalias() += enc_m_ * M;
-  h.colwise() += enc_b_;
-  silu_inplace(h);
+  detail::split_linear_silu(enc_, X, M, h);
   h.colwise() += time_table_.col(t);
 
   for (const Block& blk : blocks_) {
@@ -185,11 +144,9 @@ void Tcn::forward(std::span<const float> x, std::span<const float> m, int t, std
   // y_w = dec2(SiLU(dec1(SiLU(LayerNorm_out(h_w))))).
   layer_norm(h, out_norm_.weight, out_norm_.bias, n);
   silu_inplace(n);
-  d.noalias() = dec1_.weight * n;
-  d.colwise() += dec1_.bias;
+  detail::linear(dec1_, n, d);
   silu_inplace(d);
-  Y.noalias() = dec2_.weight * d;
-  Y.colwise() += dec2_.bias;
+  detail::linear(dec2_, d, Y);
 }
 
 std::unique_ptr<DenoiserStream> Tcn::make_stream(int t) const { return std::make_unique<TcnStream>(*this, t); }
@@ -222,10 +179,7 @@ void TcnStream::push(std::span<const float> x, std::span<const float> m, std::sp
   const Eigen::Map<const Eigen::VectorXf> M(m.data(), c.D);
   Eigen::Map<Eigen::VectorXf> Y(out.data(), c.D);
 
-  h_.noalias() = net.enc_x_ * X;
-  h_.noalias() += net.enc_m_ * M;
-  h_ += net.enc_b_;
-  silu_inplace(h_);
+  detail::split_linear_silu(net.enc_, X, M, h_);
   h_ += net.time_table_.col(t_);
 
   for (std::size_t b = 0; b < net.blocks_.size(); ++b) {
@@ -248,11 +202,9 @@ void TcnStream::push(std::span<const float> x, std::span<const float> m, std::sp
 
   layer_norm(h_, net.out_norm_.weight, net.out_norm_.bias, n_);
   silu_inplace(n_);
-  d_.noalias() = net.dec1_.weight * n_;
-  d_ += net.dec1_.bias;
+  detail::linear(net.dec1_, n_, d_);
   silu_inplace(d_);
-  Y.noalias() = net.dec2_.weight * d_;
-  Y += net.dec2_.bias;
+  detail::linear(net.dec2_, d_, Y);
 }
 
 }  // namespace bodyd::inference

@@ -21,13 +21,6 @@ constexpr double kParityTolerance = 1e-4;
 // Float forward against the double reference.
 constexpr double kReferenceTolerance = 5e-6;
 
-std::vector<float> random_window(std::mt19937& rng, std::size_t n, bool mask) {
-  std::normal_distribution<float> normal(0.0f, 1.0f);
-  std::vector<float> v(n);
-  for (float& x : v) x = mask ? static_cast<float>(rng() % 3 == 0) : normal(rng);
-  return v;
-}
-
 TEST(Network, MatchesPyTorchOnTheFixture) {
   const auto model = inference::load_model(tiny_model_path());
   const auto io = inference::read_tensor_file(tiny_io_path());

@@ -20,19 +20,9 @@ using inference::TcnStream;
 
 constexpr double kParityTolerance = 1e-4;
 
-inline std::filesystem::path tiny_tcn_path() { return fixtures() / "tiny_tcn.safetensors"; }
-inline std::filesystem::path tiny_tcn_io_path() { return fixtures() / "tiny_tcn_io.safetensors"; }
-
 std::shared_ptr<const Tcn> tiny_tcn() {
   const auto model = inference::load_model(tiny_tcn_path());
   return std::make_shared<const Tcn>(*model);
-}
-
-std::vector<float> random_frames(std::mt19937& rng, std::size_t n, bool mask) {
-  std::normal_distribution<float> normal(0.0f, 1.0f);
-  std::vector<float> v(n);
-  for (float& x : v) x = mask ? static_cast<float>(rng() % 3 == 0) : normal(rng);
-  return v;
 }
 
 TEST(Tcn, TheTableHasItsRowAndTheFixtureLoads) {
@@ -96,8 +86,8 @@ TEST(Tcn, OutputsDependOnlyOnTheFrameAndEarlierOnes) {
   TcnScratch s(*net);
   std::mt19937 rng(4);
   const std::size_t D = 191, W = 10, n = W * D;
-  auto x = random_frames(rng, n, false);
-  const auto m = random_frames(rng, n, true);
+  auto x = random_window(rng, n, false);
+  const auto m = random_window(rng, n, true);
   std::vector<float> a(n), b(n);
   net->forward(x, m, 5, a, s);
   for (std::size_t d = 0; d < D; ++d) x[6 * D + d] += 1.0f;  // frame 6 changes
@@ -111,8 +101,8 @@ TEST(Tcn, BatchOfTwoEqualsTwoSingles) {
   TcnScratch single(*net, 1), pair(*net, 2);
   std::mt19937 rng(8);
   const std::size_t n = static_cast<std::size_t>(net->window_size());
-  const auto x = random_frames(rng, 2 * n, false);
-  const auto m = random_frames(rng, 2 * n, true);
+  const auto x = random_window(rng, 2 * n, false);
+  const auto m = random_window(rng, 2 * n, true);
   std::vector<float> out2(2 * n), a(n), b(n);
   net->forward(x, m, 2, out2, pair);
   net->forward(std::span(x).first(n), std::span(m).first(n), 2, a, single);
@@ -128,8 +118,8 @@ TEST(Tcn, StreamingEqualsFullRecomputation) {
   std::mt19937 rng(6);
   // A stream of 37 frames, 4 times W.
   const std::size_t frames = 37;
-  const auto x = random_frames(rng, frames * D, false);
-  const auto m = random_frames(rng, frames * D, true);
+  const auto x = random_window(rng, frames * D, false);
+  const auto m = random_window(rng, frames * D, true);
   for (int t : {0, 9}) {
     TcnStream stream(*net, t);
     std::vector<std::vector<float>> streamed(frames, std::vector<float>(D));

@@ -1,4 +1,4 @@
-// Helpers shared by the inference_engine tests.
+// Helpers shared by the tests of tests/model.
 #pragma once
 
 #include "bodyd/inference/denoiser.h"
@@ -19,6 +19,16 @@ namespace bodyd::test {
 
 inline std::filesystem::path tiny_model_path() { return fixtures() / "tiny_model.safetensors"; }
 inline std::filesystem::path tiny_io_path() { return fixtures() / "tiny_model_io.safetensors"; }
+inline std::filesystem::path tiny_tcn_path() { return fixtures() / "tiny_tcn.safetensors"; }
+inline std::filesystem::path tiny_tcn_io_path() { return fixtures() / "tiny_tcn_io.safetensors"; }
+
+// n random floats: a mask (1 with probability 1/3, else 0) or standard normal values.
+inline std::vector<float> random_window(std::mt19937& rng, std::size_t n, bool mask) {
+  std::normal_distribution<float> normal(0.0f, 1.0f);
+  std::vector<float> v(n);
+  for (float& x : v) x = mask ? static_cast<float>(rng() % 3 == 0) : normal(rng);
+  return v;
+}
 
 // The parity metric: max |a - b| / max(1e-6, max |b|), b the reference.
 template <typename A, typename B>

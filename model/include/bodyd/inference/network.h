@@ -12,6 +12,7 @@
 #pragma once
 
 #include "bodyd/inference/denoiser.h"
+#include "bodyd/inference/eigen_denoiser.h"
 #include "bodyd/inference/model_file.h"
 
 #include <Eigen/Core>
@@ -43,7 +44,7 @@ struct MlpWinConfig {
 class NetworkScratch;
 
 // The Denoiser of architecture "mlpwin-v1" (denoiser.h).
-class Network final : public Denoiser {
+class Network final : public detail::EigenDenoiser<MlpWinConfig> {
  public:
   // Copies the weights out of a checked model and precomputes the time embedding of every step.
   explicit Network(const Model& model);
@@ -62,16 +63,8 @@ class Network final : public Denoiser {
   [[nodiscard]] static TensorShapes tensors(const ModelConfig& config);
   [[nodiscard]] static std::shared_ptr<const Denoiser> make(const Model& model);
 
+  // config(), frames(), dim(), steps(), alpha_bar(), norm_mean(), norm_std(): EigenDenoiser.
   [[nodiscard]] std::string_view architecture() const override { return kArchitectureMlpWin; }
-  [[nodiscard]] const MlpWinConfig& config() const { return config_; }
-  [[nodiscard]] int frames() const override { return config_.W; }
-  [[nodiscard]] int dim() const override { return config_.D; }
-  [[nodiscard]] int steps() const override { return config_.T; }
-  // diffusion.alpha_bar[t], t in [0, T).
-  [[nodiscard]] std::span<const float> alpha_bar() const override { return alpha_bar_; }
-  // Feature normalisation (D each): the network works on (f - mean) / std.
-  [[nodiscard]] std::span<const float> norm_mean() const override { return norm_mean_; }
-  [[nodiscard]] std::span<const float> norm_std() const override { return norm_std_; }
   [[nodiscard]] std::unique_ptr<DenoiserScratch> make_scratch(int max_batch) const override;
 
   // Evaluates `batch` windows at the same step t. x, m: batch * W * D floats (window after
@@ -86,35 +79,21 @@ class Network final : public Denoiser {
                DenoiserScratch& scratch) const override;
 
  private:
-  using RowMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-  struct Linear {
-    RowMatrix weight;         // out x in, as in PyTorch
-    Eigen::VectorXf bias;     // out
-  };
-  struct LayerNorm {
-    Eigen::VectorXf weight;
-    Eigen::VectorXf bias;
-  };
+  using Linear = detail::Linear;
+  using LayerNorm = detail::LayerNorm;
   struct Block {
     LayerNorm norm;
     Linear fc1, fc2;
   };
 
-  MlpWinConfig config_;
-  std::vector<float> alpha_bar_, norm_mean_, norm_std_;
-  // enc.weight split into the columns that multiply x and those that multiply m, so the
-  // concatenation [x_w; m_w] never has to be built.
-  RowMatrix enc_x_, enc_m_;
-  Eigen::VectorXf enc_b_;
+  detail::SplitLinear enc_;  // enc.weight's columns for x_w and for m_w
   Linear inp_;
   // Column t: time2(SiLU(time1(sinusoid(t)))) + inp.bias (depends on t only), H x T.
   Eigen::MatrixXf time_table_;
   std::vector<Block> blocks_;
   LayerNorm out_norm_;
   Linear out_;
-  // dec1.weight split into the columns for z_w and for e_w.
-  RowMatrix dec1_z_, dec1_e_;
-  Eigen::VectorXf dec1_b_;
+  detail::SplitLinear dec1_;  // dec1.weight's columns for z_w and for e_w
   Linear dec2_;
 };
 

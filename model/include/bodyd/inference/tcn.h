@@ -14,6 +14,7 @@
 #pragma once
 
 #include "bodyd/inference/denoiser.h"
+#include "bodyd/inference/eigen_denoiser.h"
 #include "bodyd/inference/model_file.h"
 
 #include <Eigen/Core>
@@ -48,7 +49,7 @@ struct TcnConfig {
 class TcnScratch;
 class TcnStream;
 
-class Tcn final : public Denoiser {
+class Tcn final : public detail::EigenDenoiser<TcnConfig> {
  public:
   // The architecture table's row (denoiser.h).
   static constexpr std::array<ConfigField, 8> kConfigFields = {{
@@ -66,14 +67,8 @@ class Tcn final : public Denoiser {
 
   explicit Tcn(const Model& model);
 
+  // config(), frames(), dim(), steps(), alpha_bar(), norm_mean(), norm_std(): EigenDenoiser.
   [[nodiscard]] std::string_view architecture() const override { return kArchitectureTcn; }
-  [[nodiscard]] const TcnConfig& config() const { return config_; }
-  [[nodiscard]] int frames() const override { return config_.W; }
-  [[nodiscard]] int dim() const override { return config_.D; }
-  [[nodiscard]] int steps() const override { return config_.T; }
-  [[nodiscard]] std::span<const float> alpha_bar() const override { return alpha_bar_; }
-  [[nodiscard]] std::span<const float> norm_mean() const override { return norm_mean_; }
-  [[nodiscard]] std::span<const float> norm_std() const override { return norm_std_; }
   [[nodiscard]] std::unique_ptr<DenoiserScratch> make_scratch(int max_batch) const override;
   // A TcnStream at step t.
   [[nodiscard]] std::unique_ptr<DenoiserStream> make_stream(int t) const override;
@@ -89,14 +84,9 @@ class Tcn final : public Denoiser {
  private:
   friend class TcnScratch;
   friend class TcnStream;
-  using RowMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-  struct Linear {
-    RowMatrix weight;  // out x in
-    Eigen::VectorXf bias;
-  };
-  struct LayerNorm {
-    Eigen::VectorXf weight, bias;
-  };
+  using RowMatrix = detail::RowMatrix;
+  using Linear = detail::Linear;
+  using LayerNorm = detail::LayerNorm;
   struct Block {
     LayerNorm norm;
     std::vector<RowMatrix> taps;  // K matrices C x C: tap k multiplies frame w - (K-1-k) * dilation
@@ -105,10 +95,7 @@ class Tcn final : public Denoiser {
     int dilation = 1;
   };
 
-  TcnConfig config_;
-  std::vector<float> alpha_bar_, norm_mean_, norm_std_;
-  RowMatrix enc_x_, enc_m_;  // enc.weight's columns for x and for m
-  Eigen::VectorXf enc_b_;
+  detail::SplitLinear enc_;  // enc.weight's columns for x_w and for m_w
   Eigen::MatrixXf time_table_;  // C x T: time2(SiLU(time1(sinusoid(t)))), column t
   std::vector<Block> blocks_;
   LayerNorm out_norm_;
