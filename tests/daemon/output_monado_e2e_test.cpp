@@ -47,24 +47,30 @@ const std::tuple<int, int, const char*> kTrackers[] = {{1, 5, "Hips"},       {2,
                                                        {4, 3, "Chest"},      {5, 8, "LowerLeg_L"},  {6, 9, "LowerLeg_R"},
                                                        {7, 14, "LowerArm_L"}, {8, 15, "LowerArm_R"}};
 
+// Why the Python SolarXR client cannot run (python_skip_reason, or the flatc --python output
+// missing); empty, with `python` set, when it can.
+std::string solarxr_client_skip_reason(std::string& python) {
+  if (std::string why = python_skip_reason(python, true); !why.empty()) return why;
+  if (!fs::exists(pb_dir() / "solarxr_protocol" / "MessageBundle.py"))
+    return "flatc --python did not run (flatbuffers-compiler missing at configure time?)";
+  return "";
+}
+
 Vec3 joint_p(const protocol::PoseMessage& pose, std::size_t j) { return vec3(pose.joints[j].position_m); }
 Quat joint_q(const protocol::PoseMessage& pose, std::size_t j) { return quat_xyzw(pose.joints[j].rotation_xyzw); }
 
 TEST(MonadoBridge, HandshakeThenBonesFollowTheZmqPoseFedByTheFeeder) {
   std::string python;
-  if (std::string why = python_skip_reason(python, true); !why.empty()) GTEST_SKIP() << why;
-  if (!fs::exists(pb_dir() / "solarxr_protocol" / "MessageBundle.py")) GTEST_SKIP() << "flatc --python did not run (flatbuffers-compiler missing at configure time?)";
+  if (std::string why = solarxr_client_skip_reason(python); !why.empty()) GTEST_SKIP() << why;
   test::TempDir dir;
   const fs::path run = dir.path / "run";
   test::Child daemon({(test::bin_dir() / "bodyd").string(), "--method", "ik", "--source", "monado:" + run.string(),
                       "--output", "monado:" + run.string() + "?trackers=waist,feet,chest,knees,elbows", "--pub",
                       "tcp://127.0.0.1:*", "--control", "none", "--endpoints-file", (dir.path / "endpoints.json").string()},
                      dir.path / "bodyd.err");
-  const auto endpoints = test::wait_endpoints(dir.path / "endpoints.json", 20000);
-  ASSERT_TRUE(endpoints) << daemon.log();
   zmq::context_t ctx;
-  zmq::socket_t sub = test::sub_socket(ctx, (*endpoints)["pub"].get<std::string>());
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  zmq::socket_t sub;
+  ASSERT_TRUE(test::subscribe_when_up(ctx, dir.path / "endpoints.json", daemon, sub));
 
   write_poses(dir.path / "poses.txt");
   test::Child client({python, client_script("solarxr_client.py").string(), pb_dir().string(), run.string(),
@@ -171,8 +177,7 @@ namespace {
 // reason in the monado output's status, and a fresh connection's poll is still answered.
 TEST(MonadoBridge, BadRequestsAreCountedAndANewClientIsStillServed) {
   std::string python;
-  if (std::string why = python_skip_reason(python, true); !why.empty()) GTEST_SKIP() << why;
-  if (!fs::exists(pb_dir() / "solarxr_protocol" / "MessageBundle.py")) GTEST_SKIP() << "flatc --python did not run";
+  if (std::string why = solarxr_client_skip_reason(python); !why.empty()) GTEST_SKIP() << why;
   test::TempDir dir;
   const fs::path run = dir.path / "run";
   test::Child daemon({(test::bin_dir() / "bodyd").string(), "--method", "ik", "--source", "monado:" + run.string(),
