@@ -1,13 +1,15 @@
 // What the tests that run bodyd and bodyd-ctl as processes share (tests/daemon, tests/tools):
-// the programs, a pose subscriber and the status request.
+// the programs, an idle bodyd, a pose subscriber and the status request.
 #pragma once
 
 #include "test_paths.h"
 
 #include "bodyd/protocol/pose_message.h"
+#include "bodyd/test/process.h"
 
 #include <zmq.hpp>
 
+#include <filesystem>
 #include <optional>
 #include <string>
 
@@ -24,6 +26,15 @@ inline zmq::socket_t pose_subscriber(zmq::context_t& ctx, const std::string& pub
   sub.set(zmq::sockopt::subscribe, std::string(protocol::kPoseTopic));
   sub.connect(pub);
   return sub;
+}
+
+// A bodyd (IK, no source) on ipc sockets in `dir`: poses on dir/pose, control on
+// ipc_control(dir), its endpoints file dir/endpoints.json, its output files named "bodyd".
+inline std::string ipc_control(const std::filesystem::path& dir) { return "ipc://" + (dir / "control").string(); }
+inline Process idle_bodyd(const std::filesystem::path& dir) {
+  return Process({kBodyd, "--method", "ik", "--pub", "ipc://" + (dir / "pose").string(), "--control", ipc_control(dir),
+                  "--endpoints-file", (dir / "endpoints.json").string()},
+                 {.output_dir = dir, .name = "bodyd"});
 }
 
 // The daemon's answer to {"cmd":"status"} on `control` (a fresh REQ socket); nullopt when none

@@ -6,6 +6,7 @@
 #include "bodyd/motion/tracker_log.h"
 #include "../test_paths.h"
 #include "zmq_helpers.h"
+#include "bodyd/test/files.h"
 
 #include <gtest/gtest.h>
 
@@ -21,6 +22,8 @@ namespace {
 
 namespace fs = std::filesystem;
 using daemon::TrackerRecorder;
+using test::read_file;
+using test::samples_on_disk;
 
 TrackerSample head_at(std::int64_t t_ns) {
   TrackerSample s;
@@ -31,20 +34,6 @@ TrackerSample head_at(std::int64_t t_ns) {
   return s;
 }
 
-std::string contents(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-// Sample lines in the file as it is on disk now (what a kill -9 would leave).
-std::size_t samples_on_disk(const fs::path& p) {
-  std::size_t n = 0;
-  std::istringstream in(contents(p));
-  for (std::string line; std::getline(in, line);) n += !line.empty() && line[0] != '#' && !line.starts_with("t_ns");
-  return n;
-}
 
 TEST(TrackerRecorder, PollWritesTheBufferToTheFileWithinTheFlushInterval) {
   test::TempDir dir;
@@ -72,7 +61,7 @@ TEST(TrackerRecorder, AnExistingFileIsRefusedUnlessOverwrite) {
   EXPECT_NE(e.find("exists"), std::string::npos) << e;
   EXPECT_NE(e.find("--overwrite"), std::string::npos) << e;
   EXPECT_FALSE(r.is_open());
-  EXPECT_EQ(contents(path), "precious\n");
+  EXPECT_EQ(read_file(path), "precious\n");
   ASSERT_EQ(r.open(path.string(), {}, /*overwrite=*/true), "");
   ASSERT_TRUE(r.record(head_at(1)));
   r.close();
@@ -93,7 +82,7 @@ TEST(TrackerRecorder, ASymbolicLinkIsNeverFollowed) {
       EXPECT_FALSE(r.is_open());
     }
   }
-  EXPECT_EQ(contents(dir.path / "t"), "precious\n");
+  EXPECT_EQ(read_file(dir.path / "t"), "precious\n");
   EXPECT_FALSE(fs::exists(dir.path / "nowhere"));
 }
 

@@ -213,10 +213,8 @@ TEST(CtlNoDaemon, SaysWhichEndpointAndHowToStartOne) {
 // Last: stops a bodyd of its own.
 TEST(CtlShutdown, StopsTheDaemon) {
   TempDir dir;
-  const std::string control = "ipc://" + (dir.path / "control").string();
-  Process bodyd({kBodyd, "--method", "ik", "--pub", "ipc://" + (dir.path / "pose").string(), "--control", control,
-                 "--endpoints-file", (dir.path / "endpoints.json").string()},
-                {.output_dir = dir.path, .name = "bodyd"});
+  const std::string control = ipc_control(dir.path);
+  Process bodyd = idle_bodyd(dir.path);
   ASSERT_TRUE(wait_for_file(dir.path / "endpoints.json", 20000)) << bodyd.log();
   const RunResult r = run({kCtl, "--control", control, "shutdown"}, {.output_dir = dir.path, .name = "ctl"});
   EXPECT_EQ(r.exit_code, 0) << r.err;

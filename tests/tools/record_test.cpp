@@ -244,13 +244,6 @@ class UdpRecording {
   std::vector<TrackerSample> samples_;
 };
 
-// Sample lines in the file as it is on disk now.
-std::size_t samples_on_disk(const fs::path& p) {
-  std::size_t n = 0;
-  std::istringstream in(read_file(p));
-  for (std::string line; std::getline(in, line);) n += !line.empty() && line[0] != '#' && !line.starts_with("t_ns");
-  return n;
-}
 
 // Issue 20 item 3: closing the terminal (SIGHUP) stops bodyd as SIGTERM does, with the
 // recording written and the "stopped" line logged.
@@ -362,11 +355,9 @@ TEST(RecordTrackers, ExistingFilesLinksAndFifosAreRefused) {
 // stops it cleanly like TERM.
 TEST(Signals, UsrAndAlrmAreIgnoredQuitStopsCleanly) {
   TempDir dir;
-  const std::string control = "ipc://" + (dir.path / "control").string();
-  Process bodyd({kBodyd, "--method", "ik", "--pub", "ipc://" + (dir.path / "pose").string(), "--control", control,
-                 "--endpoints-file", (dir.path / "e.json").string()},
-                {.output_dir = dir.path, .name = "bodyd"});
-  ASSERT_TRUE(wait_for_file(dir.path / "e.json", 20000)) << bodyd.log();
+  const std::string control = ipc_control(dir.path);
+  Process bodyd = idle_bodyd(dir.path);
+  ASSERT_TRUE(wait_for_file(dir.path / "endpoints.json", 20000)) << bodyd.log();
   for (int sig : {SIGUSR1, SIGUSR2, SIGALRM}) bodyd.signal(sig);
   zmq::context_t ctx;
   ASSERT_TRUE(status_reply(ctx, control)) << bodyd.log();  // still there

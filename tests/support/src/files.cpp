@@ -24,4 +24,11 @@ bool write_file(const std::filesystem::path& path, std::string_view content) {
   return static_cast<bool>(out);
 }
 
+std::size_t samples_on_disk(const std::filesystem::path& path) {
+  std::size_t n = 0;
+  std::istringstream in(read_file(path));
+  for (std::string line; std::getline(in, line);) n += !line.empty() && line[0] != '#' && !line.starts_with("t_ns");
+  return n;
+}
+
 }  // namespace bodyd::test
