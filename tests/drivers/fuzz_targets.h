@@ -6,6 +6,7 @@
 // bytes that matter. A broken promise aborts (libFuzzer records the input).
 #pragma once
 
+#include "../fuzz/fuzz_check.h"
 #include "bodyd/drivers/hydra.h"
 #include "bodyd/drivers/osc_decode.h"
 #include "bodyd/drivers/report.h"
@@ -19,13 +20,6 @@
 #include <vector>
 
 namespace bodyd::test {
-
-inline void fuzz_check(bool ok, const char* what) {
-  if (!ok) {
-    std::fprintf(stderr, "fuzz invariant broken: %s\n", what);
-    std::abort();
-  }
-}
 
 inline void fuzz_tracker_report(const std::uint8_t* data, std::size_t size) {
   using namespace bodyd::drivers;

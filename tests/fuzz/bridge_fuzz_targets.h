@@ -4,6 +4,7 @@
 // and the libFuzzer executables (fuzz_main.cpp; make fuzz). A broken promise aborts.
 #pragma once
 
+#include "fuzz_check.h"
 #include "bodyd/daemon/solarxr.h"
 #include "bodyd/drivers/slimevr_bridge.h"
 
@@ -16,13 +17,6 @@
 
 namespace bodyd::test {
 
-inline void bridge_fuzz_check(bool ok, const char* what) {
-  if (!ok) {
-    std::fprintf(stderr, "fuzz invariant broken: %s\n", what);
-    std::abort();
-  }
-}
-
 // The bytes as a client's stream: frames one after the other, each decoded, as the bridge
 // server reads them. A decoded Position or TrackerAdded re-encodes to a frame that decodes to
 // the same fields.
@@ -33,13 +27,13 @@ inline void fuzz_slimevr_bridge(const std::uint8_t* data, std::size_t size) {
   while (at < size) {
     const sv::FrameView f = sv::next_frame(data + at, size - at);
     if (f.result != sv::FrameResult::Frame) {
-      if (f.result == sv::FrameResult::TooLong) bridge_fuzz_check(f.declared_bytes > sv::kMaxFrameBytes, "too long below the limit");
-      if (f.result == sv::FrameResult::TooShort) bridge_fuzz_check(f.declared_bytes < 4, "too short at 4 or more");
+      if (f.result == sv::FrameResult::TooLong) fuzz_check(f.declared_bytes > sv::kMaxFrameBytes, "too long below the limit");
+      if (f.result == sv::FrameResult::TooShort) fuzz_check(f.declared_bytes < 4, "too short at 4 or more");
       return;
     }
-    bridge_fuzz_check(f.frame_bytes >= 4 && f.frame_bytes <= sv::kMaxFrameBytes && f.frame_bytes <= size - at,
+    fuzz_check(f.frame_bytes >= 4 && f.frame_bytes <= sv::kMaxFrameBytes && f.frame_bytes <= size - at,
                       "frame outside the bytes or the limit");
-    bridge_fuzz_check(f.payload == data + at + 4 && f.payload_bytes == f.frame_bytes - 4, "payload not after the length");
+    fuzz_check(f.payload == data + at + 4 && f.payload_bytes == f.frame_bytes - 4, "payload not after the length");
     sv::Message m;
     std::string error;
     if (sv::decode_message(f.payload, f.payload_bytes, m, error)) {
@@ -48,24 +42,24 @@ inline void fuzz_slimevr_bridge(const std::uint8_t* data, std::size_t size) {
           std::isfinite(m.z) && std::isfinite(m.qx) && std::isfinite(m.qy) && std::isfinite(m.qz) && std::isfinite(m.qw)) {
         encoder.position(again, m.tracker_id, Vec3(m.x, m.y, m.z), Quat(m.qw, m.qx, m.qy, m.qz));
         const sv::FrameView g = sv::next_frame(again.data(), again.size());
-        bridge_fuzz_check(g.result == sv::FrameResult::Frame && g.frame_bytes == again.size(), "re-encoded Position is not one frame");
+        fuzz_check(g.result == sv::FrameResult::Frame && g.frame_bytes == again.size(), "re-encoded Position is not one frame");
         sv::Message m2;
-        bridge_fuzz_check(sv::decode_message(g.payload, g.payload_bytes, m2, error), "re-encoded Position rejected");
-        bridge_fuzz_check(m2.kind == m.kind && m2.tracker_id == m.tracker_id && m2.x == m.x && m2.y == m.y && m2.z == m.z &&
+        fuzz_check(sv::decode_message(g.payload, g.payload_bytes, m2, error), "re-encoded Position rejected");
+        fuzz_check(m2.kind == m.kind && m2.tracker_id == m.tracker_id && m2.x == m.x && m2.y == m.y && m2.z == m.z &&
                               m2.qx == m.qx && m2.qy == m.qy && m2.qz == m.qz && m2.qw == m.qw,
                           "Position round trip changed a field");
       } else if (m.kind == sv::Message::Kind::TrackerAdded &&
                  m.serial.size() + m.name.size() + m.manufacturer.size() < sv::kMaxFrameBytes - 64) {
         encoder.tracker_added(again, m.tracker_id, m.serial, m.name, m.role, m.manufacturer);
         const sv::FrameView g = sv::next_frame(again.data(), again.size());
-        bridge_fuzz_check(g.result == sv::FrameResult::Frame, "re-encoded TrackerAdded is not one frame");
+        fuzz_check(g.result == sv::FrameResult::Frame, "re-encoded TrackerAdded is not one frame");
         sv::Message m2;
-        bridge_fuzz_check(sv::decode_message(g.payload, g.payload_bytes, m2, error), "re-encoded TrackerAdded rejected");
-        bridge_fuzz_check(m2.serial == m.serial && m2.name == m.name && m2.role == m.role && m2.tracker_id == m.tracker_id,
+        fuzz_check(sv::decode_message(g.payload, g.payload_bytes, m2, error), "re-encoded TrackerAdded rejected");
+        fuzz_check(m2.serial == m.serial && m2.name == m.name && m2.role == m.role && m2.tracker_id == m.tracker_id,
                           "TrackerAdded round trip changed a field");
       }
     } else {
-      bridge_fuzz_check(!error.empty(), "rejected without a reason");
+      fuzz_check(!error.empty(), "rejected without a reason");
     }
     at += f.frame_bytes;
   }
@@ -79,17 +73,17 @@ inline void fuzz_solarxr(const std::uint8_t* data, std::size_t size) {
   sx::Request r;
   std::string error;
   if (sx::decode_request(aligned.data(), aligned.size(), r, error)) {
-    bridge_fuzz_check(r.polls >= 0 && r.ignored >= 0, "negative counts");
+    fuzz_check(r.polls >= 0 && r.ignored >= 0, "negative counts");
     sx::Encoder enc;
     for (std::uint32_t tx : r.settings_requests) {
       const auto [p, n] = enc.settings_response(tx, sx::SteamvrToggles{});
       const std::vector<std::uint8_t> answer(p, p + n);
       sx::Request back;
-      bridge_fuzz_check(sx::decode_request(answer.data(), answer.size(), back, error), "our SettingsResponse is not a bundle");
-      bridge_fuzz_check(back.polls == 0 && back.settings_requests.empty() && back.ignored == 1, "our answer requests something");
+      fuzz_check(sx::decode_request(answer.data(), answer.size(), back, error), "our SettingsResponse is not a bundle");
+      fuzz_check(back.polls == 0 && back.settings_requests.empty() && back.ignored == 1, "our answer requests something");
     }
   } else {
-    bridge_fuzz_check(!error.empty(), "rejected without a reason");
+    fuzz_check(!error.empty(), "rejected without a reason");
   }
 }
 

@@ -7,6 +7,7 @@
 // motion/include/bodyd/motion/limits.h and survives a write/read round trip.
 #pragma once
 
+#include "fuzz_check.h"
 #include "bodyd/daemon/config.h"
 #include "bodyd/daemon/control.h"
 #include "bodyd/inference/model_file.h"
@@ -28,13 +29,6 @@
 #include <string_view>
 
 namespace bodyd::test {
-
-inline void input_fuzz_check(bool ok, const char* what) {
-  if (!ok) {
-    std::fprintf(stderr, "fuzz invariant broken: %s\n", what);
-    std::abort();
-  }
-}
 
 inline std::string_view as_text(const std::uint8_t* data, std::size_t size) {
   return {reinterpret_cast<const char*>(data), size};
@@ -58,28 +52,28 @@ inline void fuzz_tracker_log(const std::uint8_t* data, std::size_t size) {
   std::array<bool, kRoleCount> seen{};
   for (const TrackerSample& s : log.samples) {
     const auto r = static_cast<std::size_t>(s.role);
-    input_fuzz_check(r < kRoleCount, "tracker log: role out of range");
-    input_fuzz_check(limits::time_plausible(s.t_ns), "tracker log: t_ns outside the limits");
-    input_fuzz_check(!seen[r] || s.t_ns > last[r], "tracker log: time not increasing within a role");
+    fuzz_check(r < kRoleCount, "tracker log: role out of range");
+    fuzz_check(limits::time_plausible(s.t_ns), "tracker log: t_ns outside the limits");
+    fuzz_check(!seen[r] || s.t_ns > last[r], "tracker log: time not increasing within a role");
     seen[r] = true;
     last[r] = s.t_ns;
     if (!s.valid) continue;
-    input_fuzz_check(within_limits(s.position_m), "tracker log: position outside the limits");
-    input_fuzz_check(std::abs(s.rotation.norm() - 1.0) < 1e-12, "tracker log: rotation not unit length");
+    fuzz_check(within_limits(s.position_m), "tracker log: position outside the limits");
+    fuzz_check(std::abs(s.rotation.norm() - 1.0) < 1e-12, "tracker log: rotation not unit length");
   }
   std::string text;
   try {
     text = format_tracker_log(log.samples);
   } catch (const TrackerLogError&) {
-    input_fuzz_check(false, "tracker log: the writer refuses samples the reader accepted");
+    fuzz_check(false, "tracker log: the writer refuses samples the reader accepted");
   }
   const TrackerLog back = parse_tracker_log(text, "fuzz round trip");  // throws (aborts) if not
-  input_fuzz_check(back.samples.size() == log.samples.size(), "tracker log: round trip changed the count");
+  fuzz_check(back.samples.size() == log.samples.size(), "tracker log: round trip changed the count");
   for (std::size_t i = 0; i < back.samples.size(); ++i) {
     const TrackerSample& a = log.samples[i];
     const TrackerSample& b = back.samples[i];
-    input_fuzz_check(a.t_ns == b.t_ns && a.role == b.role && a.valid == b.valid, "tracker log: round trip");
-    if (a.valid) input_fuzz_check(a.position_m == b.position_m, "tracker log: round trip changed a position");
+    fuzz_check(a.t_ns == b.t_ns && a.role == b.role && a.valid == b.valid, "tracker log: round trip");
+    if (a.valid) fuzz_check(a.position_m == b.position_m, "tracker log: round trip changed a position");
   }
 }
 
@@ -92,15 +86,15 @@ inline void fuzz_bvh(const std::uint8_t* data, std::size_t size) {
   } catch (const BvhError&) {
     return;
   }
-  input_fuzz_check(m.skeleton.validate().empty(), "bvh: accepted an invalid skeleton");
-  for (const Vec3& o : m.skeleton.offsets) input_fuzz_check(within_limits(o), "bvh: OFFSET outside the limits");
+  fuzz_check(m.skeleton.validate().empty(), "bvh: accepted an invalid skeleton");
+  for (const Vec3& o : m.skeleton.offsets) fuzz_check(within_limits(o), "bvh: OFFSET outside the limits");
   GlobalPose g;
   for (const Pose& pose : m.frames) {
-    for (const Vec3& t : pose.local_translations) input_fuzz_check(within_limits(t), "bvh: position outside limits");
+    for (const Vec3& t : pose.local_translations) fuzz_check(within_limits(t), "bvh: position outside limits");
     forward_kinematics(m.skeleton, pose, g);
     for (std::size_t j = 0; j < g.positions.size(); ++j) {
-      input_fuzz_check(g.positions[j].allFinite(), "bvh: forward kinematics not finite");
-      input_fuzz_check(g.rotations[j].coeffs().allFinite(), "bvh: rotation not finite");
+      fuzz_check(g.positions[j].allFinite(), "bvh: forward kinematics not finite");
+      fuzz_check(g.rotations[j].coeffs().allFinite(), "bvh: rotation not finite");
     }
   }
 }
@@ -117,9 +111,9 @@ inline void fuzz_config(const std::uint8_t* data, std::size_t size) {
   if (!daemon::validate_config(config).empty()) return;
   const nlohmann::json printed = daemon::config_to_json(config);
   daemon::DaemonConfig again;
-  input_fuzz_check(daemon::apply_config_json(printed, "printed", again).empty(),
+  fuzz_check(daemon::apply_config_json(printed, "printed", again).empty(),
                    "config: the printed configuration does not read back");
-  input_fuzz_check(daemon::config_to_json(again) == printed, "config: round trip changed a key");
+  fuzz_check(daemon::config_to_json(again) == printed, "config: round trip changed a key");
 }
 
 // Control requests (docs/control.md): handle_control_request never throws and always answers
@@ -129,7 +123,7 @@ class FuzzControlTarget final : public daemon::ControlTarget {
   nlohmann::json status() override { return {{"ok", true}}; }
   nlohmann::json skeleton() override { return {{"ok", true}}; }
   nlohmann::json calibrate_height(double head_height_m) override {
-    input_fuzz_check(std::isfinite(head_height_m), "control: non-finite height reached the target");
+    fuzz_check(std::isfinite(head_height_m), "control: non-finite height reached the target");
     return {{"ok", true}};
   }
   nlohmann::json calibrate_from_head() override { return {{"ok", true}}; }
@@ -140,8 +134,8 @@ class FuzzControlTarget final : public daemon::ControlTarget {
 inline void fuzz_control(const std::uint8_t* data, std::size_t size) {
   FuzzControlTarget target;
   const nlohmann::json reply = daemon::handle_control_request(as_text(data, size), target);
-  input_fuzz_check(reply.is_object(), "control: reply is not an object");
-  input_fuzz_check(reply.contains("ok") && reply["ok"].is_boolean(), "control: reply has no boolean ok");
+  fuzz_check(reply.is_object(), "control: reply is not an object");
+  fuzz_check(reply.contains("ok") && reply["ok"].is_boolean(), "control: reply has no boolean ok");
   // The reply goes back over the socket as text: it must serialise whatever the request held.
   (void)reply.dump(-1, ' ', false, nlohmann::json::error_handler_t::strict);
 }
@@ -156,9 +150,9 @@ inline void fuzz_model(const std::uint8_t* data, std::size_t size) {
   }
   try {
     const inference::Model model = inference::parse_model(bytes, "fuzz.safetensors");
-    input_fuzz_check(model.norm_std.size() == static_cast<std::size_t>(model.config.dim()), "model: norm_std size");
-    for (float s : model.norm_std) input_fuzz_check(std::isfinite(s) && s > 0.0f, "model: norm_std not positive");
-    input_fuzz_check(model.skeleton.validate().empty(), "model: invalid skeleton");
+    fuzz_check(model.norm_std.size() == static_cast<std::size_t>(model.config.dim()), "model: norm_std size");
+    for (float s : model.norm_std) fuzz_check(std::isfinite(s) && s > 0.0f, "model: norm_std not positive");
+    fuzz_check(model.skeleton.validate().empty(), "model: invalid skeleton");
   } catch (const inference::ModelFileError&) {
   }
 }
@@ -171,23 +165,23 @@ inline void fuzz_pose_message(const std::uint8_t* data, std::size_t size) {
   PoseMessage pose;
   if (decode_pose(bytes, pose).ok()) {
     std::vector<std::uint8_t> again;
-    input_fuzz_check(encode_pose(pose, again).ok(), "pose: a decoded pose does not encode");
+    fuzz_check(encode_pose(pose, again).ok(), "pose: a decoded pose does not encode");
     PoseMessage back;
-    input_fuzz_check(decode_pose(again, back).ok(), "pose: re-encoded pose does not decode");
-    input_fuzz_check(back.seq == pose.seq && back.t_ns == pose.t_ns && back.publish_t_ns == pose.publish_t_ns &&
+    fuzz_check(decode_pose(again, back).ok(), "pose: re-encoded pose does not decode");
+    fuzz_check(back.seq == pose.seq && back.t_ns == pose.t_ns && back.publish_t_ns == pose.publish_t_ns &&
                          back.skeleton_id == pose.skeleton_id && back.root_joint == pose.root_joint &&
                          back.joints.size() == pose.joints.size(),
                      "pose: round trip changed a field");
     for (std::size_t i = 0; i < pose.joints.size(); ++i)
-      input_fuzz_check(back.joints[i].position_m == pose.joints[i].position_m, "pose: round trip changed a joint");
+      fuzz_check(back.joints[i].position_m == pose.joints[i].position_m, "pose: round trip changed a joint");
   }
   SkeletonMessage skeleton;
   if (decode_skeleton(bytes, skeleton).ok()) {
     std::vector<std::uint8_t> again;
-    input_fuzz_check(encode_skeleton(skeleton, again).ok(), "skeleton: a decoded skeleton does not encode");
+    fuzz_check(encode_skeleton(skeleton, again).ok(), "skeleton: a decoded skeleton does not encode");
     SkeletonMessage back;
-    input_fuzz_check(decode_skeleton(again, back).ok(), "skeleton: re-encoded skeleton does not decode");
-    input_fuzz_check(back.names == skeleton.names && back.parents == skeleton.parents &&
+    fuzz_check(decode_skeleton(again, back).ok(), "skeleton: re-encoded skeleton does not decode");
+    fuzz_check(back.names == skeleton.names && back.parents == skeleton.parents &&
                          back.offsets_m == skeleton.offsets_m && back.skeleton_id == skeleton.skeleton_id,
                      "skeleton: round trip changed a field");
   }
