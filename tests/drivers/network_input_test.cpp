@@ -682,14 +682,20 @@ TEST(OscQuery, TreeAndHostInfo) {
   EXPECT_FALSE(nlohmann::json::parse(detail::oscquery_host_info_json("bodyd", "0.0.0.0", 9001)).contains("OSC_IP"));
 }
 
-TEST(OscQuery, HttpAnswersAreTheDocumentedJsonSeenFromNode) {
-  if (std::string why = node_missing(); !why.empty()) GTEST_SKIP() << why;
+// The VRChat source "vrchat:test" (its OSCQuery service named `oscquery_name`); null, with
+// `error`, when it cannot open.
+std::unique_ptr<NetworkSource> vrchat_test_source(std::string& error, const std::string& oscquery_name = "bodyd") {
   NetworkSourceOptions o;
   o.kind = NetworkKind::Vrchat;
   o.name = "vrchat:test";
-  o.oscquery_name = "bodyd-test";
+  o.oscquery_name = oscquery_name;
+  return open_network_source(o, error);
+}
+
+TEST(OscQuery, HttpAnswersAreTheDocumentedJsonSeenFromNode) {
+  if (std::string why = node_missing(); !why.empty()) GTEST_SKIP() << why;
   std::string error;
-  auto source = open_network_source(o, error);
+  auto source = vrchat_test_source(error, "bodyd-test");
   ASSERT_TRUE(source) << error;
   ASSERT_GT(source->oscquery_port(), 0);
   const NodeRun r = run_node("oscquery_get.js", std::to_string(source->oscquery_port()));
@@ -736,12 +742,8 @@ std::string avahi_unreachable() {
 
 TEST(OscQuery, MdnsAnnouncedWhenAvahiRuns) {
   if (std::string why = avahi_unreachable(); !why.empty()) GTEST_SKIP() << why;
-  NetworkSourceOptions o;
-  o.kind = NetworkKind::Vrchat;
-  o.name = "vrchat:test";
-  o.oscquery_name = "bodyd-mdns-test";
   std::string error;
-  auto source = open_network_source(o, error);
+  auto source = vrchat_test_source(error, "bodyd-mdns-test");
   ASSERT_TRUE(source) << error;
   ASSERT_TRUE(wait_for([&] { return source->mdns_state().starts_with("announced"); }, 10000)) << source->mdns_state();
   FILE* p = popen("avahi-browse -rpt _oscjson._tcp 2>/dev/null", "r");
@@ -760,11 +762,8 @@ TEST(OscQuery, WithoutAvahiTheStateSaysWhatToDo) {
   // Without avahi-browse only a missing socket proves that no daemon runs.
   if (browse_installed ? avahi_unreachable().empty() : !no_socket)
     GTEST_SKIP() << "an avahi-daemon is running here, or may be (avahi-browse reaches it, or its socket exists)";
-  NetworkSourceOptions o;
-  o.kind = NetworkKind::Vrchat;
-  o.name = "vrchat:test";
   std::string error;
-  auto source = open_network_source(o, error);
+  auto source = vrchat_test_source(error);
   ASSERT_TRUE(source) << error;
   EXPECT_GT(source->oscquery_port(), 0);  // HTTP still served
   EXPECT_NE(source->mdns_state().find("avahi-daemon is not running"), std::string::npos) << source->mdns_state();
