@@ -64,6 +64,16 @@ class Daemon : public test::Process {
   }
 };
 
+// bodyd's arguments for an IK daemon on loopback TCP (pub on any port, control on a free one)
+// with its endpoints file dir/endpoints.json, reading `sources`.
+std::vector<std::string> ik_daemon_args(const fs::path& dir, const std::vector<std::string>& sources) {
+  std::vector<std::string> args = {"--method", "ik", "--pub", "tcp://127.0.0.1:*", "--control",
+                                   "tcp://127.0.0.1:" + std::to_string(test::free_loopback_port(SOCK_STREAM)),
+                                   "--endpoints-file", (dir / "endpoints.json").string()};
+  for (const std::string& source : sources) args.insert(args.end(), {"--source", source});
+  return args;
+}
+
 // The daemon's --endpoints-file (dir/endpoints.json) once it names the control endpoint
 // (waiting up to 10 s); an empty object if it never does.
 nlohmann::json wait_for_endpoints(const fs::path& dir) {
@@ -171,10 +181,9 @@ TEST(DaemonNetworkInputs, BadPacketsAreCountedWhilePosesKeepComing) {
   const test::TempDir tmp("bodyd-net-e2e");
   const fs::path& dir = tmp.path;
   const int ports[3] = {test::free_loopback_port(), test::free_loopback_port(), test::free_loopback_port()};
-  Daemon daemon({"--method", "ik", "--pub", "tcp://127.0.0.1:*", "--control", "tcp://127.0.0.1:" + std::to_string(test::free_loopback_port(SOCK_STREAM)), "--endpoints-file",
-                 (dir / "endpoints.json").string(), "--source",
-                 "vrchat:127.0.0.1:" + std::to_string(ports[0]) + "?oscquery=off", "--source",
-                 "vmc:127.0.0.1:" + std::to_string(ports[1]), "--source", "udp:127.0.0.1:" + std::to_string(ports[2])},
+  Daemon daemon(ik_daemon_args(dir, {"vrchat:127.0.0.1:" + std::to_string(ports[0]) + "?oscquery=off",
+                                     "vmc:127.0.0.1:" + std::to_string(ports[1]),
+                                     "udp:127.0.0.1:" + std::to_string(ports[2])}),
                 dir);
   nlohmann::json endpoints = wait_for_endpoints(dir);
   ASSERT_TRUE(endpoints.contains("control")) << daemon.err();
@@ -260,9 +269,7 @@ TEST(DaemonNetworkInputs, VrchatSenderDrivesThePoseStream) {
   const std::vector<TrackerSample> samples = simulate_trackers(read_bvh(test::fixtures() / "walk_60.bvh"), sim);
   write_tracker_log(dir / "walk.csv", samples);
   const int port = test::free_loopback_port();
-  Daemon daemon({"--method", "ik", "--pub", "tcp://127.0.0.1:*", "--control", "tcp://127.0.0.1:" + std::to_string(test::free_loopback_port(SOCK_STREAM)), "--endpoints-file",
-                 (dir / "endpoints.json").string(), "--source", "vrchat:127.0.0.1:" + std::to_string(port)},
-                dir);
+  Daemon daemon(ik_daemon_args(dir, {"vrchat:127.0.0.1:" + std::to_string(port)}), dir);
   nlohmann::json endpoints = wait_for_endpoints(dir);
   ASSERT_TRUE(endpoints.contains("control")) << daemon.err();
   zmq::context_t ctx;
@@ -295,10 +302,7 @@ TEST(DaemonNetworkInputs, AForgedVmcSerialCannotKeepOrStealTheHead) {
   samples.resize(3 * 360);  // 360 time steps, 4 s at the sender's 11 ms
   write_tracker_log(dir / "walk.csv", samples);
   const int port = test::free_loopback_port();
-  Daemon daemon({"--method", "ik", "--pub", "tcp://127.0.0.1:*", "--control",
-                 "tcp://127.0.0.1:" + std::to_string(test::free_loopback_port(SOCK_STREAM)), "--endpoints-file",
-                 (dir / "endpoints.json").string(), "--source", "vmc:127.0.0.1:" + std::to_string(port)},
-                dir);
+  Daemon daemon(ik_daemon_args(dir, {"vmc:127.0.0.1:" + std::to_string(port)}), dir);
   nlohmann::json endpoints = wait_for_endpoints(dir);
   ASSERT_TRUE(endpoints.contains("control")) << daemon.err();
   zmq::context_t ctx;
