@@ -7,9 +7,6 @@
 namespace bodyd::drivers {
 namespace {
 
-using detail::DeviceContext;
-using detail::ReadOutcome;
-
 // A full-speed bulk packet is 64 bytes, high-speed 512; a transfer of up to 16 reports.
 constexpr std::size_t kTransferSize = 512;
 

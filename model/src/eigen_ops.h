@@ -5,7 +5,6 @@
 #pragma once
 
 #include "bodyd/base/require.h"
-#include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/eigen_denoiser.h"
 #include "bodyd/inference/model_file.h"
 
@@ -105,14 +104,6 @@ inline Eigen::Index checked_batch(std::span<const float> x, std::span<const floa
   BODYD_REQUIRE(t >= 0 && t < T, "t must be in [0, T)");
   BODYD_REQUIRE(out.data() != x.data() && out.data() != m.data(), "out may not alias x or m");
   return batch;
-}
-
-// The Denoiser entry point's scratch as the network's own type (another is a bug: abort with `what`).
-template <typename Scratch>
-Scratch& scratch_as(DenoiserScratch& scratch, const char* what) {
-  auto* s = dynamic_cast<Scratch*>(&scratch);
-  BODYD_REQUIRE(s != nullptr, what);
-  return *s;
 }
 
 }  // namespace bodyd::inference::detail

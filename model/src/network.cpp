@@ -16,12 +16,7 @@
 
 namespace bodyd::inference {
 
-using detail::add_layer_norm;
-using detail::add_linear;
-using detail::layer_norm;
-using detail::load_layer_norm;
-using detail::load_linear;
-using detail::silu_inplace;
+using namespace detail;  // eigen_ops.h: the building blocks every line below uses
 
 void timestep_embedding(int t, std::span<double> out) {
   const std::size_t half = out.size() / 2;
@@ -80,8 +75,6 @@ TensorShapes Network::tensors(const ModelConfig& config) {
   return v;
 }
 
-std::shared_ptr<const Denoiser> Network::make(const Model& model) { return std::make_shared<const Network>(model); }
-
 Network::Network(const Model& model) : EigenDenoiser(model) {
   const MlpWinConfig& c = config_;
   enc_ = detail::load_split_linear(model, "enc", c.D);
@@ -100,8 +93,8 @@ Network::Network(const Model& model) : EigenDenoiser(model) {
   time_table_ = detail::time_table(load_linear(model, "time1"), load_linear(model, "time2"), c.TE, c.T, &inp_.bias);
 }
 
-NetworkScratch::NetworkScratch(const Network& network, int max_batch) : config_(network.config()), max_batch_(max_batch) {
-  BODYD_REQUIRE(max_batch >= 1, "NetworkScratch needs max_batch >= 1");
+NetworkScratch::NetworkScratch(const Network& network, int max_batch)
+    : EigenScratch(network.config(), max_batch, "NetworkScratch needs max_batch >= 1") {
   const MlpWinConfig& c = config_;
   e_.resize(c.E, c.W * max_batch);
   h_.resize(c.H, max_batch);
@@ -109,17 +102,6 @@ NetworkScratch::NetworkScratch(const Network& network, int max_batch) : config_(
   a_.resize(c.H, max_batch);
   z_.resize(c.W * c.E, max_batch);
   d_.resize(c.E, c.W * max_batch);
-}
-
-std::unique_ptr<DenoiserScratch> Network::make_scratch(int max_batch) const {
-  return std::make_unique<NetworkScratch>(*this, max_batch);
-}
-
-void Network::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
-                      DenoiserScratch& scratch) const {
-  forward(x, m, t, out,
-          detail::scratch_as<NetworkScratch>(scratch,
-                                             "Network::forward needs a NetworkScratch (made by Network::make_scratch)"));
 }
 
 void Network::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,

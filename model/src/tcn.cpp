@@ -12,12 +12,7 @@
 
 namespace bodyd::inference {
 
-using detail::add_layer_norm;
-using detail::add_linear;
-using detail::layer_norm;
-using detail::load_layer_norm;
-using detail::load_linear;
-using detail::silu_inplace;
+using namespace detail;  // eigen_ops.h
 
 TcnConfig TcnConfig::from(const ModelConfig& c) {
   return TcnConfig{c.at("W"), c.at("D"), c.at("C"), c.at("K"), c.at("L"), c.at("R"), c.at("TE"), c.at("T")};
@@ -54,8 +49,6 @@ TensorShapes Tcn::tensors(const ModelConfig& config) {
   return v;
 }
 
-std::shared_ptr<const Denoiser> Tcn::make(const Model& model) { return std::make_shared<const Tcn>(model); }
-
 Tcn::Tcn(const Model& model) : EigenDenoiser(model) {
   const TcnConfig& c = config_;
   enc_ = detail::load_split_linear(model, "enc", c.D);
@@ -86,22 +79,13 @@ Tcn::Tcn(const Model& model) : EigenDenoiser(model) {
   time_table_ = detail::time_table(load_linear(model, "time1"), load_linear(model, "time2"), c.TE, c.T, nullptr);
 }
 
-TcnScratch::TcnScratch(const Tcn& network, int max_batch) : config_(network.config()), max_batch_(max_batch) {
-  BODYD_REQUIRE(max_batch >= 1, "TcnScratch needs max_batch >= 1");
+TcnScratch::TcnScratch(const Tcn& network, int max_batch)
+    : EigenScratch(network.config(), max_batch, "TcnScratch needs max_batch >= 1") {
   const Eigen::Index cols = static_cast<Eigen::Index>(config_.W) * max_batch;
   h_.resize(config_.C, cols);
   n_.resize(config_.C, cols);
   a_.resize(config_.C, cols);
   d_.resize(config_.C, cols);
-}
-
-std::unique_ptr<DenoiserScratch> Tcn::make_scratch(int max_batch) const {
-  return std::make_unique<TcnScratch>(*this, max_batch);
-}
-
-void Tcn::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
-                  DenoiserScratch& scratch) const {
-  forward(x, m, t, out, detail::scratch_as<TcnScratch>(scratch, "Tcn::forward needs a TcnScratch (made by Tcn::make_scratch)"));
 }
 
 void Tcn::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,

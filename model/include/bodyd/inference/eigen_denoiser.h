@@ -1,13 +1,16 @@
 // What the Eigen denoisers (network.h's mlpwin-v1, tcn.h's tcn-v1) share: their layer types and a
-// base that holds the config and the model's diffusion / normalisation data and answers the
-// Denoiser accessors from them. The arithmetic they share lives in model/src/eigen_ops.h.
+// base that holds the config and the model's diffusion / normalisation data, answers the
+// Denoiser accessors from them and makes the network's scratch. The arithmetic they share lives
+// in model/src/eigen_ops.h.
 #pragma once
 
+#include "bodyd/base/require.h"
 #include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/model_file.h"
 
 #include <Eigen/Core>
 
+#include <memory>
 #include <span>
 #include <vector>
 
@@ -32,10 +35,34 @@ struct SplitLinear {
   Eigen::VectorXf bias;
 };
 
-// `Config` has the fields W (frames), D (features per frame), T (steps) and from(ModelConfig).
+// The per-session buffers' base: the config they were sized for and the most windows per call.
 template <typename Config>
+class EigenScratch : public DenoiserScratch {
+ public:
+  [[nodiscard]] int max_batch() const override { return max_batch_; }
+
+ protected:
+  // `what`: the message when max_batch < 1 (a bug: abort).
+  EigenScratch(const Config& config, int max_batch, const char* what) : config_(config), max_batch_(max_batch) {
+    BODYD_REQUIRE(max_batch >= 1, what);
+  }
+
+  Config config_;
+  int max_batch_;
+};
+
+// `Config` has the fields W (frames), D (features per frame), T (steps) and from(ModelConfig);
+// `Net` derives from EigenDenoiser<Config, Net, Scratch>, has Net(const Model&), forward(..., Scratch&)
+// and kWrongScratch (the message when forward() is given another scratch); `Scratch` has
+// Scratch(const Net&, int max_batch).
+template <typename Config, typename Net, typename Scratch>
 class EigenDenoiser : public Denoiser {
  public:
+  // The architecture row's factory (denoiser.h).
+  [[nodiscard]] static std::shared_ptr<const Denoiser> make(const Model& model) {
+    return std::make_shared<const Net>(model);
+  }
+
   [[nodiscard]] const Config& config() const { return config_; }
   [[nodiscard]] int frames() const override { return config_.W; }
   [[nodiscard]] int dim() const override { return config_.D; }
@@ -45,6 +72,16 @@ class EigenDenoiser : public Denoiser {
   // Feature normalisation (D each): the network works on (f - mean) / std.
   [[nodiscard]] std::span<const float> norm_mean() const override { return norm_mean_; }
   [[nodiscard]] std::span<const float> norm_std() const override { return norm_std_; }
+  [[nodiscard]] std::unique_ptr<DenoiserScratch> make_scratch(int max_batch) const override {
+    return std::make_unique<Scratch>(static_cast<const Net&>(*this), max_batch);
+  }
+  // The Denoiser entry point: `scratch` must be a Scratch (a bug otherwise: abort).
+  void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+               DenoiserScratch& scratch) const override {
+    auto* s = dynamic_cast<Scratch*>(&scratch);
+    BODYD_REQUIRE(s != nullptr, Net::kWrongScratch);
+    static_cast<const Net&>(*this).forward(x, m, t, out, *s);
+  }
 
  protected:
   explicit EigenDenoiser(const Model& model)

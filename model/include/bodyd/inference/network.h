@@ -44,7 +44,7 @@ struct MlpWinConfig {
 class NetworkScratch;
 
 // The Denoiser of architecture "mlpwin-v1" (denoiser.h).
-class Network final : public detail::EigenDenoiser<MlpWinConfig> {
+class Network final : public detail::EigenDenoiser<MlpWinConfig, Network, NetworkScratch> {
  public:
   // Copies the weights out of a checked model and precomputes the time embedding of every step.
   explicit Network(const Model& model);
@@ -61,11 +61,12 @@ class Network final : public detail::EigenDenoiser<MlpWinConfig> {
   }};
   // Network parameters under their PyTorch state-dict names, in file order (docs/model-file.md).
   [[nodiscard]] static TensorShapes tensors(const ModelConfig& config);
-  [[nodiscard]] static std::shared_ptr<const Denoiser> make(const Model& model);
+  static constexpr const char* kWrongScratch = "Network::forward needs a NetworkScratch (made by Network::make_scratch)";
 
-  // config(), frames(), dim(), steps(), alpha_bar(), norm_mean(), norm_std(): EigenDenoiser.
+  // make(), config(), frames(), dim(), steps(), alpha_bar(), norm_mean(), norm_std(), make_scratch()
+  // and forward(..., DenoiserScratch&), which takes a NetworkScratch: EigenDenoiser.
   [[nodiscard]] std::string_view architecture() const override { return kArchitectureMlpWin; }
-  [[nodiscard]] std::unique_ptr<DenoiserScratch> make_scratch(int max_batch) const override;
+  using EigenDenoiser::forward;
 
   // Evaluates `batch` windows at the same step t. x, m: batch * W * D floats (window after
   // window, each frame-major); out: the same size (may not alias x or m). Requirements (a bug
@@ -74,9 +75,6 @@ class Network final : public detail::EigenDenoiser<MlpWinConfig> {
   // network's config. Does not allocate.
   void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                NetworkScratch& scratch) const;
-  // The Denoiser entry point: `scratch` must be a NetworkScratch (a bug otherwise: abort).
-  void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
-               DenoiserScratch& scratch) const override;
 
  private:
   using Linear = detail::Linear;
@@ -98,15 +96,12 @@ class Network final : public detail::EigenDenoiser<MlpWinConfig> {
 };
 
 // Per-session buffers for Network::forward, for up to max_batch windows per call.
-class NetworkScratch final : public DenoiserScratch {
+class NetworkScratch final : public detail::EigenScratch<MlpWinConfig> {
  public:
   explicit NetworkScratch(const Network& network, int max_batch = 1);
-  [[nodiscard]] int max_batch() const override { return max_batch_; }
 
  private:
   friend class Network;
-  MlpWinConfig config_;
-  int max_batch_;
   Eigen::MatrixXf e_;      // E x (W * batch): per-frame embeddings, frame after frame
   Eigen::MatrixXf h_;      // H x batch: trunk state
   Eigen::MatrixXf n_;      // H x batch: normalised / activated trunk state

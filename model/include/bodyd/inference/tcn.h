@@ -49,7 +49,7 @@ struct TcnConfig {
 class TcnScratch;
 class TcnStream;
 
-class Tcn final : public detail::EigenDenoiser<TcnConfig> {
+class Tcn final : public detail::EigenDenoiser<TcnConfig, Tcn, TcnScratch> {
  public:
   // The architecture table's row (denoiser.h).
   static constexpr std::array<ConfigField, 8> kConfigFields = {{
@@ -63,13 +63,14 @@ class Tcn final : public detail::EigenDenoiser<TcnConfig> {
       {"T", "diffusion steps"},
   }};
   [[nodiscard]] static TensorShapes tensors(const ModelConfig& config);
-  [[nodiscard]] static std::shared_ptr<const Denoiser> make(const Model& model);
+  static constexpr const char* kWrongScratch = "Tcn::forward needs a TcnScratch (made by Tcn::make_scratch)";
 
   explicit Tcn(const Model& model);
 
-  // config(), frames(), dim(), steps(), alpha_bar(), norm_mean(), norm_std(): EigenDenoiser.
+  // make(), config(), frames(), dim(), steps(), alpha_bar(), norm_mean(), norm_std(), make_scratch()
+  // and forward(..., DenoiserScratch&), which takes a TcnScratch: EigenDenoiser.
   [[nodiscard]] std::string_view architecture() const override { return kArchitectureTcn; }
-  [[nodiscard]] std::unique_ptr<DenoiserScratch> make_scratch(int max_batch) const override;
+  using EigenDenoiser::forward;
   // A TcnStream at step t.
   [[nodiscard]] std::unique_ptr<DenoiserStream> make_stream(int t) const override;
 
@@ -78,8 +79,6 @@ class Tcn final : public detail::EigenDenoiser<TcnConfig> {
   // not aliasing x or m, a scratch made by this network. Does not allocate.
   void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                TcnScratch& scratch) const;
-  void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
-               DenoiserScratch& scratch) const override;
 
  private:
   friend class TcnScratch;
@@ -103,15 +102,12 @@ class Tcn final : public detail::EigenDenoiser<TcnConfig> {
 };
 
 // Per-session buffers for Tcn::forward, for up to max_batch windows per call.
-class TcnScratch final : public DenoiserScratch {
+class TcnScratch final : public detail::EigenScratch<TcnConfig> {
  public:
   explicit TcnScratch(const Tcn& network, int max_batch = 1);
-  [[nodiscard]] int max_batch() const override { return max_batch_; }
 
  private:
   friend class Tcn;
-  TcnConfig config_;
-  int max_batch_;
   Eigen::MatrixXf h_, n_, a_, d_;  // C x (W * batch) each
 };
 
