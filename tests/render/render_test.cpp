@@ -27,6 +27,18 @@ using bodyd::test::TempDir;
 
 Motion walk() { return read_bvh(test::fixtures() / "walk_60.bvh"); }
 
+// The message of the RenderError that `load` throws; a test failure (and "") when it throws none.
+template <class Load>
+std::string render_error(Load&& load) {
+  try {
+    load();
+  } catch (const RenderError& e) {
+    return e.what();
+  }
+  ADD_FAILURE() << "no error";
+  return "";
+}
+
 // The clip moved by `offset_m` in the floor plane (root translation), so every joint is off by |offset|.
 Motion shifted(const Motion& m, const Vec3& offset_m) {
   Motion out = m;
@@ -167,12 +179,8 @@ TEST(RenderLoad, WrongFrameCountIsAClearError) {
   Motion short_clip = m;
   short_clip.frames.resize(50);
   write_bvh(tmp.path / "short.bvh", short_clip);
-  try {
-    (void)load_bvh_prediction(tmp.path / "short.bvh", m, "x");
-    FAIL() << "no error";
-  } catch (const RenderError& e) {
-    EXPECT_NE(std::string(e.what()).find("short.bvh: 50 frames, but the ground truth has 60"), std::string::npos) << e.what();
-  }
+  const std::string e = render_error([&] { (void)load_bvh_prediction(tmp.path / "short.bvh", m, "x"); });
+  EXPECT_NE(e.find("short.bvh: 50 frames, but the ground truth has 60"), std::string::npos) << e;
 }
 
 TEST(RenderLoad, OtherSkeletonNamesTheMissingJoint) {
@@ -181,13 +189,9 @@ TEST(RenderLoad, OtherSkeletonNamesTheMissingJoint) {
   Motion other = m;
   other.skeleton.names[static_cast<size_t>(other.skeleton.find("Hand_L"))] = "LeftHand";
   write_bvh(tmp.path / "other.bvh", other);
-  try {
-    (void)load_bvh_prediction(tmp.path / "other.bvh", m, "x");
-    FAIL() << "no error";
-  } catch (const RenderError& e) {
-    EXPECT_NE(std::string(e.what()).find("lacks joints of the ground truth"), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find("Hand_L"), std::string::npos) << e.what();
-  }
+  const std::string e = render_error([&] { (void)load_bvh_prediction(tmp.path / "other.bvh", m, "x"); });
+  EXPECT_NE(e.find("lacks joints of the ground truth"), std::string::npos) << e;
+  EXPECT_NE(e.find("Hand_L"), std::string::npos) << e;
 }
 
 TEST(RenderLoad, RecordingOnePosePerFrameAndResampled) {
@@ -207,12 +211,8 @@ TEST(RenderLoad, RecordingShorterThanTheClipIsAnError) {
   TempDir tmp;
   const Motion m = walk();
   write_recording(m, 3, 90, tmp.path / "half.bdrec");
-  try {
-    (void)load_recording_prediction(tmp.path / "half.bdrec", m, "rec");
-    FAIL() << "no error";
-  } catch (const RenderError& e) {
-    EXPECT_NE(std::string(e.what()).find("record the whole clip"), std::string::npos) << e.what();
-  }
+  const std::string e = render_error([&] { (void)load_recording_prediction(tmp.path / "half.bdrec", m, "rec"); });
+  EXPECT_NE(e.find("record the whole clip"), std::string::npos) << e;
 }
 
 TEST(RenderPictures, SizesAndDeterminism) {
