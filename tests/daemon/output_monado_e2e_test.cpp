@@ -56,35 +56,54 @@ std::string solarxr_client_skip_reason(std::string& python) {
   return "";
 }
 
+// The SolarXR client's command line: solarxr_client.py with `args`.
+std::vector<std::string> solarxr_client(const std::string& python, std::initializer_list<std::string> args) {
+  std::vector<std::string> command{python, client_script("solarxr_client.py").string(), pb_dir().string()};
+  command.insert(command.end(), args);
+  return command;
+}
+
+// bodyd as Monado's SolarXR server in a fresh directory: --source and --output monado: on its
+// run directory (`output_options` after the output's), --control `control`, the endpoints in
+// endpoints_file() and the log in bodyd.err there.
+struct MonadoServer {
+  test::TempDir dir;
+  fs::path run = dir.path / "run";
+  test::Child daemon;
+
+  MonadoServer(const std::string& output_options, const std::string& control)
+      : daemon({(test::bin_dir() / "bodyd").string(), "--method", "ik", "--source", "monado:" + run.string(), "--output",
+                "monado:" + run.string() + output_options, "--pub", "tcp://127.0.0.1:*", "--control", control,
+                "--endpoints-file", endpoints_file().string()},
+               dir.path / "bodyd.err") {}
+  fs::path endpoints_file() const { return dir.path / "endpoints.json"; }
+};
+
 Vec3 joint_p(const protocol::PoseMessage& pose, std::size_t j) { return vec3(pose.joints[j].position_m); }
 Quat joint_q(const protocol::PoseMessage& pose, std::size_t j) { return quat_xyzw(pose.joints[j].rotation_xyzw); }
 
 TEST(MonadoBridge, HandshakeThenBonesFollowTheZmqPoseFedByTheFeeder) {
   std::string python;
   if (std::string why = solarxr_client_skip_reason(python); !why.empty()) GTEST_SKIP() << why;
-  test::TempDir dir;
-  const fs::path run = dir.path / "run";
-  test::Child daemon({(test::bin_dir() / "bodyd").string(), "--method", "ik", "--source", "monado:" + run.string(),
-                      "--output", "monado:" + run.string() + "?trackers=waist,feet,chest,knees,elbows", "--pub",
-                      "tcp://127.0.0.1:*", "--control", "none", "--endpoints-file", (dir.path / "endpoints.json").string()},
-                     dir.path / "bodyd.err");
+  MonadoServer server("?trackers=waist,feet,chest,knees,elbows", "none");
+  const fs::path& dir = server.dir.path;
   zmq::context_t ctx;
   zmq::socket_t sub;
-  ASSERT_TRUE(test::subscribe_when_up(ctx, dir.path / "endpoints.json", daemon, sub));
+  ASSERT_TRUE(test::subscribe_when_up(ctx, server.endpoints_file(), server.daemon, sub));
 
-  write_poses(dir.path / "poses.txt");
-  test::Child client({python, client_script("solarxr_client.py").string(), pb_dir().string(), run.string(),
-                      (dir.path / "poses.txt").string(), (dir.path / "received.jsonl").string()},
-                     dir.path / "client.err");
+  write_poses(dir / "poses.txt");
+  test::Child client(solarxr_client(python, {server.run.string(), (dir / "poses.txt").string(),
+                                             (dir / "received.jsonl").string()}),
+                     dir / "client.err");
   protocol::SkeletonMessage skeleton;
   std::vector<protocol::PoseMessage> poses;
   collect_until_quiet(sub, skeleton, poses, client);
-  ASSERT_EQ(client.wait(0), 0) << client.log() << daemon.log();
-  daemon.signal(SIGINT);
-  ASSERT_EQ(daemon.wait(10000), 0) << daemon.log();
-  ASSERT_GT(poses.size(), 100u) << "the feeder's samples drive the reconstruction: " << daemon.log();
+  ASSERT_EQ(client.wait(0), 0) << client.log() << server.daemon.log();
+  server.daemon.signal(SIGINT);
+  ASSERT_EQ(server.daemon.wait(10000), 0) << server.daemon.log();
+  ASSERT_GT(poses.size(), 100u) << "the feeder's samples drive the reconstruction: " << server.daemon.log();
 
-  const std::vector<nlohmann::json> records = read_jsonl(dir.path / "received.jsonl");
+  const std::vector<nlohmann::json> records = read_jsonl(dir / "received.jsonl");
   std::vector<nlohmann::json> updates;
   bool settings = false;
   for (const auto& r : records) {
@@ -178,14 +197,10 @@ namespace {
 TEST(MonadoBridge, BadRequestsAreCountedAndANewClientIsStillServed) {
   std::string python;
   if (std::string why = solarxr_client_skip_reason(python); !why.empty()) GTEST_SKIP() << why;
-  test::TempDir dir;
-  const fs::path run = dir.path / "run";
-  test::Child daemon({(test::bin_dir() / "bodyd").string(), "--method", "ik", "--source", "monado:" + run.string(),
-                      "--output", "monado:" + run.string(), "--pub", "tcp://127.0.0.1:*", "--control",
-                      "tcp://127.0.0.1:*", "--endpoints-file", (dir.path / "endpoints.json").string()},
-                     dir.path / "bodyd.err");
-  const auto endpoints = test::wait_endpoints(dir.path / "endpoints.json", 20000);
-  ASSERT_TRUE(endpoints && endpoints->contains("control")) << daemon.log();
+  MonadoServer server("", "tcp://127.0.0.1:*");
+  const fs::path& dir = server.dir.path;
+  const auto endpoints = test::wait_endpoints(server.endpoints_file(), 20000);
+  ASSERT_TRUE(endpoints && endpoints->contains("control")) << server.daemon.log();
   struct Case {
     const char* kind;
     const char* reason;
@@ -196,10 +211,9 @@ TEST(MonadoBridge, BadRequestsAreCountedAndANewClientIsStillServed) {
                         {"malformed", "malformed", false},
                         {"flood", "flood", true}};
   for (const Case& c : cases) {
-    const fs::path out = dir.path / (std::string(c.kind) + ".json");
-    test::Child bad({python, client_script("solarxr_client.py").string(), pb_dir().string(), "bad", run.string(), c.kind,
-                     out.string()},
-                    dir.path / (std::string(c.kind) + ".err"));
+    const fs::path out = dir / (std::string(c.kind) + ".json");
+    test::Child bad(solarxr_client(python, {"bad", server.run.string(), c.kind, out.string()}),
+                    dir / (std::string(c.kind) + ".err"));
     ASSERT_EQ(bad.wait(30000), 0) << c.kind << ": " << bad.log();
     const auto result = read_jsonl(out);
     ASSERT_EQ(result.size(), 1u);
@@ -217,8 +231,8 @@ TEST(MonadoBridge, BadRequestsAreCountedAndANewClientIsStillServed) {
   ASSERT_FALSE(out_status.is_null()) << status->dump();
   for (const Case& c : cases) EXPECT_GE(out_status["rejected_by_reason"].value(c.reason, 0), 1) << c.reason << " " << out_status.dump();
   EXPECT_GE(out_status["polls_answered"].get<int>(), 4);
-  daemon.signal(SIGINT);
-  EXPECT_EQ(daemon.wait(10000), 0) << daemon.log();
+  server.daemon.signal(SIGINT);
+  EXPECT_EQ(server.daemon.wait(10000), 0) << server.daemon.log();
 }
 
 }  // namespace

@@ -67,7 +67,10 @@ struct Loop {
   std::optional<zmq::socket_t> sub;
   protocol::SkeletonMessage skeleton;
   std::vector<protocol::PoseMessage> poses;
+  nlohmann::json endpoints;  // bodyd's --endpoints-file, once start() has seen it
 
+  // bodyd up and subscribed to, and dir/poses.txt written for the client to play (play_args).
+  // With a control endpoint, the endpoints must name it.
   ::testing::AssertionResult start(const std::string& control = "none") {
     socket = dir.path / "run" / "SlimeVRDriver";  // bodyd makes the directory (0700)
     std::vector<std::string> args{(test::bin_dir() / "bodyd").string(), "--method", "ik", "--source",
@@ -76,18 +79,36 @@ struct Loop {
                                   "tcp://127.0.0.1:*", "--control", control, "--endpoints-file",
                                   (dir.path / "endpoints.json").string()};
     daemon = std::make_unique<test::Child>(args, dir.path / "bodyd.err");
-    const auto endpoints = test::wait_endpoints(dir.path / "endpoints.json", 20000);
-    if (!endpoints) return ::testing::AssertionFailure() << daemon->log();
-    sub.emplace(test::sub_socket(ctx, (*endpoints)["pub"].get<std::string>()));
+    const auto written = test::wait_endpoints(dir.path / "endpoints.json", 20000);
+    if (!written) return ::testing::AssertionFailure() << daemon->log();
+    endpoints = *written;
+    if (control != "none" && !endpoints.contains("control"))
+      return ::testing::AssertionFailure() << endpoints.dump() << "\n" << daemon->log();
+    sub.emplace(test::sub_socket(ctx, endpoints["pub"].get<std::string>()));
     std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the subscription reaches the publisher
+    write_poses(dir.path / "poses.txt");
     return ::testing::AssertionSuccess();
+  }
+
+  // The driver client's command line: driver_client.py with `args`.
+  std::vector<std::string> client_command(const std::vector<std::string>& args) const {
+    std::vector<std::string> full{python, client_script("driver_client.py").string(), pb_dir().string()};
+    full.insert(full.end(), args.begin(), args.end());
+    return full;
+  }
+
+  // The client's arguments to play dir/poses.txt on the socket, recording what comes back in
+  // dir/received.jsonl, with `options` after.
+  std::vector<std::string> play_args(std::initializer_list<std::string> options = {}) const {
+    std::vector<std::string> args{"play", socket.string(), (dir.path / "poses.txt").string(),
+                                  (dir.path / "received.jsonl").string()};
+    args.insert(args.end(), options);
+    return args;
   }
 
   // Runs the client to its end, collecting the ZeroMQ poses meanwhile.
   int run_client(const std::vector<std::string>& args, const fs::path& err) {
-    std::vector<std::string> full{python, client_script("driver_client.py").string(), pb_dir().string()};
-    full.insert(full.end(), args.begin(), args.end());
-    test::Child client(full, err);
+    test::Child client(client_command(args), err);
     collect_until_quiet(*sub, skeleton, poses, client);
     const int rc = client.wait(0).value_or(-1);
     if (rc != 0) ADD_FAILURE() << "client: " << client.log();
@@ -140,11 +161,7 @@ TEST(SteamvrBridge, DriverLoopTrackersAreTheZmqPoseJoints) {
   EXPECT_TRUE(S_ISSOCK(st.st_mode));
   EXPECT_EQ(st.st_mode & 0077, 0u);
 
-  write_poses(loop.dir.path / "poses.txt");
-  ASSERT_EQ(loop.run_client({"play", loop.socket.string(), (loop.dir.path / "poses.txt").string(),
-                             (loop.dir.path / "received.jsonl").string()},
-                            loop.dir.path / "client.err"),
-            0);
+  ASSERT_EQ(loop.run_client(loop.play_args(), loop.dir.path / "client.err"), 0);
   loop.daemon->signal(SIGINT);
   ASSERT_EQ(loop.daemon->wait(10000), 0) << loop.daemon->log();
   ASSERT_FALSE(loop.skeleton.names.empty());
@@ -168,11 +185,7 @@ TEST(SteamvrBridge, ADriverThatReconnectsGetsItsTrackersAgain) {
   Loop loop;
   if (std::string why = python_skip_reason(loop.python); !why.empty()) GTEST_SKIP() << why;
   ASSERT_TRUE(loop.start());
-  write_poses(loop.dir.path / "poses.txt");
-  ASSERT_EQ(loop.run_client({"play", loop.socket.string(), (loop.dir.path / "poses.txt").string(),
-                             (loop.dir.path / "received.jsonl").string(), "--reconnect-after", "90"},
-                            loop.dir.path / "client.err"),
-            0);
+  ASSERT_EQ(loop.run_client(loop.play_args({"--reconnect-after", "90"}), loop.dir.path / "client.err"), 0);
   loop.daemon->signal(SIGINT);
   ASSERT_EQ(loop.daemon->wait(10000), 0) << loop.daemon->log();
   const Received r = parse(read_jsonl(loop.dir.path / "received.jsonl"));
@@ -207,13 +220,7 @@ TEST(SteamvrBridge, BadInputIsCountedAndDroppedWhileTheGoodDriverKeepsItsTracker
   Loop loop;
   if (std::string why = python_skip_reason(loop.python); !why.empty()) GTEST_SKIP() << why;
   ASSERT_TRUE(loop.start("tcp://127.0.0.1:*"));
-  const auto endpoints = test::wait_endpoints(loop.dir.path / "endpoints.json", 5000);
-  ASSERT_TRUE(endpoints && endpoints->contains("control")) << loop.daemon->log();
-  write_poses(loop.dir.path / "poses.txt");
-  std::vector<std::string> good{loop.python, client_script("driver_client.py").string(), pb_dir().string(), "play",
-                                loop.socket.string(), (loop.dir.path / "poses.txt").string(),
-                                (loop.dir.path / "received.jsonl").string(), "--repeat", "12"};
-  test::Child driver(good, loop.dir.path / "good.err");
+  test::Child driver(loop.client_command(loop.play_args({"--repeat", "12"})), loop.dir.path / "good.err");
 
   struct Case {
     const char* kind;
@@ -227,8 +234,7 @@ TEST(SteamvrBridge, BadInputIsCountedAndDroppedWhileTheGoodDriverKeepsItsTracker
   ::setenv("NEVER_READS_S", "6", 1);
   for (const Case& c : cases) {
     const fs::path out = loop.dir.path / (std::string(c.kind) + ".json");
-    test::Child bad({loop.python, client_script("driver_client.py").string(), pb_dir().string(), "bad", loop.socket.string(),
-                     c.kind, out.string()},
+    test::Child bad(loop.client_command({"bad", loop.socket.string(), c.kind, out.string()}),
                     loop.dir.path / (std::string(c.kind) + ".err"));
     ASSERT_EQ(bad.wait(30000), 0) << c.kind << ": " << bad.log();
     const auto result = read_jsonl(out);
@@ -239,7 +245,7 @@ TEST(SteamvrBridge, BadInputIsCountedAndDroppedWhileTheGoodDriverKeepsItsTracker
     EXPECT_TRUE(result[0]["served_after"].get<bool>()) << c.kind << ": a fresh connection must still be served";
     EXPECT_TRUE(driver.running()) << "the good driver stopped during " << c.kind << ": " << driver.log();
   }
-  const auto status = test::control_request(loop.ctx, (*endpoints)["control"], R"({"cmd":"status"})");
+  const auto status = test::control_request(loop.ctx, loop.endpoints["control"], R"({"cmd":"status"})");
   ASSERT_TRUE(status) << loop.daemon->log();
   const nlohmann::json& src = (*status)["sources"][0];
   nlohmann::json out_status;
@@ -281,21 +287,15 @@ TEST(SteamvrBridge, AfterResetTheTrackersStayInTheDriversSpace) {
   Loop loop;
   if (std::string why = python_skip_reason(loop.python); !why.empty()) GTEST_SKIP() << why;
   ASSERT_TRUE(loop.start("tcp://127.0.0.1:*"));
-  const auto endpoints = test::wait_endpoints(loop.dir.path / "endpoints.json", 5000);
-  ASSERT_TRUE(endpoints && endpoints->contains("control"));
-  write_poses(loop.dir.path / "poses.txt");
-  test::Child driver({loop.python, client_script("driver_client.py").string(), pb_dir().string(), "play",
-                      loop.socket.string(), (loop.dir.path / "poses.txt").string(),
-                      (loop.dir.path / "received.jsonl").string(), "--repeat", "3"},
-                     loop.dir.path / "client.err");
+  test::Child driver(loop.client_command(loop.play_args({"--repeat", "3"})), loop.dir.path / "client.err");
   // Collect for a second, reset, collect the rest.
   const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(1500);
   collect(*loop.sub, loop.skeleton, loop.poses, [&] { return std::chrono::steady_clock::now() > until; });
   const std::size_t before = loop.poses.size();
   ASSERT_GT(before, 20u) << loop.daemon->log();
-  const auto reset = test::control_request(loop.ctx, (*endpoints)["control"], R"({"cmd":"reset"})");
+  const auto reset = test::control_request(loop.ctx, loop.endpoints["control"], R"({"cmd":"reset"})");
   ASSERT_TRUE(reset && (*reset)["ok"] == true) << (reset ? reset->dump() : "no reply");
-  const auto status = test::control_request(loop.ctx, (*endpoints)["control"], R"({"cmd":"status"})");
+  const auto status = test::control_request(loop.ctx, loop.endpoints["control"], R"({"cmd":"status"})");
   ASSERT_TRUE(status && (*status)["recentred"] == true) << (status ? status->dump() : "");
   const double heading = (*status)["recentre"]["heading_deg"].get<double>() * M_PI / 180.0;
   const Vec3 origin((*status)["recentre"]["origin_m"][0].get<double>(), 0.0, (*status)["recentre"]["origin_m"][1].get<double>());
