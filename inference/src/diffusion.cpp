@@ -41,6 +41,7 @@ DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::
       history_(model_scale_history(options.history)),
       filter_(options.filter) {
   if (std::string err = validate(options.filter); !err.empty()) throw std::invalid_argument(err);
+  if (std::string err = validate(options.body_filter); !err.empty()) throw std::invalid_argument(err);
   if (std::string err = features::check_skeleton(skeleton_); !err.empty())
     throw std::invalid_argument(fmt::format("{}: model skeleton: {}", model_->source, err));
   if (network_->dim() != features::kDim)
@@ -73,6 +74,7 @@ DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::
   scratch_global_ = emitted_[0].global;
   out_global_ = emitted_[0].global;
   scratch_pose_ = rest_pose(skeleton_);
+  body_filter_ = PoseFilter(options_.body_filter, skeleton_.size(), features::kHips);
 }
 
 void DiffusionReconstructor::push(const TrackerSample& sample) {
@@ -90,6 +92,7 @@ void DiffusionReconstructor::push(const TrackerSample& sample) {
 void DiffusionReconstructor::reset() {
   history_.clear();
   filter_.reset();
+  body_filter_.reset();
   emitted_head_ = emitted_count_ = 0;
   emitted_dropped_ = false;
   have_last_ = false;
@@ -249,6 +252,7 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
   build_window(t_ns, head, canon, trackers);
   std::array<bool, 2> contact{};
   sample_newest_frame(canon, contact);
+  filter_body(t_ns);
 
   const double frame_dt_s = have_last_ ? static_cast<double>(t_ns - last_t_ns_) / kNsPerS : 0.0;
   TrackedTargets targets;
@@ -265,6 +269,7 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
     hand_was_valid_ = {};
     foot_locked_ = {};
     foot_release_offset_ = {Vec3::Zero(), Vec3::Zero()};
+    body_filter_.reset();
     return false;
   }
   remember_emitted(t_ns, contact);
@@ -343,6 +348,16 @@ void DiffusionReconstructor::sample_newest_frame(const features::Canonical& cano
     const float v = newest[features::kContactOffset + static_cast<int>(s)];
     contact[s] = foot_locked_[s] ? v > options_.contact_off : v > options_.contact_on;
   }
+}
+
+void DiffusionReconstructor::filter_body(std::int64_t t_ns) {
+  // The network's frame-to-frame jitter (larger on motion styles it has not seen) smoothed on the
+  // Hips position and every joint's local rotation. Before the tracked joints are fitted: the
+  // head and hands are then put on their trackers as without the filter, so its lag shows only
+  // in the untracked joints (bodyd-eval's lag_ms).
+  if (!body_filter_.enabled()) return;
+  body_filter_.filter(t_ns, scratch_pose_);
+  forward_kinematics(skeleton_, scratch_pose_, out_global_);
 }
 
 DiffusionReconstructor::HandGoals DiffusionReconstructor::hand_goals(std::int64_t t_ns, double frame_dt_s,

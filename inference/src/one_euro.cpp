@@ -17,30 +17,46 @@ double alpha(double cutoff_hz, double dt_s) {
 }
 }  // namespace
 
-std::string validate(const OneEuroOptions& o) {
+std::string validate(const OneEuroOptions& o, std::string_view group) {
   const auto positive = [](double v) { return std::isfinite(v) && v > 0.0; };
   const auto non_negative = [](double v) { return std::isfinite(v) && v >= 0.0; };
-  if (!positive(o.min_cutoff_hz)) return fmt::format("filter min_cutoff_hz must be > 0, not {}", o.min_cutoff_hz);
+  if (!positive(o.min_cutoff_hz)) return fmt::format("{} min_cutoff_hz must be > 0, not {}", group, o.min_cutoff_hz);
   if (!positive(o.rot_min_cutoff_hz))
-    return fmt::format("filter rot_min_cutoff_hz must be > 0, not {}", o.rot_min_cutoff_hz);
-  if (!positive(o.d_cutoff_hz)) return fmt::format("filter d_cutoff_hz must be > 0, not {}", o.d_cutoff_hz);
-  if (!non_negative(o.beta_per_m_s)) return fmt::format("filter beta_per_m_s must be >= 0, not {}", o.beta_per_m_s);
+    return fmt::format("{} rot_min_cutoff_hz must be > 0, not {}", group, o.rot_min_cutoff_hz);
+  if (!positive(o.d_cutoff_hz)) return fmt::format("{} d_cutoff_hz must be > 0, not {}", group, o.d_cutoff_hz);
+  if (!non_negative(o.beta_per_m_s))
+    return fmt::format("{} beta_per_m_s must be >= 0, not {}", group, o.beta_per_m_s);
   if (!non_negative(o.rot_beta_per_rad_s))
-    return fmt::format("filter rot_beta_per_rad_s must be >= 0, not {}", o.rot_beta_per_rad_s);
-  if (!positive(o.restart_after_s)) return fmt::format("filter restart_after_s must be > 0, not {}", o.restart_after_s);
+    return fmt::format("{} rot_beta_per_rad_s must be >= 0, not {}", group, o.rot_beta_per_rad_s);
+  if (!positive(o.restart_after_s))
+    return fmt::format("{} restart_after_s must be > 0, not {}", group, o.restart_after_s);
   if (!non_negative(o.noise_gate_low_mm) || !(std::isfinite(o.noise_gate_high_mm) && o.noise_gate_high_mm > o.noise_gate_low_mm))
-    return fmt::format("filter noise gate must be 0 <= noise_gate_low_mm < noise_gate_high_mm, not {} and {}",
+    return fmt::format("{} noise gate must be 0 <= noise_gate_low_mm < noise_gate_high_mm, not {} and {}", group,
                        o.noise_gate_low_mm, o.noise_gate_high_mm);
   if (!non_negative(o.rot_noise_gate_low_deg) ||
       !(std::isfinite(o.rot_noise_gate_high_deg) && o.rot_noise_gate_high_deg > o.rot_noise_gate_low_deg))
     return fmt::format(
-        "filter rotation noise gate must be 0 <= rot_noise_gate_low_deg < rot_noise_gate_high_deg, not {} and {}",
+        "{} rotation noise gate must be 0 <= rot_noise_gate_low_deg < rot_noise_gate_high_deg, not {} and {}", group,
         o.rot_noise_gate_low_deg, o.rot_noise_gate_high_deg);
   if (o.noise_window < 16 || o.noise_window > kMaxNoiseWindow)
-    return fmt::format("filter noise_window must be between 16 and {} samples, not {}", kMaxNoiseWindow,
+    return fmt::format("{} noise_window must be between 16 and {} samples, not {}", group, kMaxNoiseWindow,
                        o.noise_window);
   return {};
 }
+
+OneEuroOptions one_euro_options(const BodyFilterOptions& b) {
+  OneEuroOptions o;
+  o.enabled = b.enabled;
+  o.min_cutoff_hz = b.min_cutoff_hz;
+  o.beta_per_m_s = b.beta_per_m_s;
+  o.d_cutoff_hz = b.d_cutoff_hz;
+  o.rot_min_cutoff_hz = b.rot_min_cutoff_hz;
+  o.rot_beta_per_rad_s = b.rot_beta_per_rad_s;
+  o.noise_gate = false;
+  return o;
+}
+
+std::string validate(const BodyFilterOptions& options) { return validate(one_euro_options(options), "body_filter"); }
 
 namespace {
 // The n-th divided difference of values v at times t (seconds), n = kNoiseOrder, expressed as
@@ -117,7 +133,7 @@ TrackerSample OneEuroFilter::filter(const TrackerSample& in) {
     return in;
   }
   if (started_ && in.t_ns <= last_t_ns_) return in;
-  measure_noise(in);
+  if (options_.noise_gate) measure_noise(in);
   const double dt_s = started_ ? static_cast<double>(in.t_ns - last_t_ns_) * 1e-9 : 0.0;
   if (!started_ || dt_s > options_.restart_after_s) {
     started_ = true;
@@ -150,11 +166,37 @@ TrackerSample OneEuroFilter::filter(const TrackerSample& in) {
   const double rot_cutoff = options_.rot_min_cutoff_hz + options_.rot_beta_per_rad_s * w_.norm();
   q_ = slerp(q_, q_in, alpha(rot_cutoff, dt_s)).normalized();
 
-  // The noise gate: only as much of the filter as the tracker's noise calls for.
+  // The noise gate: only as much of the filter as the tracker's noise calls for (all of it
+  // without the gate).
   TrackerSample out = in;
+  if (!options_.noise_gate) {
+    out.position_m = x_;
+    out.rotation = q_;
+    return out;
+  }
   out.position_m = in.position_m + position_gain_ * (x_ - in.position_m);
   out.rotation = slerp(q_in, q_, rotation_gain_).normalized();
   return out;
+}
+
+PoseFilter::PoseFilter(const BodyFilterOptions& options, int joint_count, int translated_joint)
+    : filters_(static_cast<size_t>(std::max(0, joint_count)), OneEuroFilter(one_euro_options(options))),
+      translated_joint_(translated_joint),
+      enabled_(options.enabled) {}
+
+void PoseFilter::filter(std::int64_t t_ns, Pose& pose) {
+  if (!enabled_) return;
+  TrackerSample s;
+  s.t_ns = t_ns;
+  s.valid = true;
+  for (size_t j = 0; j < filters_.size(); ++j) {
+    const bool translated = static_cast<int>(j) == translated_joint_;
+    s.position_m = translated ? pose.local_translations[j] : Vec3::Zero();
+    s.rotation = pose.local_rotations[j];
+    const TrackerSample out = filters_[j].filter(s);
+    pose.local_rotations[j] = out.rotation;
+    if (translated) pose.local_translations[j] = out.position_m;
+  }
 }
 
 }  // namespace bodyd

@@ -23,14 +23,24 @@
 // `noise_gate_high_mm` (rotations likewise, in degrees). A clean tracker (e.g. a headset with
 // sub-millimetre noise) passes unchanged; a noisy one gets the full filter. The noise
 // measurement survives gaps and starts over only at reset().
-// Pure, no allocation; not thread-safe (one thread drives one object).
+// Without the gate (noise_gate false) the full filter always applies: the body filter below.
+//
+// PoseFilter: the same filter on a body pose (the diffusion reconstructor's output-side body
+// filter, diffusion.h, docs/model.md "Body filter"): one OneEuroFilter per joint on its local
+// rotation, and on the local translation of one joint (the Hips: the body's position), without
+// the noise gate, so a constant pose passes unchanged and a jittery one is smoothed.
+// Pure, no allocation (PoseFilter allocates in its constructor only); not thread-safe (one
+// thread drives one object).
 #pragma once
 
+#include "bodyd/motion/skeleton.h"
 #include "bodyd/motion/tracker.h"
 
 #include <array>
 #include <cstdint>
 #include <string>
+#include <string_view>
+#include <vector>
 
 namespace bodyd {
 
@@ -51,11 +61,33 @@ struct OneEuroOptions {
   double rot_noise_gate_low_deg = 0.5;   // measured rotation noise (sigma per axis)
   double rot_noise_gate_high_deg = 0.8;
   int noise_window = 64;             // samples the noise is measured over (16..kMaxNoiseWindow)
+  // false: no noise measurement, the full filter always (gain 1; PoseFilter's setting).
+  bool noise_gate = true;
 };
 inline constexpr int kMaxNoiseWindow = 256;
 inline constexpr int kNoiseOrder = 6;  // the order of the differences the noise is measured by
-// Empty when usable, otherwise what is wrong (names the field).
-[[nodiscard]] std::string validate(const OneEuroOptions& options);
+// Empty when usable, otherwise what is wrong (names the field, after `group`: "filter min_cutoff_hz
+// must be > 0, not 0").
+[[nodiscard]] std::string validate(const OneEuroOptions& options, std::string_view group = "filter");
+
+// The output-side body filter (PoseFilter; the daemon's "body_filter" keys, docs/daemon.md "Body
+// filter"). The same cutoffs as OneEuroOptions: position (the Hips) cutoff_hz = min_cutoff_hz +
+// beta_per_m_s * speed, rotation (every joint's local rotation) rot_min_cutoff_hz +
+// rot_beta_per_rad_s * angular speed. Off by default (the defaults are to be chosen on held-out
+// styles, docs/evaluation.md).
+struct BodyFilterOptions {
+  bool enabled = false;
+  double min_cutoff_hz = 2.0;       // Hips position cutoff of a still body, Hz
+  double beta_per_m_s = 1.0;        // its increase per m/s of Hips speed
+  double d_cutoff_hz = 1.0;         // cutoff of the speed estimates, Hz
+  double rot_min_cutoff_hz = 2.0;   // joint rotation cutoff of a still joint, Hz
+  double rot_beta_per_rad_s = 0.5;  // its increase per rad/s of the joint's angular speed
+};
+// The OneEuroOptions PoseFilter runs with: these cutoffs, no noise gate, the other fields at
+// OneEuroOptions' defaults.
+[[nodiscard]] OneEuroOptions one_euro_options(const BodyFilterOptions& options);
+// Empty when usable, otherwise what is wrong ("body_filter min_cutoff_hz must be > 0, not 0").
+[[nodiscard]] std::string validate(const BodyFilterOptions& options);
 
 // One tracker's filter.
 class OneEuroFilter {
@@ -112,6 +144,28 @@ class TrackerFilter {
  private:
   std::array<OneEuroFilter, kRoleCount> filters_;
   bool enabled_ = true;
+};
+
+// The body filter (see the top): one filter per joint of a skeleton.
+class PoseFilter {
+ public:
+  PoseFilter() = default;
+  // For poses of `joint_count` joints; `translated_joint`'s local translation is filtered too
+  // (-1: none). Disabled options make filter() a no-op.
+  PoseFilter(const BodyFilterOptions& options, int joint_count, int translated_joint);
+  // Filters `pose` (local rotations, and the translated joint's translation) in place as the
+  // sample at t_ns; a time not later than the previous one passes unchanged, and a gap longer
+  // than restart_after_s (0.25 s) starts over. `pose` must have joint_count joints.
+  void filter(std::int64_t t_ns, Pose& pose);
+  void reset() {
+    for (OneEuroFilter& f : filters_) f.reset();
+  }
+  [[nodiscard]] bool enabled() const { return enabled_; }
+
+ private:
+  std::vector<OneEuroFilter> filters_;
+  int translated_joint_ = -1;
+  bool enabled_ = false;
 };
 
 }  // namespace bodyd
