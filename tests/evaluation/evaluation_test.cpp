@@ -7,6 +7,7 @@
 #include "bodyd/simulators/tracker_sim.h"
 
 #include "../test_paths.h"
+#include "bodyd/test/temp_dir.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -67,6 +68,31 @@ std::string run_command(const std::string& cmd, int& status) {
   while (fgets(buf.data(), static_cast<int>(buf.size()), p) != nullptr) out += buf.data();
   status = pclose(p);
   return out;
+}
+
+struct EvalRun {
+  int status = 0;
+  std::string out;        // stdout and stderr
+  nlohmann::json report;  // with run_eval_with_report, when it exits 0
+};
+
+// bodyd-eval with `args`.
+EvalRun run_eval(const std::string& args) {
+  EvalRun run;
+  run.out = run_command((test::bin_dir() / "bodyd-eval").string() + " " + args, run.status);
+  return run;
+}
+
+// bodyd-eval with `args` and --json to a file in a temporary directory, and the report it wrote.
+EvalRun run_eval_with_report(const std::string& args) {
+  const test::TempDir dir("bodyd-eval-report");
+  const std::filesystem::path json = dir.path / "report.json";
+  EvalRun run = run_eval("--json " + json.string() + " " + args);
+  if (run.status == 0) {
+    std::ifstream in(json);
+    run.report = nlohmann::json::parse(in);
+  }
+  return run;
 }
 
 // A reconstructor that breaks the contract: it reports the newest head sample pushed, even one
@@ -252,28 +278,19 @@ TEST(Evaluation, SplitFilesResolveAgainstTheDatasetRoot) {
 }
 
 TEST(BodydEval, CommandLineWritesTheReportAndExplainsMissingMethods) {
-  const auto json = std::filesystem::temp_directory_path() / "bodyd_eval_cli_test.json";
-  std::filesystem::remove(json);
-  const std::string exe = (test::bin_dir() / "bodyd-eval").string();
-  int status = 0;
-  std::string out = run_command(exe + " --methods ik --seed 2 --noise-mm 3 --json " + json.string() + " " +
-                                    kWalk.string() + " " + kBow.string(),
-                                status);
-  ASSERT_EQ(status, 0) << out;
-  EXPECT_NE(out.find("mpjpe_cm"), std::string::npos) << out;
-  std::ifstream in(json);
-  const nlohmann::json j = nlohmann::json::parse(in);
-  EXPECT_EQ(j["clips"], 2);
-  EXPECT_EQ(j["frames"], 90);
-  EXPECT_TRUE(j["methods"]["ik"]["mpjpe_cm"].is_number());
-  std::filesystem::remove(json);
+  const EvalRun ik = run_eval_with_report("--methods ik --seed 2 --noise-mm 3 " + kWalk.string() + " " + kBow.string());
+  ASSERT_EQ(ik.status, 0) << ik.out;
+  EXPECT_NE(ik.out.find("mpjpe_cm"), std::string::npos) << ik.out;
+  EXPECT_EQ(ik.report["clips"], 2);
+  EXPECT_EQ(ik.report["frames"], 90);
+  EXPECT_TRUE(ik.report["methods"]["ik"]["mpjpe_cm"].is_number());
 
-  out = run_command(exe + " --methods diffusion,ik --json " + json.string() + " " + kBow.string(), status);
-  EXPECT_NE(status, 0);
-  EXPECT_NE(out.find("diffusion"), std::string::npos) << out;
-  out = run_command(exe + " --methods ik " + (test::fixtures() / "no_such.bvh").string(), status);
-  EXPECT_NE(status, 0);
-  EXPECT_NE(out.find("no_such.bvh"), std::string::npos) << out;
+  const EvalRun no_model = run_eval_with_report("--methods diffusion,ik " + kBow.string());
+  EXPECT_NE(no_model.status, 0);
+  EXPECT_NE(no_model.out.find("diffusion"), std::string::npos) << no_model.out;
+  const EvalRun no_clip = run_eval("--methods ik " + (test::fixtures() / "no_such.bvh").string());
+  EXPECT_NE(no_clip.status, 0);
+  EXPECT_NE(no_clip.out.find("no_such.bvh"), std::string::npos) << no_clip.out;
 }
 
 // Issue 11: a clip with one finite absurd value (1e300) made bodyd-eval print nan/inf metrics
@@ -288,15 +305,13 @@ TEST(BodydEval, AbsurdClipIsAnErrorNotNanMetrics) {
   text.replace(pos, text.find(' ', pos) - pos, "1e300");  // frame 5's root Xposition
   const auto bad = std::filesystem::temp_directory_path() / "bodyd_eval_absurd_test.bvh";
   std::ofstream(bad, std::ios::binary) << text;
-  int status = 0;
-  const std::string out =
-      run_command((test::bin_dir() / "bodyd-eval").string() + " --methods ik " + bad.string(), status);
+  const EvalRun run = run_eval("--methods ik " + bad.string());
   std::filesystem::remove(bad);
-  EXPECT_NE(status, 0) << out;
-  EXPECT_NE(out.find(bad.string() + ":140:"), std::string::npos) << out;
-  EXPECT_EQ(out.find(" nan"), std::string::npos) << out;
-  EXPECT_EQ(out.find(" inf"), std::string::npos) << out;
-  EXPECT_EQ(out.find("mpjpe_cm"), std::string::npos) << out;
+  EXPECT_NE(run.status, 0) << run.out;
+  EXPECT_NE(run.out.find(bad.string() + ":140:"), std::string::npos) << run.out;
+  EXPECT_EQ(run.out.find(" nan"), std::string::npos) << run.out;
+  EXPECT_EQ(run.out.find(" inf"), std::string::npos) << run.out;
+  EXPECT_EQ(run.out.find("mpjpe_cm"), std::string::npos) << run.out;
 }
 
 // Groups come from dataset-N_{content}_{style}_{take}.bvh names: copies of the fixtures under such
@@ -365,28 +380,19 @@ TEST(Evaluation, BodyScaleCalibratesNearTheTrueScaleAndIsDeterministic) {
 }
 
 TEST(BodydEval, BodyScaleFlagCalibrates) {
-  const auto json = std::filesystem::temp_directory_path() / "bodyd_eval_scale_test.json";
-  std::filesystem::remove(json);
-  int status = 0;
-  const std::string out = run_command((test::bin_dir() / "bodyd-eval").string() + " --methods diffusion --model " +
-                                          (test::fixtures() / "tiny_model.safetensors").string() +
-                                          " --body-scale 1.2 --json " + json.string() + " " + kBow.string(),
-                                      status);
-  ASSERT_EQ(status, 0) << out;
-  EXPECT_NE(out.find("body scale 1.2: calibrated on 1 of 1 clips (0 by the fallback)"), std::string::npos) << out;
-  std::ifstream in(json);
-  const nlohmann::json j = nlohmann::json::parse(in);
+  const std::string diffusion = "--methods diffusion --model " + (test::fixtures() / "tiny_model.safetensors").string();
+  const EvalRun scaled = run_eval_with_report(diffusion + " --body-scale 1.2 " + kBow.string());
+  ASSERT_EQ(scaled.status, 0) << scaled.out;
+  EXPECT_NE(scaled.out.find("body scale 1.2: calibrated on 1 of 1 clips (0 by the fallback)"), std::string::npos)
+      << scaled.out;
+  const nlohmann::json& j = scaled.report;
   EXPECT_EQ(j["body_scale"], 1.2);
   EXPECT_EQ(j["calibration"]["enabled"], true);
   EXPECT_EQ(j["calibration"]["clips_calibrated"], 1);
   EXPECT_LT(j["calibration"]["scale_error"].get<double>(), 0.02);
-  std::filesystem::remove(json);
 
   // The tracker filter's flags: a bad value is refused, naming it.
-  const std::string bad = run_command((test::bin_dir() / "bodyd-eval").string() + " --methods diffusion --model " +
-                                          (test::fixtures() / "tiny_model.safetensors").string() +
-                                          " --filter-min-cutoff-hz 0 " + kBow.string(),
-                                      status);
-  EXPECT_NE(status, 0) << bad;
-  EXPECT_NE(bad.find("min_cutoff_hz must be > 0"), std::string::npos) << bad;
+  const EvalRun bad = run_eval(diffusion + " --filter-min-cutoff-hz 0 " + kBow.string());
+  EXPECT_NE(bad.status, 0) << bad.out;
+  EXPECT_NE(bad.out.find("min_cutoff_hz must be > 0"), std::string::npos) << bad.out;
 }
