@@ -49,6 +49,14 @@ Motion shifted(const Motion& m, const Vec3& offset_m) {
 using bodyd::test::read_file;
 using bodyd::test::read_file_bytes;
 
+// `m` cut to its first `frames` frames, written as tmp/short.bvh.
+fs::path write_short_clip(const TempDir& tmp, const Motion& m, std::size_t frames) {
+  Motion short_clip = m;
+  short_clip.frames.resize(frames);
+  write_bvh(tmp.path / "short.bvh", short_clip);
+  return tmp.path / "short.bvh";
+}
+
 ImageSize png_size(const std::vector<std::uint8_t>& png) {
   const auto chunks = parse_png_chunks(png);
   const auto& d = chunks.front().data;
@@ -175,11 +183,9 @@ TEST(RenderLoad, DefaultLabelsFollowBodydEvalNames) {
 
 TEST(RenderLoad, WrongFrameCountIsAClearError) {
   TempDir tmp;
-  Motion m = walk();
-  Motion short_clip = m;
-  short_clip.frames.resize(50);
-  write_bvh(tmp.path / "short.bvh", short_clip);
-  const std::string e = render_error([&] { (void)load_bvh_prediction(tmp.path / "short.bvh", m, "x"); });
+  const Motion m = walk();
+  const fs::path short_bvh = write_short_clip(tmp, m, 50);
+  const std::string e = render_error([&] { (void)load_bvh_prediction(short_bvh, m, "x"); });
   EXPECT_NE(e.find("short.bvh: 50 frames, but the ground truth has 60"), std::string::npos) << e;
 }
 
@@ -312,12 +318,9 @@ TEST(RenderTool, WritesDeterministicPictures) {
 
 TEST(RenderTool, MismatchedInputsFailWithTheReason) {
   TempDir tmp;
-  Motion m = walk();
-  Motion short_clip = m;
-  short_clip.frames.resize(30);
-  write_bvh(tmp.path / "short.bvh", short_clip);
+  const fs::path short_bvh = write_short_clip(tmp, walk(), 30);
   const std::string truth = (test::fixtures() / "walk_60.bvh").string();
-  RunResult r = run_render("--truth " + truth + " --pred " + (tmp.path / "short.bvh").string() + " --out " +
+  RunResult r = run_render("--truth " + truth + " --pred " + short_bvh.string() + " --out " +
                                (tmp.path / "o").string(),
                            tmp);
   EXPECT_EQ(r.exit_code, 1);
