@@ -185,12 +185,6 @@ TEST(MonadoBridge, HandshakeThenBonesFollowTheZmqPoseFedByTheFeeder) {
             << " deg\n";
 }
 
-}  // namespace
-}  // namespace bodyd
-
-namespace bodyd {
-namespace {
-
 // Bad input on SlimeVRRpc (issue 17 item 4): a length above 16 KiB or below 4 and a flood drop
 // the connection, a bundle that fails FlatBuffers verification is skipped; each is counted by
 // reason in the monado output's status, and a fresh connection's poll is still answered.

@@ -116,9 +116,14 @@ struct Loop {
   }
 };
 
+struct Match {
+  double worst_mm = 0, worst_deg = 0;
+  std::size_t matched = 0;  // groups paired with a pose
+};
+
 // Pairs each group with the first pose at or after the previous group's that matches within
 // 1 mm (poses and groups come in the same order, one group per pose while a driver is connected).
-void compare(const Loop& loop, const Received& r, double& worst_mm, double& worst_deg, std::size_t& matched) {
+void compare(const Loop& loop, const Received& r, Match& m) {
   std::vector<std::size_t> joints;
   for (const auto& [id, joint] : kTrackers) joints.push_back(joint_index(loop.skeleton, joint));
   std::size_t next = 0;
@@ -132,11 +137,21 @@ void compare(const Loop& loop, const Received& r, double& worst_mm, double& wors
     while (p < loop.poses.size() && group_error(r.groups[i], loop.poses[p], joints).first > 1.0) ++p;
     ASSERT_LT(p, loop.poses.size()) << "group " << i << " matches no pose from " << next << " on";
     const auto [mm, deg] = group_error(r.groups[i], loop.poses[p], joints);
-    worst_mm = std::max(worst_mm, mm);
-    worst_deg = std::max(worst_deg, deg);
-    ++matched;
+    m.worst_mm = std::max(m.worst_mm, mm);
+    m.worst_deg = std::max(m.worst_deg, deg);
+    ++m.matched;
     next = p + 1;
   }
+}
+
+// compare, expecting every group paired, within 1 mm and 0.1 degree.
+Match expect_groups_match_poses(const Loop& loop, const Received& r) {
+  Match m;
+  compare(loop, r, m);
+  EXPECT_EQ(m.matched, r.groups.size());
+  EXPECT_LE(m.worst_mm, 1.0);
+  EXPECT_LE(m.worst_deg, 0.1);
+  return m;
 }
 
 void expect_announced(const std::vector<nlohmann::json>& added) {
@@ -172,13 +187,9 @@ TEST(SteamvrBridge, DriverLoopTrackersAreTheZmqPoseJoints) {
   expect_announced(r.announced[0]);
   // One group per pose (the driver was connected for all of them).
   EXPECT_GE(r.groups.size() * 100, loop.poses.size() * 95) << r.groups.size() << " groups for " << loop.poses.size() << " poses";
-  double mm = 0, deg = 0;
-  std::size_t matched = 0;
-  compare(loop, r, mm, deg, matched);
-  EXPECT_EQ(matched, r.groups.size());
-  EXPECT_LE(mm, 1.0);
-  EXPECT_LE(deg, 0.1);
-  std::cout << r.groups.size() << " position groups for " << loop.poses.size() << " poses; worst " << mm << " mm, " << deg << " deg\n";
+  const Match m = expect_groups_match_poses(loop, r);
+  std::cout << r.groups.size() << " position groups for " << loop.poses.size() << " poses; worst " << m.worst_mm << " mm, "
+            << m.worst_deg << " deg\n";
 }
 
 TEST(SteamvrBridge, ADriverThatReconnectsGetsItsTrackersAgain) {
@@ -192,24 +203,13 @@ TEST(SteamvrBridge, ADriverThatReconnectsGetsItsTrackersAgain) {
   ASSERT_EQ(r.announced.size(), 2u);
   expect_announced(r.announced[0]);
   expect_announced(r.announced[1]);
-  double mm = 0, deg = 0;
-  std::size_t matched = 0;
-  compare(loop, r, mm, deg, matched);
+  expect_groups_match_poses(loop, r);
   // Both connections were served: trackers moved on each (the first 90 frames, then the rest
   // once the reconstruction has its history again).
   const auto on = [&](std::size_t c) { return std::count(r.group_connection.begin(), r.group_connection.end(), c); };
   EXPECT_GT(on(1), 60);
   EXPECT_GT(on(2), 20);  // of 88 frames: the reconstruction starts again after the gap
-  EXPECT_EQ(matched, r.groups.size());
-  EXPECT_LE(mm, 1.0);
-  EXPECT_LE(deg, 0.1);
 }
-
-}  // namespace
-}  // namespace bodyd
-
-namespace bodyd {
-namespace {
 
 // Issue 17 item 4: every kind of bad input from another client while a good driver plays a
 // clip: each is counted by reason in `status` (the source's and the output's entries), the
@@ -273,12 +273,6 @@ TEST(SteamvrBridge, BadInputIsCountedAndDroppedWhileTheGoodDriverKeepsItsTracker
   for (const Case& c : cases) EXPECT_NE(log.find(c.reason), std::string::npos) << c.reason;
 }
 
-}  // namespace
-}  // namespace bodyd
-
-namespace bodyd {
-namespace {
-
 // The trackers stay in the driver's space after `reset` (bodyd-ctl reset re-centres bodyd's
 // world; SteamVR's is unchanged): after the reset, each Position is the ZeroMQ pose's joint
 // taken back through the re-centring that `status` reports (docs/control.md):
@@ -324,17 +318,10 @@ TEST(SteamvrBridge, AfterResetTheTrackersStayInTheDriversSpace) {
                          static_cast<float>(q.w())};
     }
   }
-  Loop& l = loop;
-  l.poses = driver_space;
-  const Received rec = parse(read_jsonl(loop.dir.path / "received.jsonl"));
-  double mm = 0, deg = 0;
-  std::size_t matched = 0;
-  compare(l, rec, mm, deg, matched);
-  EXPECT_EQ(matched, rec.groups.size());
-  EXPECT_LE(mm, 1.0);
-  EXPECT_LE(deg, 0.1);
-  std::cout << matched << " groups; after the reset (heading " << heading * 180.0 / M_PI << " deg, origin " << origin.x()
-            << ", " << origin.z() << " m) worst " << mm << " mm, " << deg << " deg\n";
+  loop.poses = driver_space;
+  const Match m = expect_groups_match_poses(loop, parse(read_jsonl(loop.dir.path / "received.jsonl")));
+  std::cout << m.matched << " groups; after the reset (heading " << heading * 180.0 / M_PI << " deg, origin " << origin.x()
+            << ", " << origin.z() << " m) worst " << m.worst_mm << " mm, " << m.worst_deg << " deg\n";
 }
 
 }  // namespace
