@@ -17,6 +17,7 @@
 
 #include "bodyd/test/log_capture.h"
 #include "bodyd/test/sinks.h"
+#include "bodyd/test/temp_dir.h"
 #include "bodyd/test/wait.h"
 
 #include <gtest/gtest.h>
@@ -121,6 +122,19 @@ std::unique_ptr<NetworkSource> open_test_source(NetworkKind kind, std::map<std::
   std::string error;
   auto s = open_network_source(o, error);
   EXPECT_TRUE(s) << error;
+  return s;
+}
+
+// open_test_source, started into `sink` as source 0; nullptr (a test failure) when it did not
+// open or start.
+std::unique_ptr<NetworkSource> start_test_source(NetworkKind kind, CaptureSink& sink,
+                                                 std::map<std::string, Role> vmc_roles = {}) {
+  auto s = open_test_source(kind, std::move(vmc_roles));
+  if (!s) return nullptr;
+  if (const std::string error = s->start(sink, 0); !error.empty()) {
+    ADD_FAILURE() << "start: " << error;
+    return nullptr;
+  }
   return s;
 }
 
@@ -442,10 +456,9 @@ TEST(NetworkSource, MalformedPacketsAreCountedAndNeverReachTheSink) {
 TEST(NetworkSource, VmcAssignsHandsByTheHeadsLeftAndRight) {
   for (const double head_yaw_deg : {0.0, 180.0}) {
     SCOPED_TRACE(head_yaw_deg);
-    auto source = open_test_source(NetworkKind::Vmc);
-    ASSERT_TRUE(source);
     CaptureSink sink;
-    ASSERT_EQ(source->start(sink, 0), "");
+    auto source = start_test_source(NetworkKind::Vmc, sink);
+    ASSERT_TRUE(source);
     UdpSender sender(source->bound_port());
     // Unity quaternion of a yaw about +y.
     const auto half = static_cast<float>(head_yaw_deg * M_PI / 360);
@@ -471,10 +484,9 @@ TEST(NetworkSource, VmcAssignsHandsByTheHeadsLeftAndRight) {
 }
 
 TEST(NetworkSource, VmcConfiguredSerials) {
-  auto source = open_test_source(NetworkKind::Vmc, {{"T1", Role::LeftHand}, {"C9", Role::RightHand}});
-  ASSERT_TRUE(source);
   CaptureSink sink;
-  ASSERT_EQ(source->start(sink, 0), "");
+  auto source = start_test_source(NetworkKind::Vmc, sink, {{"T1", Role::LeftHand}, {"C9", Role::RightHand}});
+  ASSERT_TRUE(source);
   UdpSender sender(source->bound_port());
   sender.send(osc_vmc("/VMC/Ext/Tra/Pos", "T1", {0.3f, 1, 0, 0, 0, 0, 1}));
   sender.send(osc_vmc("/VMC/Ext/Con/Pos", "C9", {-0.3f, 1, 0, 0, 0, 0, 1}));
@@ -611,10 +623,9 @@ TEST(VmcRoles, SerialsAreEscapedInTheLog) {
 
 // Issue 20 item 7: last_error says "nothing received yet" only until something is received.
 TEST(NetworkSource, LastErrorForgetsNothingReceivedOnceDatagramsCome) {
-  auto source = open_test_source(NetworkKind::Vrchat);
-  ASSERT_TRUE(source);
   CaptureSink sink;
-  ASSERT_EQ(source->start(sink, 0), "");
+  auto source = start_test_source(NetworkKind::Vrchat, sink);
+  ASSERT_TRUE(source);
   EXPECT_NE(source->status().last_error.find("nothing received yet"), std::string::npos);
   UdpSender sender(source->bound_port());
   for (int i = 0; i < 10; ++i) sender.send(osc_floats("/tracking/vrsystem/head/pose", {0, 1.6f, 0, 0, 0, 0}));
@@ -624,10 +635,9 @@ TEST(NetworkSource, LastErrorForgetsNothingReceivedOnceDatagramsCome) {
 }
 
 TEST(NetworkSource, UdpLinesKeepTheSendersTimeAsDeviceTime) {
-  auto source = open_test_source(NetworkKind::Udp);
-  ASSERT_TRUE(source);
   CaptureSink sink;
-  ASSERT_EQ(source->start(sink, 0), "");
+  auto source = start_test_source(NetworkKind::Udp, sink);
+  ASSERT_TRUE(source);
   UdpSender sender(source->bound_port());
   sender.send("# bodyd-tracker-log v1\n");
   sender.send("5000,head,1,0,1.6,0,0,0,0,1\n");
@@ -646,10 +656,9 @@ TEST(NetworkSource, UdpLinesKeepTheSendersTimeAsDeviceTime) {
 }
 
 TEST(NetworkSource, StopsPromptly) {
-  auto source = open_test_source(NetworkKind::Udp);
-  ASSERT_TRUE(source);
   CaptureSink sink;
-  ASSERT_EQ(source->start(sink, 0), "");
+  auto source = start_test_source(NetworkKind::Udp, sink);
+  ASSERT_TRUE(source);
   // stop() returns while no datagram comes (how long it takes: bodyd-bench-stop), and what
   // is sent afterwards is not taken.
   const int port = source->bound_port();
@@ -798,6 +807,18 @@ std::vector<TrackerSample> float32_samples() {
   return samples;
 }
 
+// float32_samples() written as a tracker log in a fresh directory, for a sender to play, and
+// the samples a replay of that log gives.
+struct LoggedWalk {
+  test::TempDir dir{"bodyd-net"};
+  fs::path path = dir.path / "walk.csv";
+  std::vector<TrackerSample> samples;
+  LoggedWalk() {
+    write_tracker_log(path, float32_samples());
+    samples = read_tracker_log(path).samples;
+  }
+};
+
 std::vector<BodyPose> reconstruct_all(const std::vector<TrackerSample>& samples) {
   IkReconstructor ik(read_bvh(test::fixtures() / "walk_60.bvh").skeleton);
   std::vector<BodyPose> poses;
@@ -857,27 +878,22 @@ class SameSamples : public ::testing::TestWithParam<NetworkKind> {};
 
 TEST_P(SameSamples, GiveBitIdenticalPosesToATrackerLogReplay) {
   if (std::string why = node_missing(); !why.empty()) GTEST_SKIP() << why;
-  const fs::path dir = fs::temp_directory_path() / ("bodyd-net-" + std::to_string(getpid()));
-  fs::create_directories(dir);
-  const fs::path log_path = dir / "walk.csv";
-  write_tracker_log(log_path, float32_samples());
-  const std::vector<TrackerSample> logged = read_tracker_log(log_path).samples;  // the replay's samples
+  const LoggedWalk log;
+  const std::vector<TrackerSample>& logged = log.samples;  // the replay's samples
 
-  auto source = open_test_source(GetParam(), {{"HMD-1", Role::Head}, {"CON-LEFT", Role::LeftHand},
-                                              {"CON-RIGHT", Role::RightHand}});
-  ASSERT_TRUE(source);
   CaptureSink sink;
-  ASSERT_EQ(source->start(sink, 0), "");
+  auto source = start_test_source(GetParam(), sink, {{"HMD-1", Role::Head}, {"CON-LEFT", Role::LeftHand},
+                                                     {"CON-RIGHT", Role::RightHand}});
+  ASSERT_TRUE(source);
   const bool vmc = GetParam() == NetworkKind::Vmc;
   const NodeRun r = run_node("send_trackers.js", std::string(vmc ? "vmc" : "udp") + " 127.0.0.1 " +
-                                                     std::to_string(source->bound_port()) + " '" + log_path.string() + "'");
+                                                     std::to_string(source->bound_port()) + " '" + log.path.string() + "'");
   ASSERT_EQ(r.exit_code, 0) << r.out;
   ASSERT_TRUE(wait_for([&] { return sink.samples().size() >= logged.size(); }, 5000))
       << sink.samples().size() << " of " << logged.size() << " samples arrived; sender said " << r.out;
   source->stop();
   EXPECT_EQ(source->stats().rejected_total(), 0u);
   expect_same_samples_and_poses(logged, sink.samples(), !vmc);
-  fs::remove_all(dir);
 }
 
 INSTANTIATE_TEST_SUITE_P(VmcAndUdp, SameSamples, ::testing::Values(NetworkKind::Vmc, NetworkKind::Udp),
@@ -887,17 +903,13 @@ INSTANTIATE_TEST_SUITE_P(VmcAndUdp, SameSamples, ::testing::Values(NetworkKind::
 // osc.js (float32, Euler in degrees) must still agree to float precision.
 TEST(VrchatInput, OscJsSenderAgreesWithTheLogToFloatPrecision) {
   if (std::string why = node_missing(); !why.empty()) GTEST_SKIP() << why;
-  const fs::path dir = fs::temp_directory_path() / ("bodyd-vrc-" + std::to_string(getpid()));
-  fs::create_directories(dir);
-  const fs::path log_path = dir / "walk.csv";
-  write_tracker_log(log_path, float32_samples());
-  const std::vector<TrackerSample> logged = read_tracker_log(log_path).samples;
-  auto source = open_test_source(NetworkKind::Vrchat);
-  ASSERT_TRUE(source);
+  const LoggedWalk log;
+  const std::vector<TrackerSample>& logged = log.samples;
   CaptureSink sink;
-  ASSERT_EQ(source->start(sink, 0), "");
+  auto source = start_test_source(NetworkKind::Vrchat, sink);
+  ASSERT_TRUE(source);
   const NodeRun r =
-      run_node("send_trackers.js", "vrchat 127.0.0.1 " + std::to_string(source->bound_port()) + " '" + log_path.string() + "'");
+      run_node("send_trackers.js", "vrchat 127.0.0.1 " + std::to_string(source->bound_port()) + " '" + log.path.string() + "'");
   ASSERT_EQ(r.exit_code, 0) << r.out;
   ASSERT_TRUE(wait_for([&] { return sink.samples().size() >= logged.size(); }, 5000)) << sink.samples().size();
   source->stop();
@@ -912,7 +924,6 @@ TEST(VrchatInput, OscJsSenderAgreesWithTheLogToFloatPrecision) {
   }
   EXPECT_LT(worst_m, 1e-6);
   EXPECT_LT(worst_rad, 1e-5);  // float32 degrees: ~1e-7 relative
-  fs::remove_all(dir);
 }
 
 }  // namespace
