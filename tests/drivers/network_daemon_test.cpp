@@ -49,21 +49,6 @@ using Bytes = std::vector<std::uint8_t>;
 
 using test::read_file;
 
-// bodyd as a child process, stdout and stderr in files in `dir`.
-class Daemon : public test::Process {
- public:
-  Daemon(std::vector<std::string> args, const fs::path& dir)
-      : Process(with_bodyd(std::move(args)), {.stdout_path = dir / "stdout", .stderr_path = dir / "stderr"}) {}
-  // SIGTERM; the exit code within timeout_ms, or nullopt.
-  std::optional<int> stop(int timeout_ms) { return terminate(timeout_ms); }
-
- private:
-  static std::vector<std::string> with_bodyd(std::vector<std::string> args) {
-    args.insert(args.begin(), BODYD_EXE);
-    return args;
-  }
-};
-
 // bodyd's arguments for an IK daemon on loopback TCP (pub on any port, control on a free one)
 // with its endpoints file dir/endpoints.json, reading `sources`.
 std::vector<std::string> ik_daemon_args(const fs::path& dir, const std::vector<std::string>& sources) {
@@ -99,6 +84,32 @@ zmq::socket_t subscribe_all(zmq::context_t& ctx, const std::string& pub) {
   return sub;
 }
 
+// bodyd as a child process (ik_daemon_args, reading `sources`), stdout and stderr in files in
+// `dir`; once it is up, its endpoints (wait_for_endpoints) and a SUB socket taking all it
+// publishes (subscribe_all).
+class Daemon : public test::Process {
+ public:
+  Daemon(const fs::path& dir, const std::vector<std::string>& sources)
+      : Process(with_bodyd(ik_daemon_args(dir, sources)), {.stdout_path = dir / "stdout", .stderr_path = dir / "stderr"}),
+        endpoints(wait_for_endpoints(dir)) {
+    if (up()) sub = subscribe_all(ctx, endpoints["pub"].get<std::string>());
+  }
+  // Its endpoints name the control socket (and `sub` is connected).
+  bool up() const { return endpoints.contains("control"); }
+  // SIGTERM; the exit code within timeout_ms, or nullopt.
+  std::optional<int> stop(int timeout_ms) { return terminate(timeout_ms); }
+
+  nlohmann::json endpoints;
+  zmq::context_t ctx;
+  zmq::socket_t sub;
+
+ private:
+  static std::vector<std::string> with_bodyd(std::vector<std::string> args) {
+    args.insert(args.begin(), BODYD_EXE);
+    return args;
+  }
+};
+
 // Why a test that plays trackers with osc.js cannot run (node or the npm package osc is
 // missing); empty when it can.
 std::string osc_js_skip_reason() {
@@ -133,8 +144,8 @@ int collect_poses(zmq::socket_t& sub, std::chrono::seconds duration, OnPose&& on
 }
 
 // The daemon's status (a {"cmd":"status"} request on its control endpoint), with its sources.
-nlohmann::json daemon_status(zmq::context_t& ctx, const nlohmann::json& endpoints, const Daemon& daemon) {
-  const std::optional<std::string> reply = test::status_reply(ctx, endpoints["control"].get<std::string>());
+nlohmann::json daemon_status(Daemon& daemon) {
+  const std::optional<std::string> reply = test::status_reply(daemon.ctx, daemon.endpoints["control"].get<std::string>());
   EXPECT_TRUE(reply) << daemon.err();
   if (!reply) return {};
   const auto status = nlohmann::json::parse(*reply, nullptr, false);
@@ -181,17 +192,9 @@ TEST(DaemonNetworkInputs, BadPacketsAreCountedWhilePosesKeepComing) {
   const test::TempDir tmp("bodyd-net-e2e");
   const fs::path& dir = tmp.path;
   const int ports[3] = {test::free_loopback_port(), test::free_loopback_port(), test::free_loopback_port()};
-  Daemon daemon(ik_daemon_args(dir, {"vrchat:127.0.0.1:" + std::to_string(ports[0]) + "?oscquery=off",
-                                     "vmc:127.0.0.1:" + std::to_string(ports[1]),
-                                     "udp:127.0.0.1:" + std::to_string(ports[2])}),
-                dir);
-  nlohmann::json endpoints = wait_for_endpoints(dir);
-  ASSERT_TRUE(endpoints.contains("control")) << daemon.err();
-  zmq::context_t ctx;
-  zmq::socket_t sub(ctx, zmq::socket_type::sub);
-  sub.set(zmq::sockopt::linger, 0);
-  sub.set(zmq::sockopt::subscribe, "");
-  sub.connect(endpoints["pub"].get<std::string>());
+  Daemon daemon(dir, {"vrchat:127.0.0.1:" + std::to_string(ports[0]) + "?oscquery=off",
+                      "vmc:127.0.0.1:" + std::to_string(ports[1]), "udp:127.0.0.1:" + std::to_string(ports[2])});
+  ASSERT_TRUE(daemon.up()) << daemon.err();
 
   // The sender: good VRChat poses at 90 Hz for 2 s; the bad packets in the middle second.
   const std::vector<Bad> bad = bad_packets();
@@ -222,7 +225,7 @@ TEST(DaemonNetworkInputs, BadPacketsAreCountedWhilePosesKeepComing) {
   });
 
   int poses_after_bad = 0, non_finite = 0;
-  const int poses = collect_poses(sub, std::chrono::seconds(4), [&](const protocol::PoseMessage& pose) {
+  const int poses = collect_poses(daemon.sub, std::chrono::seconds(4), [&](const protocol::PoseMessage& pose) {
     if (bad_sent.load()) ++poses_after_bad;
     for (const auto& j : pose.joints)
       for (float v : j.position_m) non_finite += !std::isfinite(v);
@@ -232,7 +235,7 @@ TEST(DaemonNetworkInputs, BadPacketsAreCountedWhilePosesKeepComing) {
   EXPECT_GT(poses_after_bad, 10) << "the daemon stopped publishing after the bad packets\n" << daemon.err();
   EXPECT_EQ(non_finite, 0);
 
-  const nlohmann::json status = daemon_status(ctx, endpoints, daemon);
+  const nlohmann::json status = daemon_status(daemon);
   ASSERT_TRUE(status.contains("sources"));
   ASSERT_EQ(status["sources"].size(), 3u) << status.dump(2);
   std::map<std::string, int> expected[3];
@@ -269,16 +272,13 @@ TEST(DaemonNetworkInputs, VrchatSenderDrivesThePoseStream) {
   const std::vector<TrackerSample> samples = simulate_trackers(read_bvh(test::fixtures() / "walk_60.bvh"), sim);
   write_tracker_log(dir / "walk.csv", samples);
   const int port = test::free_loopback_port();
-  Daemon daemon(ik_daemon_args(dir, {"vrchat:127.0.0.1:" + std::to_string(port)}), dir);
-  nlohmann::json endpoints = wait_for_endpoints(dir);
-  ASSERT_TRUE(endpoints.contains("control")) << daemon.err();
-  zmq::context_t ctx;
-  zmq::socket_t sub = subscribe_all(ctx, endpoints["pub"].get<std::string>());
+  Daemon daemon(dir, {"vrchat:127.0.0.1:" + std::to_string(port)});
+  ASSERT_TRUE(daemon.up()) << daemon.err();
 
   std::thread sender([&] { play_tracker_log("vrchat", port, dir); });
   const std::uint32_t all = protocol::kFlagHeadValid | protocol::kFlagLeftHandValid | protocol::kFlagRightHandValid;
   int tracked = 0;
-  const int poses = collect_poses(sub, std::chrono::seconds(5), [&](const protocol::PoseMessage& pose) {
+  const int poses = collect_poses(daemon.sub, std::chrono::seconds(5), [&](const protocol::PoseMessage& pose) {
     if ((pose.flags & all) == all) ++tracked;
   });
   sender.join();
@@ -302,11 +302,8 @@ TEST(DaemonNetworkInputs, AForgedVmcSerialCannotKeepOrStealTheHead) {
   samples.resize(3 * 360);  // 360 time steps, 4 s at the sender's 11 ms
   write_tracker_log(dir / "walk.csv", samples);
   const int port = test::free_loopback_port();
-  Daemon daemon(ik_daemon_args(dir, {"vmc:127.0.0.1:" + std::to_string(port)}), dir);
-  nlohmann::json endpoints = wait_for_endpoints(dir);
-  ASSERT_TRUE(endpoints.contains("control")) << daemon.err();
-  zmq::context_t ctx;
-  zmq::socket_t sub = subscribe_all(ctx, endpoints["pub"].get<std::string>());
+  Daemon daemon(dir, {"vmc:127.0.0.1:" + std::to_string(port)});
+  ASSERT_TRUE(daemon.up()) << daemon.err();
 
   const int fd = socket(AF_INET, SOCK_DGRAM, 0);
   sockaddr_in to{};
@@ -329,7 +326,7 @@ TEST(DaemonNetworkInputs, AForgedVmcSerialCannotKeepOrStealTheHead) {
   });
   const std::uint32_t all = protocol::kFlagHeadValid | protocol::kFlagLeftHandValid | protocol::kFlagRightHandValid;
   int tracked = 0;
-  const int poses = collect_poses(sub, std::chrono::seconds(5), [&](const protocol::PoseMessage& pose) {
+  const int poses = collect_poses(daemon.sub, std::chrono::seconds(5), [&](const protocol::PoseMessage& pose) {
     if ((pose.flags & all) == all) ++tracked;
   });
   sender.join();
@@ -340,7 +337,7 @@ TEST(DaemonNetworkInputs, AForgedVmcSerialCannotKeepOrStealTheHead) {
   // kept the head and no pose came after the first).
   EXPECT_GE(tracked, 60) << poses << " poses\n" << daemon.err();
 
-  const nlohmann::json status = daemon_status(ctx, endpoints, daemon);
+  const nlohmann::json status = daemon_status(daemon);
   ASSERT_TRUE(status.contains("sources"));
   // FORGED-2's 15 poses were dropped, never used as the head.
   EXPECT_GE(status["sources"][0]["counters"]["unassigned"].get<int>(), 15) << status.dump(2);
