@@ -4,10 +4,10 @@
 
 #include <lo/lo.h>
 
-#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <memory>
+#include <optional>
 
 namespace bodyd::drivers {
 
@@ -29,6 +29,21 @@ std::string_view input_reject_name(InputReject reason) {
 namespace {
 
 constexpr std::uint8_t kBundleTag[8] = {'#', 'b', 'u', 'n', 'd', 'l', 'e', 0};
+
+// An OSC address a decoder takes, and what it stands for.
+template <class T>
+struct KnownAddress {
+  std::string_view address;
+  T meaning;
+};
+
+// What `address` stands for in `table`; nullopt when the table lacks it.
+template <class T, std::size_t N>
+std::optional<T> meaning_of(const KnownAddress<T> (&table)[N], std::string_view address) {
+  for (const KnownAddress<T>& known : table)
+    if (known.address == address) return known.meaning;
+  return std::nullopt;
+}
 
 std::uint32_t read_be32(const std::uint8_t* p) {
   return (std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) | (std::uint32_t{p[2]} << 8) | std::uint32_t{p[3]};
@@ -177,18 +192,14 @@ Quat unity_euler_deg_to_quat(double x_deg, double y_deg, double z_deg) {
 MessageUse decode_vrchat_message(const OscMessage& m, VrchatPose& out, InputReject& out_reject) {
   out_reject = InputReject::None;
   static constexpr std::string_view kPrefix = "/tracking/vrsystem/";
-  static constexpr struct {
-    std::string_view address;
-    Role role;
-  } kAddresses[] = {{"/tracking/vrsystem/head/pose", Role::Head},
-                    {"/tracking/vrsystem/leftwrist/pose", Role::LeftHand},
-                    {"/tracking/vrsystem/rightwrist/pose", Role::RightHand}};
+  static constexpr KnownAddress<Role> kAddresses[] = {{"/tracking/vrsystem/head/pose", Role::Head},
+                                                      {"/tracking/vrsystem/leftwrist/pose", Role::LeftHand},
+                                                      {"/tracking/vrsystem/rightwrist/pose", Role::RightHand}};
   if (!m.address.starts_with(kPrefix)) return MessageUse::Ignore;
-  const auto* known = std::find_if(std::begin(kAddresses), std::end(kAddresses),
-                                   [&](const auto& a) { return a.address == m.address; });
-  if (known == std::end(kAddresses)) return MessageUse::Ignore;
+  const std::optional<Role> role = meaning_of(kAddresses, m.address);
+  if (!role) return MessageUse::Ignore;
   if ((out_reject = check_types(m, "ffffff")) != InputReject::None) return MessageUse::Reject;
-  out.role = known->role;
+  out.role = *role;
   for (int i = 0; i < 3; ++i) {
     out.position_unity[i] = m.args[i].number;
     out.euler_deg_unity[i] = m.args[3 + i].number;
@@ -217,17 +228,13 @@ TrackerSample sample_from_vrchat(const VrchatPose& pose, std::int64_t t_ns) {
 // ---------------------------------------------------------------------------------------------
 MessageUse decode_vmc_message(const OscMessage& m, VmcPose& out, InputReject& out_reject) {
   out_reject = InputReject::None;
-  static constexpr struct {
-    std::string_view address;
-    VmcDevice device;
-  } kAddresses[] = {{"/VMC/Ext/Hmd/Pos", VmcDevice::Hmd},
-                    {"/VMC/Ext/Con/Pos", VmcDevice::Controller},
-                    {"/VMC/Ext/Tra/Pos", VmcDevice::Tracker}};
-  const auto* known = std::find_if(std::begin(kAddresses), std::end(kAddresses),
-                                   [&](const auto& a) { return a.address == m.address; });
-  if (known == std::end(kAddresses)) return MessageUse::Ignore;  // bones, blend shapes, .../Pos/Local, ...
+  static constexpr KnownAddress<VmcDevice> kAddresses[] = {{"/VMC/Ext/Hmd/Pos", VmcDevice::Hmd},
+                                                           {"/VMC/Ext/Con/Pos", VmcDevice::Controller},
+                                                           {"/VMC/Ext/Tra/Pos", VmcDevice::Tracker}};
+  const std::optional<VmcDevice> device = meaning_of(kAddresses, m.address);
+  if (!device) return MessageUse::Ignore;  // bones, blend shapes, .../Pos/Local, ...
   if ((out_reject = check_types(m, "sfffffff")) != InputReject::None) return MessageUse::Reject;
-  out.device = known->device;
+  out.device = *device;
   out.serial = m.args[0].text;
   const Vec3 p(m.args[1].number, m.args[2].number, m.args[3].number);
   // Eigen's constructor takes (w, x, y, z); VMC writes x, y, z, w.
