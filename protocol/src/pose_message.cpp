@@ -156,6 +156,33 @@ std::uint32_t fnv1a(const std::uint8_t* p, std::size_t n) {
   return h == 0 ? 1u : h;
 }
 
+// What a decoder checks first: the message's whole header is there and starts with its magic.
+struct MessageKind {
+  const char* name;  // "pose", "skeleton"
+  std::size_t header_size;
+  const std::array<std::uint8_t, 4>& magic;
+};
+constexpr MessageKind kPoseKind{"pose", kPoseHeaderSize, kPoseMagic};
+constexpr MessageKind kSkeletonKind{"skeleton", kSkeletonHeaderSize, kSkeletonMagic};
+static_assert(kPoseOffMagic == 0, "both headers start with their magic");
+
+// Empty when `bytes` holds kind's whole header and starts with its magic; else the error, which
+// says when the bytes are the `other` kind of message.
+Status check_header(std::span<const std::uint8_t> bytes, const MessageKind& kind, const MessageKind& other) {
+  if (bytes.size() < kind.header_size) {
+    return fail(fmt::format("{} message: {} bytes is shorter than the {}-byte header", kind.name, bytes.size(),
+                            kind.header_size));
+  }
+  if (std::memcmp(bytes.data(), kind.magic.data(), kind.magic.size()) != 0) {
+    const bool is_other = std::memcmp(bytes.data(), other.magic.data(), other.magic.size()) == 0;
+    return fail(fmt::format("{} message: wrong magic {} (expected {}, \"{}\"){}", kind.name, hex_bytes(bytes.data(), 4),
+                            hex_bytes(kind.magic.data(), kind.magic.size()),
+                            std::string(kind.magic.begin(), kind.magic.end()),
+                            is_other ? fmt::format("; this is a {} message", other.name) : std::string()));
+  }
+  return {};
+}
+
 }  // namespace
 
 // ---- Pose ----------------------------------------------------------------------------------
@@ -186,17 +213,8 @@ Status encode_pose(const PoseMessage& pose, std::vector<std::uint8_t>& out) {
 }
 
 Status decode_pose(std::span<const std::uint8_t> bytes, PoseMessage& out) {
+  if (Status s = check_header(bytes, kPoseKind, kSkeletonKind); !s) return s;
   Reader r(bytes);
-  if (bytes.size() < kPoseHeaderSize) {
-    return fail(fmt::format("pose message: {} bytes is shorter than the {}-byte header", bytes.size(),
-                            kPoseHeaderSize));
-  }
-  if (std::memcmp(r.at(kPoseOffMagic), kPoseMagic.data(), kPoseMagic.size()) != 0) {
-    return fail(fmt::format("pose message: wrong magic {} (expected 42 44 50 4f, \"BDPO\"){}",
-                            hex_bytes(r.at(0), 4),
-                            std::memcmp(r.at(0), kSkeletonMagic.data(), 4) == 0
-                                ? "; this is a skeleton message" : ""));
-  }
   const std::uint16_t version = r.u16(kPoseOffVersion);
   if (version != kPoseVersion) {
     return fail(fmt::format("pose message: unsupported version {} (this decoder reads version {}; "
@@ -314,16 +332,8 @@ Status encode_skeleton(const SkeletonMessage& skeleton, std::vector<std::uint8_t
 }
 
 Status decode_skeleton(std::span<const std::uint8_t> bytes, SkeletonMessage& out) {
+  if (Status s = check_header(bytes, kSkeletonKind, kPoseKind); !s) return s;
   Reader r(bytes);
-  if (bytes.size() < kSkeletonHeaderSize) {
-    return fail(fmt::format("skeleton message: {} bytes is shorter than the {}-byte header", bytes.size(),
-                            kSkeletonHeaderSize));
-  }
-  if (std::memcmp(r.at(0), kSkeletonMagic.data(), kSkeletonMagic.size()) != 0) {
-    return fail(fmt::format("skeleton message: wrong magic {} (expected 42 44 53 4b, \"BDSK\"){}",
-                            hex_bytes(r.at(0), 4),
-                            std::memcmp(r.at(0), kPoseMagic.data(), 4) == 0 ? "; this is a pose message" : ""));
-  }
   const std::uint16_t version = r.u16(kSkelOffVersion);
   if (version != kSkeletonVersion && version != kSkeletonVersionWithoutRest) {
     return fail(fmt::format("skeleton message: unsupported version {} (this decoder reads versions {} and {}; "
