@@ -3,6 +3,16 @@
 #include <stdexcept>
 
 namespace bodyd::daemon {
+namespace {
+
+// A copy of `field`, read while holding `mutex`.
+template <class T>
+T read_locked(std::mutex& mutex, const T& field) {
+  std::lock_guard lock(mutex);
+  return field;
+}
+
+}  // namespace
 
 SampleQueue::SampleQueue(std::size_t capacity, std::chrono::nanoseconds max_age)
     : ring_(capacity), may_drop_stale_(capacity, 0), max_age_(max_age) {
@@ -69,24 +79,9 @@ bool SampleQueue::pop(drivers::SourceSample& out, std::chrono::nanoseconds timeo
   return true;
 }
 
-std::size_t SampleQueue::size() const {
-  std::lock_guard lock(mutex_);
-  return count_;
-}
-
-std::uint64_t SampleQueue::pushed() const {
-  std::lock_guard lock(mutex_);
-  return pushed_;
-}
-
-std::uint64_t SampleQueue::dropped() const {
-  std::lock_guard lock(mutex_);
-  return dropped_;
-}
-
-std::uint64_t SampleQueue::dropped_stale() const {
-  std::lock_guard lock(mutex_);
-  return dropped_stale_;
-}
+std::size_t SampleQueue::size() const { return read_locked(mutex_, count_); }
+std::uint64_t SampleQueue::pushed() const { return read_locked(mutex_, pushed_); }
+std::uint64_t SampleQueue::dropped() const { return read_locked(mutex_, dropped_); }
+std::uint64_t SampleQueue::dropped_stale() const { return read_locked(mutex_, dropped_stale_); }
 
 }  // namespace bodyd::daemon
