@@ -24,14 +24,27 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <optional>
 #include <span>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace bodyd::test {
 
 inline std::string_view as_text(const std::uint8_t* data, std::size_t size) {
   return {reinterpret_cast<const char*>(data), size};
+}
+
+// What `read` returns, or nullopt when it throws `Error` (the reader refused the input: nothing
+// more to check).
+template <class Error, class Read>
+auto accepted(Read&& read) -> std::optional<decltype(read())> {
+  try {
+    return read();
+  } catch (const Error&) {
+    return std::nullopt;
+  }
 }
 
 inline bool within_limits(const Vec3& p) {
@@ -42,15 +55,12 @@ inline bool within_limits(const Vec3& p) {
 // through TrackerLogParser). Accepted samples are within the limits, unit, ordered per role,
 // and the writer writes them back to the same samples.
 inline void fuzz_tracker_log(const std::uint8_t* data, std::size_t size) {
-  TrackerLog log;
-  try {
-    log = parse_tracker_log(as_text(data, size), "fuzz");
-  } catch (const TrackerLogError&) {
-    return;
-  }
+  const std::optional<TrackerLog> log =
+      accepted<TrackerLogError>([&] { return parse_tracker_log(as_text(data, size), "fuzz"); });
+  if (!log) return;
   std::array<std::int64_t, kRoleCount> last{};
   std::array<bool, kRoleCount> seen{};
-  for (const TrackerSample& s : log.samples) {
+  for (const TrackerSample& s : log->samples) {
     const auto r = static_cast<std::size_t>(s.role);
     fuzz_check(r < kRoleCount, "tracker log: role out of range");
     fuzz_check(limits::time_plausible(s.t_ns), "tracker log: t_ns outside the limits");
@@ -63,14 +73,14 @@ inline void fuzz_tracker_log(const std::uint8_t* data, std::size_t size) {
   }
   std::string text;
   try {
-    text = format_tracker_log(log.samples);
+    text = format_tracker_log(log->samples);
   } catch (const TrackerLogError&) {
     fuzz_check(false, "tracker log: the writer refuses samples the reader accepted");
   }
   const TrackerLog back = parse_tracker_log(text, "fuzz round trip");  // throws (aborts) if not
-  fuzz_check(back.samples.size() == log.samples.size(), "tracker log: round trip changed the count");
+  fuzz_check(back.samples.size() == log->samples.size(), "tracker log: round trip changed the count");
   for (std::size_t i = 0; i < back.samples.size(); ++i) {
-    const TrackerSample& a = log.samples[i];
+    const TrackerSample& a = log->samples[i];
     const TrackerSample& b = back.samples[i];
     fuzz_check(a.t_ns == b.t_ns && a.role == b.role && a.valid == b.valid, "tracker log: round trip");
     if (a.valid) fuzz_check(a.position_m == b.position_m, "tracker log: round trip changed a position");
@@ -80,12 +90,9 @@ inline void fuzz_tracker_log(const std::uint8_t* data, std::size_t size) {
 // BVH text: parse_bvh. An accepted clip has a valid skeleton, lengths within the limits and
 // finite forward kinematics in every frame.
 inline void fuzz_bvh(const std::uint8_t* data, std::size_t size) {
-  Motion m;
-  try {
-    m = parse_bvh(as_text(data, size), "fuzz.bvh");
-  } catch (const BvhError&) {
-    return;
-  }
+  const std::optional<Motion> clip = accepted<BvhError>([&] { return parse_bvh(as_text(data, size), "fuzz.bvh"); });
+  if (!clip) return;
+  const Motion& m = *clip;
   fuzz_check(m.skeleton.validate().empty(), "bvh: accepted an invalid skeleton");
   for (const Vec3& o : m.skeleton.offsets) fuzz_check(within_limits(o), "bvh: OFFSET outside the limits");
   GlobalPose g;
@@ -144,17 +151,32 @@ inline void fuzz_control(const std::uint8_t* data, std::size_t size) {
 // only ModelFileError; a loaded model has what the loader promises.
 inline void fuzz_model(const std::uint8_t* data, std::size_t size) {
   const std::span<const std::byte> bytes(reinterpret_cast<const std::byte*>(data), size);
-  try {
-    (void)inference::parse_tensor_file(bytes, "fuzz.safetensors");
-  } catch (const inference::ModelFileError&) {
-  }
-  try {
-    const inference::Model model = inference::parse_model(bytes, "fuzz.safetensors");
-    fuzz_check(model.norm_std.size() == static_cast<std::size_t>(model.config.dim()), "model: norm_std size");
-    for (float s : model.norm_std) fuzz_check(std::isfinite(s) && s > 0.0f, "model: norm_std not positive");
-    fuzz_check(model.skeleton.validate().empty(), "model: invalid skeleton");
-  } catch (const inference::ModelFileError&) {
-  }
+  (void)accepted<inference::ModelFileError>([&] { return inference::parse_tensor_file(bytes, "fuzz.safetensors"); });
+  const std::optional<inference::Model> model =
+      accepted<inference::ModelFileError>([&] { return inference::parse_model(bytes, "fuzz.safetensors"); });
+  if (!model) return;
+  fuzz_check(model->norm_std.size() == static_cast<std::size_t>(model->config.dim()), "model: norm_std size");
+  for (float s : model->norm_std) fuzz_check(std::isfinite(s) && s > 0.0f, "model: norm_std not positive");
+  fuzz_check(model->skeleton.validate().empty(), "model: invalid skeleton");
+}
+
+// `bytes` decoded, and that message encoded and decoded again (`back`); nullopt when `bytes`
+// do not decode. What decodes must encode, and what it encodes to must decode.
+template <class Message>
+struct RoundTrip {
+  Message decoded, back;
+};
+template <class Message>
+std::optional<RoundTrip<Message>> round_trip(std::span<const std::uint8_t> bytes,
+                                             protocol::Status (*decode)(std::span<const std::uint8_t>, Message&),
+                                             protocol::Status (*encode)(const Message&, std::vector<std::uint8_t>&),
+                                             const char* does_not_encode, const char* does_not_decode_again) {
+  RoundTrip<Message> r;
+  if (!decode(bytes, r.decoded).ok()) return std::nullopt;
+  std::vector<std::uint8_t> again;
+  fuzz_check(encode(r.decoded, again).ok(), does_not_encode);
+  fuzz_check(decode(again, r.back).ok(), does_not_decode_again);
+  return r;
 }
 
 // Pose stream frames (docs/protocol.md): decode_pose and decode_skeleton on the same bytes;
@@ -162,12 +184,10 @@ inline void fuzz_model(const std::uint8_t* data, std::size_t size) {
 inline void fuzz_pose_message(const std::uint8_t* data, std::size_t size) {
   using namespace bodyd::protocol;
   const std::span<const std::uint8_t> bytes(data, size);
-  PoseMessage pose;
-  if (decode_pose(bytes, pose).ok()) {
-    std::vector<std::uint8_t> again;
-    fuzz_check(encode_pose(pose, again).ok(), "pose: a decoded pose does not encode");
-    PoseMessage back;
-    fuzz_check(decode_pose(again, back).ok(), "pose: re-encoded pose does not decode");
+  if (const auto r = round_trip(bytes, &decode_pose, &encode_pose, "pose: a decoded pose does not encode",
+                                "pose: re-encoded pose does not decode")) {
+    const PoseMessage& pose = r->decoded;
+    const PoseMessage& back = r->back;
     fuzz_check(back.seq == pose.seq && back.t_ns == pose.t_ns && back.publish_t_ns == pose.publish_t_ns &&
                          back.skeleton_id == pose.skeleton_id && back.root_joint == pose.root_joint &&
                          back.joints.size() == pose.joints.size(),
@@ -175,12 +195,10 @@ inline void fuzz_pose_message(const std::uint8_t* data, std::size_t size) {
     for (std::size_t i = 0; i < pose.joints.size(); ++i)
       fuzz_check(back.joints[i].position_m == pose.joints[i].position_m, "pose: round trip changed a joint");
   }
-  SkeletonMessage skeleton;
-  if (decode_skeleton(bytes, skeleton).ok()) {
-    std::vector<std::uint8_t> again;
-    fuzz_check(encode_skeleton(skeleton, again).ok(), "skeleton: a decoded skeleton does not encode");
-    SkeletonMessage back;
-    fuzz_check(decode_skeleton(again, back).ok(), "skeleton: re-encoded skeleton does not decode");
+  if (const auto r = round_trip(bytes, &decode_skeleton, &encode_skeleton, "skeleton: a decoded skeleton does not encode",
+                                "skeleton: re-encoded skeleton does not decode")) {
+    const SkeletonMessage& skeleton = r->decoded;
+    const SkeletonMessage& back = r->back;
     fuzz_check(back.names == skeleton.names && back.parents == skeleton.parents &&
                          back.offsets_m == skeleton.offsets_m && back.skeleton_id == skeleton.skeleton_id,
                      "skeleton: round trip changed a field");
