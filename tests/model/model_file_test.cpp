@@ -122,6 +122,18 @@ class ModelFileTest : public ::testing::Test {
     }
   }
   void expect_error(const Parts& p, std::initializer_list<std::string> needles) { expect_error(p.bytes(), needles); }
+  // expect_error for the valid file with its metadata entry `key` set to `value`.
+  void expect_error_with_meta(const std::string& key, const Json& value, std::initializer_list<std::string> needles) {
+    Parts p = parts();
+    p.meta()[key] = value;
+    expect_error(p, needles);
+  }
+  // expect_error for the valid file without its metadata entry `key`.
+  void expect_error_without_meta(const std::string& key, std::initializer_list<std::string> needles) {
+    Parts p = parts();
+    p.meta().erase(key);
+    expect_error(p, needles);
+  }
 
   Parts parts() const { return Parts::of(valid_); }
 
@@ -227,32 +239,22 @@ TEST_F(ModelFileTest, MalformedJson) {
 }
 
 TEST_F(ModelFileTest, WrongFormat) {
-  Parts p = parts();
-  p.meta()["format"] = "gguf";
-  expect_error(p, {"\"format\"", "gguf"});
-  p = parts();
-  p.meta().erase("format");
-  expect_error(p, {"\"format\" is missing"});
+  expect_error_with_meta("format", "gguf", {"\"format\"", "gguf"});
+  expect_error_without_meta("format", {"\"format\" is missing"});
 }
 
 TEST_F(ModelFileTest, WrongFormatVersion) {
-  Parts p = parts();
-  p.meta()["format_version"] = "2";
-  expect_error(p, {"format_version", "\"2\""});
+  expect_error_with_meta("format_version", "2", {"format_version", "\"2\""});
 }
 
 TEST_F(ModelFileTest, UnknownArchitecture) {
-  Parts p = parts();
-  p.meta()["architecture"] = "transformer-v9";
-  expect_error(p, {"architecture", "transformer-v9"});
+  expect_error_with_meta("architecture", "transformer-v9", {"architecture", "transformer-v9"});
 }
 
 TEST_F(ModelFileTest, FeatureVersionMismatch) {
-  Parts p = parts();
-  p.meta()["feature_version"] = std::to_string(features::kVersion + 1);
-  expect_error(p, {"feature_version", std::to_string(features::kVersion + 1)});
-  p.meta()["feature_version"] = "one";
-  expect_error(p, {"feature_version", "integer"});
+  const std::string next = std::to_string(features::kVersion + 1);
+  expect_error_with_meta("feature_version", next, {"feature_version", next});
+  expect_error_with_meta("feature_version", "one", {"feature_version", "integer"});
 }
 
 TEST_F(ModelFileTest, ConfigProblems) {
@@ -268,9 +270,7 @@ TEST_F(ModelFileTest, ConfigProblems) {
   p = parts();
   p.edit_meta_json("config", [](Json& j) { j["TE"] = 63; });
   expect_error(p, {"\"TE\" must be even"});
-  p = parts();
-  p.meta()["config"] = "{W: 4";
-  expect_error(p, {"\"config\" is not valid JSON"});
+  expect_error_with_meta("config", "{W: 4", {"\"config\" is not valid JSON"});
   p = parts();
   // A config that disagrees with the tensors: the first tensor whose shape follows H is named.
   p.edit_meta_json("config", [](Json& j) { j["H"] = 32; });
@@ -359,22 +359,14 @@ TEST_F(ModelFileTest, OverlapBehindAnEmptyOrSmallTensorIsFound) {
 }
 
 TEST_F(ModelFileTest, MetadataNotStrings) {
-  Parts p = parts();
-  p.meta()["fps"] = 30;
-  expect_error(p, {"\"fps\" must be a string"});
-  p = parts();
-  p.meta()["fps"] = "-30";
-  expect_error(p, {"fps", "> 0"});
-  p = parts();
-  p.meta().erase("provenance");
-  expect_error(p, {"\"provenance\" is missing"});
+  expect_error_with_meta("fps", 30, {"\"fps\" must be a string"});
+  expect_error_with_meta("fps", "-30", {"fps", "> 0"});
+  expect_error_without_meta("provenance", {"\"provenance\" is missing"});
 }
 
 TEST_F(ModelFileTest, BadSkeleton) {
+  expect_error_with_meta("skeleton", "{\"names\": [", {"\"skeleton\" is not valid JSON"});
   Parts p = parts();
-  p.meta()["skeleton"] = "{\"names\": [";
-  expect_error(p, {"\"skeleton\" is not valid JSON"});
-  p = parts();
   p.edit_meta_json("skeleton", [](Json& j) {
     for (const char* k : {"names", "parents", "offsets_m"}) j[k].erase(j[k].size() - 1);
   });
