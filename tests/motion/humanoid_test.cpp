@@ -52,6 +52,14 @@ std::pair<double, double> fk_error(const Skeleton& s, const UnityRig& rig, const
   return {worst_p, worst_q};
 }
 
+// make_rest_pose and make_unity_rig for `s`; the failure says which could not be made, and why.
+::testing::AssertionResult make_rest_pose_and_unity_rig(const Skeleton& s, RestPose& rest, UnityRig& rig) {
+  std::string error;
+  if (!make_rest_pose(s, rest, error)) return ::testing::AssertionFailure() << "rest pose: " << error;
+  if (!make_unity_rig(s, rig, error)) return ::testing::AssertionFailure() << "Unity rig: " << error;
+  return ::testing::AssertionSuccess();
+}
+
 }  // namespace
 
 TEST(RestPose, IsATPoseStandingOnTheFloorFacingPlusZ) {
@@ -164,9 +172,7 @@ TEST(Unity, TPoseGivesIdentityRotations) {
   const Skeleton s = walk().skeleton;
   RestPose rest;
   UnityRig rig;
-  std::string error;
-  ASSERT_TRUE(make_rest_pose(s, rest, error)) << error;
-  ASSERT_TRUE(make_unity_rig(s, rig, error)) << error;
+  ASSERT_TRUE(make_rest_pose_and_unity_rig(s, rest, rig));
   // The T-pose turned to face bodyd -Z (Unity +Z) and moved: every local rotation is the identity.
   const Quat turn(Eigen::AngleAxisd(M_PI, Vec3::UnitY()));
   Pose p{rest.rotations, rest.offsets};
@@ -262,9 +268,7 @@ TEST(Unity, DocumentedRecipeDrivesAnAvatarWithItsOwnBoneAxesAndSize) {
   const Skeleton& s = m.skeleton;
   RestPose rest;
   UnityRig rig;
-  std::string error;
-  ASSERT_TRUE(make_rest_pose(s, rest, error)) << error;
-  ASSERT_TRUE(make_unity_rig(s, rig, error)) << error;
+  ASSERT_TRUE(make_rest_pose_and_unity_rig(s, rest, rig));
   const Quat y180(Eigen::AngleAxisd(M_PI, Vec3::UnitY()));
   std::mt19937 rng(20);
   const double k = 1.3;  // the avatar is 30 % larger than the user
