@@ -234,3 +234,37 @@ TEST(Metrics, HeadErrorHandMaximumAndTheGapMetrics) {
   // Over both clips the maxima are kept.
   EXPECT_NEAR(acc.result().gap_hand_jump_cm, 19.5, 1e-9);
 }
+
+// lag_ms (issue 18 item 4): a copy of the truth delayed by 3 frames trails it by 100 ms at 30
+// fps (the tracked joints, on time here, do not count); the truth itself by 0; clips combine by
+// frames; a clip too short for the search has none.
+TEST(Metrics, LagOfADelayedCopyOfTheTruth) {
+  MetricsAccumulator acc(walk().skeleton);
+  const JointSets sets = joint_sets(walk().skeleton);
+  acc.begin_clip(30.0);
+  for (int f = 0; f < walk().frame_count(); ++f) {
+    const GlobalPose truth = frame(f);
+    GlobalPose pred = frame(std::max(0, f - 3));
+    for (int j : {sets.head, sets.hands[0], sets.hands[1]}) pred.positions[static_cast<size_t>(j)] = truth.positions[static_cast<size_t>(j)];
+    acc.add_frame(pred, truth);
+  }
+  EXPECT_NEAR(acc.end_clip().lag_ms, 100.0, 5.0);
+  acc.begin_clip(30.0);
+  for (int f = 0; f < walk().frame_count(); ++f) acc.add_frame(frame(f), frame(f));
+  EXPECT_NEAR(acc.end_clip().lag_ms, 0.0, 1e-9);
+  // Two clips of 60 frames: the mean of 100 and 0.
+  EXPECT_NEAR(acc.result().lag_ms, 50.0, 2.5);
+  // A lead reads as a negative lag, within a frame.
+  acc.begin_clip(30.0);
+  for (int f = 0; f < walk().frame_count(); ++f) {
+    GlobalPose pred = frame(f), next = frame(std::min(f + 1, walk().frame_count() - 1));
+    for (size_t j = 0; j < pred.positions.size(); ++j) pred.positions[j] = 0.5 * (pred.positions[j] + next.positions[j]);
+    acc.add_frame(pred, frame(f));
+  }
+  const double lead = acc.end_clip().lag_ms;
+  EXPECT_LT(lead, -5.0);
+  EXPECT_GT(lead, -33.4);
+  acc.begin_clip(30.0);
+  for (int f = 0; f < kMaxLagFrames; ++f) acc.add_frame(frame(f), frame(f));
+  EXPECT_TRUE(std::isnan(acc.end_clip().lag_ms));
+}

@@ -18,6 +18,13 @@
 //                   hand's tracker is invalid in t or t+1 or was invalid within the last second
 //   gap_jerk_m_s3   mean third difference (as jitter) of a hand over the frames in the second
 //                   after its tracker came back (the truth's: MotionQuality::gap_jerk_m_s3)
+//   lag_ms          how far the untracked joints (the 21 but Head, Hand_L, Hand_R) trail the
+//                   truth (issue 18 item 4): the shift k = 0..kMaxLagFrames minimising
+//                   E(k) = mean over frames t >= kMaxLagFrames and those joints of |p[t] - g[t-k]|,
+//                   refined by the vertex of the parabola through E(k-1), E(k), E(k+1) (E(-1)
+//                   compares p[t-1] with g[t], so a lag under half a frame, or a lead, is
+//                   resolved too; at k = kMaxLagFrames the shift is not refined), x 1000 / fps.
+//                   A clip of fewer than kMaxLagFrames + 1 frames has none.
 // hand_pe_max_cm and gap_hand_jump_cm combine over clips as the maximum, the others by frames.
 // Clips are combined by their frame count: result = sum(n_clip * clip_metric) / sum(n_clip),
 // over the clips where the metric is defined (a 1-frame clip has no velocities, a clip of
@@ -48,6 +55,7 @@ struct AccuracyMetrics {
   double hand_pe_max_cm = 0.0;
   double gap_hand_jump_cm = 0.0;
   double gap_jerk_m_s3 = 0.0;
+  double lag_ms = 0.0;  // issue 18 item 4 (above)
 };
 
 // The metric keys of docs/conventions.md, in its order, with their fields.
@@ -67,12 +75,16 @@ inline constexpr std::array<MetricKey, 9> kMetricKeys{{
     {"foot_skate_ratio", &AccuracyMetrics::foot_skate_ratio},
 }};
 // The keys of the additions, after kMetricKeys in reports.
-inline constexpr std::array<MetricKey, 4> kExtraMetricKeys{{
+inline constexpr std::array<MetricKey, 5> kExtraMetricKeys{{
     {"head_pe_cm", &AccuracyMetrics::head_pe_cm},
     {"hand_pe_max_cm", &AccuracyMetrics::hand_pe_max_cm},
     {"gap_hand_jump_cm", &AccuracyMetrics::gap_hand_jump_cm},
     {"gap_jerk_m_s3", &AccuracyMetrics::gap_jerk_m_s3},
+    {"lag_ms", &AccuracyMetrics::lag_ms},
 }};
+
+// The largest shift lag_ms searches, frames.
+inline constexpr int kMaxLagFrames = 10;
 
 // Smoothness and foot skating of one motion on its own (reported for ground truth).
 struct MotionQuality {
@@ -100,7 +112,8 @@ struct JointSets {
 
 // Accumulates the metrics over clips. Per frame: add_frame(predicted, truth), both global
 // poses indexed like the skeleton given to the constructor. Keeps only the last four frames
-// of positions, so memory does not grow with clip length; add_frame does not allocate.
+// of positions (of the truth kMaxLagFrames + 1, for lag_ms), so memory does not grow with clip
+// length; add_frame does not allocate.
 class MetricsAccumulator {
  public:
   explicit MetricsAccumulator(const Skeleton& skeleton);
@@ -136,8 +149,10 @@ class MetricsAccumulator {
   };
   enum TermId {
     kAll, kUpper, kLower, kHands, kRoot, kRot, kVel, kJitter, kSkate, kTruthJitter, kTruthSkate,
-    kHead, kGapJerk, kTruthGapJerk, kTerms
+    kHead, kGapJerk, kTruthGapJerk, kLag, kTerms
   };
+  // The clip's lag (ms) from lag_error_ (NaN without frames for it).
+  [[nodiscard]] double clip_lag_ms() const;
 
   JointSets sets_;
   double fps_ = 30.0;
@@ -155,6 +170,13 @@ class MetricsAccumulator {
   std::array<size_t, 2> hand_slot_{};
   // Positions of the body joints (sets_.all order) of the last 4 frames, slot = frame % 4.
   std::vector<Vec3> pred_hist_, true_hist_;
+  // lag_ms: the slots (within sets_.all) of the untracked joints, the truth's positions of the
+  // body joints over the last kMaxLagFrames + 1 frames (slot = frame % (kMaxLagFrames + 1)), and
+  // the clip's sums of E(k) for k = -1..kMaxLagFrames over its lag_frames_ frames.
+  std::vector<size_t> untracked_slots_;
+  std::vector<Vec3> lag_true_;
+  std::array<double, kMaxLagFrames + 2> lag_error_{};
+  int lag_frames_ = 0;
 };
 
 }  // namespace bodyd
