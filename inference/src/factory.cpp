@@ -39,6 +39,12 @@ std::unique_ptr<Reconstructor> make_reconstructor(std::string_view method, const
     d.guidance = options.guidance;
     d.seed = options.seed;
     d.filter = options.filter;
+    d.body_filter = options.body_filter;
+    if (options.contact_on) d.contact_on = *options.contact_on;
+    if (options.contact_off) d.contact_off = *options.contact_off;
+    if (options.foot_contact_speed_m_s) d.foot_contact_speed_m_s = *options.foot_contact_speed_m_s;
+    if (options.foot_unlock_distance_m) d.foot_unlock_distance_m = *options.foot_unlock_distance_m;
+    if (options.foot_release_half_life_s) d.foot_release_half_life_s = *options.foot_release_half_life_s;
     try {
       return std::make_unique<DiffusionReconstructor>(std::move(model), d);
     } catch (const std::invalid_argument& e) {

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -31,6 +32,11 @@ struct ReconstructorOptions {
   float guidance = 1.0f;        // classifier-free guidance scale (1 = off)
   std::uint64_t seed = 1;       // the diffusion's noise
   OneEuroOptions filter;        // the diffusion's tracker filter (one_euro.h; the daemon's "filter" keys)
+  BodyFilterOptions body_filter;  // the diffusion's body filter (one_euro.h; the daemon's "body_filter" keys)
+  // The diffusion's foot lock (DiffusionOptions' fields of these names, diffusion.h); unset:
+  // DiffusionOptions' defaults (bodyd-eval's --contact-on, ... flags).
+  std::optional<float> contact_on, contact_off;
+  std::optional<double> foot_contact_speed_m_s, foot_unlock_distance_m, foot_release_half_life_s;
 };
 
 // method "ik": the fixed-rule baseline (ik.h) on `skeleton_hint` (required; model_path unused).
