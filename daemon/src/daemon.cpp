@@ -520,10 +520,17 @@ struct Daemon::Impl final : ControlTarget {
     recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {} (auto: {})", s.t_ns, recon->head_height_m(), how));
   }
 
-  // A calibration from the control socket replaces the auto one (and stops it if it is waiting).
-  void manual_calibration_applied() {
-    calibration.manual();
+  // The control socket set the standing head height (`cleared`: back to the model's own). A
+  // calibration from the control socket replaces the auto one (and stops it if it is waiting);
+  // the skeleton is published again, the log says so (`what`, then the height) and the
+  // recording notes it.
+  void control_head_height_applied(std::string_view what, bool cleared = false) {
+    if (cleared) calibration.cleared();
+    else calibration.manual();
     publish_calibration();
+    refresh_skeleton();
+    spdlog::info("{} {:.3f} m", what, recon->head_height_m());
+    recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {}", latest_head.sample().t_ns, recon->head_height_m()));
   }
 
   json apply_command(Command& c) {
@@ -531,15 +538,7 @@ struct Daemon::Impl final : ControlTarget {
     switch (c.kind) {
       case Command::Kind::Height: {
         recon->set_head_height_m(c.height_m);
-        if (c.height_m > 0.0) {
-          manual_calibration_applied();
-        } else {
-          calibration.cleared();
-          publish_calibration();
-        }
-        refresh_skeleton();
-        spdlog::info("calibrated: standing head height {:.3f} m", recon->head_height_m());
-        recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {}", latest_head.sample().t_ns, recon->head_height_m()));
+        control_head_height_applied("calibrated: standing head height", !(c.height_m > 0.0));
         break;
       }
       case Command::Kind::FromHead: {
@@ -556,10 +555,7 @@ struct Daemon::Impl final : ControlTarget {
         if (std::string e = calibrate_from_head_height(*recon, standing_height_from_head(measured_m, StandingHeightOptions{}));
             !e.empty())
           return control_error(e);
-        manual_calibration_applied();
-        refresh_skeleton();
-        spdlog::info("calibrated from the standing head height: {:.3f} m", recon->head_height_m());
-        recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {}", latest_head.sample().t_ns, recon->head_height_m()));
+        control_head_height_applied("calibrated from the standing head height:");
         break;
       }
       case Command::Kind::Recentre: {
