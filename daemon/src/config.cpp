@@ -454,6 +454,8 @@ std::string validate_config(const DaemonConfig& c) {
     return "give user_height_m (body height) or head_height_m (standing head height), not both";
   if (std::string e = validate(c.filter); !e.empty())
     return e + " (the \"filter\" keys: docs/daemon.md, \"Tracker filter\")";
+  if (std::string e = validate(c.body_filter); !e.empty())
+    return e + " (the \"body_filter\" keys: docs/daemon.md, \"Body filter\")";
   if (c.exit_at_end && c.loop) return "exit_at_end and loop contradict each other: a looped replay never ends";
   if (const std::string e = c.sim.validate(); !e.empty()) return "sim: " + e;
   return {};

@@ -20,9 +20,15 @@ double& filter_at(DaemonConfig& c) {
   return c.filter.*Member;
 }
 bool& filter_enabled(DaemonConfig& c) { return c.filter.enabled; }
+template <double BodyFilterOptions::* Member>
+double& body_filter_at(DaemonConfig& c) {
+  return c.body_filter.*Member;
+}
+bool& body_filter_enabled(DaemonConfig& c) { return c.body_filter.enabled; }
 
 constexpr std::string_view kCommandLine = "Command line";
 constexpr std::string_view kTrackerFilter = "Tracker filter";
+constexpr std::string_view kBodyFilter = "Body filter";
 
 constexpr KeyRange kHeightRange{limits::kMinUserHeightM, limits::kMaxUserHeightM, false, true,
                                 "{key} must be 0 (the model's size) or a height in metres between {min} and {max} "
@@ -123,6 +129,22 @@ std::vector<ConfigKey> make_rows() {
        .help = "rotation cutoff of a still tracker, Hz", .doc = kTrackerFilter});
   add({.group = "filter", .name = "rot_beta_per_rad_s", .field = &filter_at<&OneEuroOptions::rot_beta_per_rad_s>,
        .help = "rotation cutoff increase per rad/s of angular speed", .doc = kTrackerFilter});
+  // The diffusion method's body filter (issue 18 item 4); validate(BodyFilterOptions) checks the values.
+  add({.group = "body_filter", .name = "enabled", .field = &body_filter_enabled, .flag = "--body-filter",
+       .help = "the One Euro filter on the model's decoded body (config \"body_filter\": {\"enabled\": true})",
+       .doc = kBodyFilter});
+  add({.group = "body_filter", .name = "min_cutoff_hz", .field = &body_filter_at<&BodyFilterOptions::min_cutoff_hz>,
+       .help = "Hips position cutoff of a still body, Hz", .doc = kBodyFilter});
+  add({.group = "body_filter", .name = "beta_per_m_s", .field = &body_filter_at<&BodyFilterOptions::beta_per_m_s>,
+       .help = "Hips cutoff increase per m/s of speed", .doc = kBodyFilter});
+  add({.group = "body_filter", .name = "d_cutoff_hz", .field = &body_filter_at<&BodyFilterOptions::d_cutoff_hz>,
+       .help = "cutoff of the speed estimates, Hz", .doc = kBodyFilter});
+  add({.group = "body_filter", .name = "rot_min_cutoff_hz",
+       .field = &body_filter_at<&BodyFilterOptions::rot_min_cutoff_hz>,
+       .help = "joint rotation cutoff of a still joint, Hz", .doc = kBodyFilter});
+  add({.group = "body_filter", .name = "rot_beta_per_rad_s",
+       .field = &body_filter_at<&BodyFilterOptions::rot_beta_per_rad_s>,
+       .help = "rotation cutoff increase per rad/s of the joint's angular speed", .doc = kBodyFilter});
   add({.name = "offsets", .field = &at<&DaemonConfig::offsets>, .flag = "--offset",
        .help = "device offset ROLE=x,y,z[,qx,qy,qz,qw] (metres; rotation x,y,z,w), repeatable",
        .read = read_offsets, .print = print_offsets});
@@ -143,10 +165,12 @@ std::span<const ConfigKey> config_keys() {
 }
 
 std::span<const ConfigGroup> config_groups() {
-  static constexpr std::array<ConfigGroup, 2> kGroups{{
+  static constexpr std::array<ConfigGroup, 3> kGroups{{
       {"sim", "expected an object", "unknown key (see docs/daemon.md, \"sim\")"},
       {"filter", "expected an object like {\"enabled\": true, \"min_cutoff_hz\": 1.0}",
        "unknown key (expected {keys}; docs/daemon.md, \"Tracker filter\")"},
+      {"body_filter", "expected an object like {\"enabled\": true, \"min_cutoff_hz\": 2.0}",
+       "unknown key (expected {keys}; docs/daemon.md, \"Body filter\")"},
   }};
   return kGroups;
 }

@@ -135,6 +135,7 @@ int main(int argc, char** argv) {
       config.skeleton_path.empty() ? bundled_skeleton_path() : std::filesystem::path(config.skeleton_path);
   bodyd::ReconstructorOptions reconstructor_options;
   reconstructor_options.filter = config.filter;
+  reconstructor_options.body_filter = config.body_filter;
   Daemon daemon(config, make_default_factory(skeleton, reconstructor_options));
   if (std::string e = daemon.start(); !e.empty()) {
     spdlog::critical("{}", e);

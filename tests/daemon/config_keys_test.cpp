@@ -300,11 +300,16 @@ TEST(ConfigKeys, DocsListExactlyTheKeys) {
     for (const std::string& key : backticked(cells[1]))
       EXPECT_TRUE(names.count(key)) << "docs/daemon.md lists a config key the table does not have: " << key;
   }
-  // The filter's table and the "sim" paragraph list their group's keys, no more.
+  // The filters' tables and the "sim" paragraph list their group's keys, no more.
   for (const auto& cells : table_lines(doc_section(doc, "Tracker filter")))
     for (const std::string& key : backticked(cells[0]))
       if (key != "key") {
         EXPECT_TRUE(names.count("filter." + key)) << "filter." << key;
+      }
+  for (const auto& cells : table_lines(doc_section(doc, "Body filter")))
+    for (const std::string& key : backticked(cells[0]))
+      if (key != "key") {
+        EXPECT_TRUE(names.count("body_filter." + key)) << "body_filter." << key;
       }
   const auto sim_at = command_line.find("The `sim` object");
   ASSERT_NE(sim_at, std::string::npos);
@@ -420,6 +425,46 @@ TEST(SimOptionKeys, BothToolsTakeEveryRowsFlags) {
   const std::string by_flag = output_of(sim + " --dropout-mean-ms 123 --rate-hz 45");
   EXPECT_NE(by_flag.find("mean_ms=123"), std::string::npos) << by_flag.substr(0, 2000);
   EXPECT_EQ(output_of(sim + " --dropout-ms 123 --tracker-rate-hz 45"), by_flag);
+}
+
+// The "body_filter" keys (issue 18 item 4) parse, print back, are checked, and --body-filter
+// turns the filter on (it is off by default).
+TEST(ConfigKeys, BodyFilterParsesValidatesAndPrints) {
+  DaemonConfig c;
+  EXPECT_FALSE(c.body_filter.enabled);
+  ASSERT_EQ(apply_config_json(json::parse(R"({"body_filter": {"enabled": true, "min_cutoff_hz": 1.5,
+      "beta_per_m_s": 0.5, "d_cutoff_hz": 2, "rot_min_cutoff_hz": 3, "rot_beta_per_rad_s": 0.25}})"),
+                              "c.json", c),
+            "");
+  EXPECT_TRUE(c.body_filter.enabled);
+  EXPECT_DOUBLE_EQ(c.body_filter.min_cutoff_hz, 1.5);
+  EXPECT_DOUBLE_EQ(c.body_filter.beta_per_m_s, 0.5);
+  EXPECT_DOUBLE_EQ(c.body_filter.d_cutoff_hz, 2.0);
+  EXPECT_DOUBLE_EQ(c.body_filter.rot_min_cutoff_hz, 3.0);
+  EXPECT_DOUBLE_EQ(c.body_filter.rot_beta_per_rad_s, 0.25);
+  EXPECT_EQ(validate_config(c), "");
+  DaemonConfig back;
+  ASSERT_EQ(apply_config_json(config_to_json(c), "printed", back), "");
+  EXPECT_EQ(config_to_json(back), config_to_json(c));
+
+  const auto error = [](const char* text) {
+    DaemonConfig x;
+    std::string e = apply_config_json(json::parse(text), "c.json", x);
+    return e.empty() ? validate_config(x) : e;
+  };
+  std::string e = error(R"({"body_filter": {"cutoff": 1}})");
+  EXPECT_NE(e.find("c.json: body_filter.cutoff: unknown key (expected enabled, min_cutoff_hz"), std::string::npos) << e;
+  e = error(R"({"body_filter": 3})");
+  EXPECT_NE(e.find("c.json: body_filter: expected an object"), std::string::npos) << e;
+  e = error(R"({"body_filter": {"rot_min_cutoff_hz": 0}})");
+  EXPECT_NE(e.find("body_filter rot_min_cutoff_hz must be > 0, not 0 (the \"body_filter\" keys: docs/daemon.md"),
+            std::string::npos)
+      << e;
+
+  DaemonConfig f;
+  const char* argv[] = {"bodyd", "--body-filter"};
+  EXPECT_EQ(parse_command_line(2, argv, f).action, CliResult::Action::Run);
+  EXPECT_TRUE(f.body_filter.enabled);
 }
 
 }  // namespace

@@ -104,6 +104,9 @@ struct DaemonConfig {
   // filter"). Only enabled, min_cutoff_hz, beta_per_m_s, d_cutoff_hz, rot_min_cutoff_hz and
   // rot_beta_per_rad_s are configurable; the rest keep the defaults of one_euro.h.
   OneEuroOptions filter;
+  // The diffusion method's output-side body filter (config "body_filter"; docs/daemon.md, "Body
+  // filter"; one_euro.h BodyFilterOptions): off by default.
+  BodyFilterOptions body_filter;
   std::array<std::optional<DeviceOffset>, kRoleCount> offsets{};  // by Role
 
   std::string log_level = "info";    // trace, debug, info, warn, error, off

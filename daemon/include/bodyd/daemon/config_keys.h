@@ -52,7 +52,7 @@ struct KeyRange {
 };
 
 struct ConfigKey {
-  std::string_view group{};  // "" for a top-level key; "sim" or "filter" for a key inside that object
+  std::string_view group{};  // "" for a top-level key; "sim", "filter" or "body_filter" for a key inside that object
   std::string_view name{};   // the key ("replay_speed"; "min_cutoff_hz" inside "filter")
   ConfigField field{};
   // The command-line flag as CLI11 takes it: "--speed"; "!--no-filter" (a bool flag that sets
@@ -74,7 +74,7 @@ struct ConfigKey {
   [[nodiscard]] std::string full_name() const;
 };
 
-// An object of keys ("sim", "filter") and its messages.
+// An object of keys ("sim", "filter", "body_filter") and its messages.
 struct ConfigGroup {
   std::string_view name;
   std::string_view not_object;   // the error when the value is not an object
