@@ -4,7 +4,7 @@
 //   bodyd-eval --model MODEL --json OUT.json [--seed N] [--noise-mm S] [--dropout-rate P]
 //              [the simulator's other options: docs/simulator.md]
 //              [--body-scale S] [--out-dir DIR] [--methods diffusion,ik] [--split FILE.txt] [FILE.bvh...]
-//              [--body-filter [--body-filter-min-cutoff-hz F] [--body-filter-beta B] ...] [--contact-on V] ...
+//              [--no-body-filter | --body-filter-min-cutoff-hz F --body-filter-beta B ...] [--contact-on V] ...
 #include "bodyd/base/random.h"
 #include "bodyd/inference/evaluation.h"
 #include "bodyd/motion/split_file.h"
@@ -75,33 +75,34 @@ int main(int argc, char** argv) {
   app.add_option("--filter-beta", method_options.filter.beta_per_m_s, "diffusion: the tracker filter's beta_per_m_s")
       ->capture_default_str();
   // The body filter (diffusion.h, one_euro.h BodyFilterOptions; the daemon's "body_filter" keys).
-  bool body_filter = false;
+  bool no_body_filter = false;
   std::optional<double> body_min_cutoff_hz, body_rot_min_cutoff_hz;
-  auto* body_filter_flag = app.add_flag("--body-filter", body_filter,
-                                        "diffusion: the One Euro body filter on the model's decoded pose (the daemon's "
-                                        "\"body_filter\": {\"enabled\": true}; docs/evaluation.md)");
+  auto* no_body_filter_flag =
+      app.add_flag("--no-body-filter", no_body_filter,
+                   "diffusion: no One Euro body filter on the model's decoded pose (the daemon's "
+                   "\"body_filter\": {\"enabled\": false}; docs/evaluation.md)");
   app.add_option("--body-filter-min-cutoff-hz", body_min_cutoff_hz,
                  "diffusion: the body filter's cutoff of a still body, Hz, for the Hips position and the joint rotations "
                  "(its min_cutoff_hz and rot_min_cutoff_hz)")
-      ->needs(body_filter_flag);
+      ->excludes(no_body_filter_flag);
   app.add_option("--body-filter-beta", method_options.body_filter.beta_per_m_s,
                  "diffusion: the body filter's beta_per_m_s (Hips cutoff increase per m/s)")
-      ->capture_default_str()->needs(body_filter_flag);
+      ->capture_default_str()->excludes(no_body_filter_flag);
   app.add_option("--body-filter-rot-min-cutoff-hz", body_rot_min_cutoff_hz,
                  "diffusion: the body filter's rot_min_cutoff_hz alone (after --body-filter-min-cutoff-hz)")
-      ->needs(body_filter_flag);
+      ->excludes(no_body_filter_flag);
   app.add_option("--body-filter-rot-beta", method_options.body_filter.rot_beta_per_rad_s,
                  "diffusion: the body filter's rot_beta_per_rad_s (rotation cutoff increase per rad/s)")
-      ->capture_default_str()->needs(body_filter_flag);
+      ->capture_default_str()->excludes(no_body_filter_flag);
   // The foot lock's knobs (DiffusionOptions, diffusion.h); unset: its defaults.
   app.add_option("--contact-on", method_options.contact_on,
-                 "diffusion: a free foot plants when its predicted contact exceeds this (default 0.5)")
+                 "diffusion: a free foot plants when its predicted contact exceeds this (default 0.4)")
       ->check(CLI::Range(0.0, 1.0));
   app.add_option("--contact-off", method_options.contact_off,
-                 "diffusion: a planted foot stays planted while its predicted contact exceeds this (default 0.5)")
+                 "diffusion: a planted foot stays planted while its predicted contact exceeds this (default 0.4)")
       ->check(CLI::Range(0.0, 1.0));
   app.add_option("--foot-unlock-distance-m", method_options.foot_unlock_distance_m,
-                 "diffusion: a planted foot further than this from its prediction re-plants there, m (default 0.25)")
+                 "diffusion: a planted foot further than this from its prediction re-plants there, m (default 0.40)")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--foot-release-half-life-s", method_options.foot_release_half_life_s,
                  "diffusion: a lifted foot eases from its planted spot to the prediction with this half-life, s "
@@ -155,7 +156,7 @@ int main(int argc, char** argv) {
     options.model_path = model;
     if (no_filter) method_options.filter.enabled = false;
     if (const std::string e = bodyd::validate(method_options.filter); !e.empty()) throw std::runtime_error(e);
-    method_options.body_filter.enabled = body_filter;
+    if (no_body_filter) method_options.body_filter.enabled = false;
     if (body_min_cutoff_hz)
       method_options.body_filter.min_cutoff_hz = method_options.body_filter.rot_min_cutoff_hz = *body_min_cutoff_hz;
     if (body_rot_min_cutoff_hz) method_options.body_filter.rot_min_cutoff_hz = *body_rot_min_cutoff_hz;

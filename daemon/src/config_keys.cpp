@@ -130,8 +130,8 @@ std::vector<ConfigKey> make_rows() {
   add({.group = "filter", .name = "rot_beta_per_rad_s", .field = &filter_at<&OneEuroOptions::rot_beta_per_rad_s>,
        .help = "rotation cutoff increase per rad/s of angular speed", .doc = kTrackerFilter});
   // The diffusion method's body filter (issue 18 item 4); validate(BodyFilterOptions) checks the values.
-  add({.group = "body_filter", .name = "enabled", .field = &body_filter_enabled, .flag = "--body-filter",
-       .help = "the One Euro filter on the model's decoded body (config \"body_filter\": {\"enabled\": true})",
+  add({.group = "body_filter", .name = "enabled", .field = &body_filter_enabled, .flag = "!--no-body-filter",
+       .help = "no One Euro filter on the model's decoded body (config \"body_filter\": {\"enabled\": false})",
        .doc = kBodyFilter});
   add({.group = "body_filter", .name = "min_cutoff_hz", .field = &body_filter_at<&BodyFilterOptions::min_cutoff_hz>,
        .help = "Hips position cutoff of a still body, Hz", .doc = kBodyFilter});

@@ -427,16 +427,16 @@ TEST(SimOptionKeys, BothToolsTakeEveryRowsFlags) {
   EXPECT_EQ(output_of(sim + " --dropout-ms 123 --tracker-rate-hz 45"), by_flag);
 }
 
-// The "body_filter" keys (issue 18 item 4) parse, print back, are checked, and --body-filter
-// turns the filter on (it is off by default).
+// The "body_filter" keys (issue 18 item 4) parse, print back, are checked, and --no-body-filter
+// turns the filter off (it is on by default).
 TEST(ConfigKeys, BodyFilterParsesValidatesAndPrints) {
   DaemonConfig c;
-  EXPECT_FALSE(c.body_filter.enabled);
-  ASSERT_EQ(apply_config_json(json::parse(R"({"body_filter": {"enabled": true, "min_cutoff_hz": 1.5,
+  EXPECT_TRUE(c.body_filter.enabled);
+  ASSERT_EQ(apply_config_json(json::parse(R"({"body_filter": {"enabled": false, "min_cutoff_hz": 1.5,
       "beta_per_m_s": 0.5, "d_cutoff_hz": 2, "rot_min_cutoff_hz": 3, "rot_beta_per_rad_s": 0.25}})"),
                               "c.json", c),
             "");
-  EXPECT_TRUE(c.body_filter.enabled);
+  EXPECT_FALSE(c.body_filter.enabled);
   EXPECT_DOUBLE_EQ(c.body_filter.min_cutoff_hz, 1.5);
   EXPECT_DOUBLE_EQ(c.body_filter.beta_per_m_s, 0.5);
   EXPECT_DOUBLE_EQ(c.body_filter.d_cutoff_hz, 2.0);
@@ -462,9 +462,9 @@ TEST(ConfigKeys, BodyFilterParsesValidatesAndPrints) {
       << e;
 
   DaemonConfig f;
-  const char* argv[] = {"bodyd", "--body-filter"};
+  const char* argv[] = {"bodyd", "--no-body-filter"};
   EXPECT_EQ(parse_command_line(2, argv, f).action, CliResult::Action::Run);
-  EXPECT_TRUE(f.body_filter.enabled);
+  EXPECT_FALSE(f.body_filter.enabled);
 }
 
 }  // namespace

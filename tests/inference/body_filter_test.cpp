@@ -1,5 +1,5 @@
 // The output-side body filter (issue 18 item 4): PoseFilter (one_euro.h) on a synthetic jittery
-// pose stream and on a constant one, and DiffusionReconstructor's body_filter option: off by
+// pose stream and on a constant one, and DiffusionReconstructor's body_filter option: on by
 // default, no allocation in reconstruct(), reset() starts it over, and with it on the head and
 // hands stay exactly on clean trackers while the untracked joints get smoother.
 #include "bodyd/inference/diffusion.h"
@@ -143,7 +143,9 @@ TEST(OneEuro, PoseFilterPassesAConstantPoseAndDisabledChangesNothing) {
   // Disabled: a no-op, bit for bit.
   std::vector<Pose> poses = jittery(clip, 1.5, 5.0, 8);
   const std::vector<Pose> before = poses;
-  PoseFilter off(BodyFilterOptions{}, clip.skeleton.size(), features::kHips);
+  BodyFilterOptions disabled;
+  disabled.enabled = false;
+  PoseFilter off(disabled, clip.skeleton.size(), features::kHips);
   EXPECT_FALSE(off.enabled());
   for (size_t f = 0; f < poses.size(); ++f) {
     off.filter(frame_ns(f), poses[f]);
@@ -156,7 +158,7 @@ TEST(OneEuro, PoseFilterPassesAConstantPoseAndDisabledChangesNothing) {
 
 TEST(OneEuro, BodyFilterOptionsAreValidated) {
   EXPECT_EQ(validate(BodyFilterOptions{}), "");
-  EXPECT_FALSE(BodyFilterOptions{}.enabled);  // off until the defaults are chosen on held-out styles
+  EXPECT_TRUE(BodyFilterOptions{}.enabled);  // on: its defaults were chosen on held-out styles
   BodyFilterOptions o;
   o.min_cutoff_hz = 0.0;
   EXPECT_EQ(validate(o), "body_filter min_cutoff_hz must be > 0, not 0");
@@ -169,19 +171,24 @@ TEST(OneEuro, BodyFilterOptionsAreValidated) {
   EXPECT_EQ(validate(t), "filter min_cutoff_hz must be > 0, not 0");
 }
 
-TEST(Diffusion, BodyFilterIsOffByDefaultAndRefusesBadOptions) {
+TEST(Diffusion, BodyFilterIsOnByDefaultAndRefusesBadOptions) {
   const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
   const auto samples = trackers(clip);
-  DiffusionReconstructor a(tiny_model());
   DiffusionOptions off;
-  off.body_filter.min_cutoff_hz = 0.1;  // ignored while disabled
-  DiffusionReconstructor b(tiny_model(), off);
+  off.body_filter.enabled = false;
+  DiffusionReconstructor a(tiny_model(), off);
+  DiffusionOptions off_other = off;
+  off_other.body_filter.min_cutoff_hz = 0.1;  // ignored while disabled
+  DiffusionReconstructor b(tiny_model(), off_other);
+  DiffusionReconstructor c(tiny_model());  // the defaults: on
   DiffusionOptions with;
-  with.body_filter = on();
-  DiffusionReconstructor c(tiny_model(), with);
-  const auto ra = run(a, samples, 60), rb = run(b, samples, 60), rc = run(c, samples, 60);
+  with.body_filter = on(BodyFilterOptions{}.min_cutoff_hz);
+  DiffusionReconstructor d(tiny_model(), with);
+  const auto ra = run(a, samples, 60), rb = run(b, samples, 60), rc = run(c, samples, 60),
+             rd = run(d, samples, 60);
   EXPECT_TRUE(identical(ra, rb));
   EXPECT_FALSE(identical(ra, rc));  // on, it changes the poses
+  EXPECT_TRUE(identical(rc, rd));   // the default is the filter on at its default cutoffs
   DiffusionOptions bad;
   bad.body_filter.rot_min_cutoff_hz = -1.0;
   EXPECT_THROW(DiffusionReconstructor(tiny_model(), bad), std::invalid_argument);
@@ -229,9 +236,10 @@ TEST_F(DefaultModelBodyFilter, HeadAndHandsExactlyOnCleanTrackersAndTheBodySmoot
   const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
   const auto samples = trackers(clip);
   const auto frames = static_cast<size_t>(clip.frame_count());
-  DiffusionOptions with;
+  DiffusionOptions without, with;
+  without.body_filter.enabled = false;
   with.body_filter = on(1.0);
-  DiffusionReconstructor a(model_), b(model_, with);
+  DiffusionReconstructor a(model_, without), b(model_, with);
   const auto off = run(a, samples, frames), filtered = run(b, samples, frames);
   double head_m = 0, head_deg = 0, hand_m = 0;
   for (size_t f = 0; f < frames; ++f) {

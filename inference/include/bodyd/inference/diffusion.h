@@ -37,10 +37,12 @@ struct DiffusionOptions {
   double hand_return_half_life_s = 0.08;  // a hand that comes back eases from where the body had it
   double hand_loss_half_life_s = 0.15;    // a hand that is lost eases from its last place to the model's
   double hand_blend_max_speed_m_s = 0.6;  // ... and those eases move the hand at most this much faster
-  float contact_on = 0.5f, contact_off = 0.5f;  // contact hysteresis on the predicted contact value
+  // The foot lock's defaults and body_filter's were chosen on the style-held-out clips
+  // (docs/models.md, "Post-processing chosen on unseen styles").
+  float contact_on = 0.4f, contact_off = 0.4f;  // contact hysteresis on the predicted contact value
   bool foot_lock = true;       // planted feet (predicted contact) do not slide (the leg swings about the hip)
   double foot_contact_speed_m_s = 0.0;    // a planted toe follows the prediction at most this fast
-  double foot_unlock_distance_m = 0.25;   // a planted foot further than this from its prediction re-plants
+  double foot_unlock_distance_m = 0.40;   // a planted foot further than this from its prediction re-plants
   double foot_release_half_life_s = 0.15; // a lifted foot eases from its planted spot to the prediction
   int emitted_capacity = 512;  // emitted frames kept for feedback (>= W * output rate / model fps)
   TrackerHistoryOptions history;

@@ -75,12 +75,14 @@ inline constexpr int kNoiseOrder = 6;  // the order of the differences the noise
 // beta_per_m_s * speed, rotation (every joint's local rotation) rot_min_cutoff_hz +
 // rot_beta_per_rad_s * angular speed. Off by default (the defaults are to be chosen on held-out
 // styles, docs/evaluation.md).
+// The defaults were chosen on the style-held-out clips (docs/models.md, "Post-processing chosen on
+// unseen styles").
 struct BodyFilterOptions {
-  bool enabled = false;
-  double min_cutoff_hz = 2.0;       // Hips position cutoff of a still body, Hz
+  bool enabled = true;
+  double min_cutoff_hz = 10.0;      // Hips position cutoff of a still body, Hz
   double beta_per_m_s = 1.0;        // its increase per m/s of Hips speed
   double d_cutoff_hz = 1.0;         // cutoff of the speed estimates, Hz
-  double rot_min_cutoff_hz = 2.0;   // joint rotation cutoff of a still joint, Hz
+  double rot_min_cutoff_hz = 10.0;  // joint rotation cutoff of a still joint, Hz
   double rot_beta_per_rad_s = 0.5;  // its increase per rad/s of the joint's angular speed
 };
 // The OneEuroOptions PoseFilter runs with: these cutoffs, no noise gate, the other fields at
