@@ -94,23 +94,30 @@ int main(int argc, char** argv) {
   app.add_option("--body-filter-rot-beta", method_options.body_filter.rot_beta_per_rad_s,
                  "diffusion: the body filter's rot_beta_per_rad_s (rotation cutoff increase per rad/s)")
       ->capture_default_str()->excludes(no_body_filter_flag);
-  // The foot lock's knobs (DiffusionOptions, diffusion.h); unset: its defaults.
+  // The foot lock's knobs (DiffusionOptions, diffusion.h); unset: its defaults. CLI11's range
+  // checks let NaN through, hence the finite check.
+  const CLI::Validator finite(
+      [](const std::string& text) {
+        double v = 0;
+        return CLI::detail::lexical_cast(text, v) && std::isfinite(v) ? std::string{} : "must be a finite number";
+      },
+      "FINITE");
   app.add_option("--contact-on", method_options.contact_on,
                  "diffusion: a free foot plants when its predicted contact exceeds this (default 0.4)")
-      ->check(CLI::Range(0.0, 1.0));
+      ->check(finite)->check(CLI::Range(0.0, 1.0));
   app.add_option("--contact-off", method_options.contact_off,
                  "diffusion: a planted foot stays planted while its predicted contact exceeds this (default 0.4)")
-      ->check(CLI::Range(0.0, 1.0));
+      ->check(finite)->check(CLI::Range(0.0, 1.0));
   app.add_option("--foot-unlock-distance-m", method_options.foot_unlock_distance_m,
                  "diffusion: a planted foot further than this from its prediction re-plants there, m (default 0.40)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(finite)->check(CLI::NonNegativeNumber);
   app.add_option("--foot-release-half-life-s", method_options.foot_release_half_life_s,
                  "diffusion: a lifted foot eases from its planted spot to the prediction with this half-life, s "
                  "(default 0.15)")
-      ->check(CLI::PositiveNumber);
+      ->check(finite)->check(CLI::PositiveNumber);
   app.add_option("--foot-contact-speed-m-s", method_options.foot_contact_speed_m_s,
                  "diffusion: a planted toe follows the prediction at most this fast, m/s (default 0)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(finite)->check(CLI::NonNegativeNumber);
   std::string device_frames = "joint", calibration_pose = "first-still", reference_path;
   bool method_pose_eye = false;
   bodyd::add_device_frames_flag(app, device_frames,

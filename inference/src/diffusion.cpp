@@ -28,6 +28,21 @@ bool finite(const GlobalPose& g) {
     if (!g.positions[j].allFinite() || !g.rotations[j].coeffs().allFinite()) return false;
   return true;
 }
+}  // namespace
+
+std::string validate_foot_lock(const DiffusionOptions& o) {
+  const auto in = [](double v, double lo, double hi) { return std::isfinite(v) && v >= lo && v <= hi; };
+  if (!in(o.contact_on, 0.0, 1.0) || !in(o.contact_off, 0.0, 1.0))
+    return fmt::format("foot lock contact_on and contact_off must be in [0, 1], not {} and {}", o.contact_on,
+                       o.contact_off);
+  if (!in(o.foot_unlock_distance_m, 0.0, 100.0))
+    return fmt::format("foot lock foot_unlock_distance_m must be in [0, 100] m, not {}", o.foot_unlock_distance_m);
+  if (!in(o.foot_contact_speed_m_s, 0.0, 100.0))
+    return fmt::format("foot lock foot_contact_speed_m_s must be in [0, 100] m/s, not {}", o.foot_contact_speed_m_s);
+  if (!(std::isfinite(o.foot_release_half_life_s) && o.foot_release_half_life_s > 0.0 &&
+        o.foot_release_half_life_s <= 100.0))
+    return fmt::format("foot lock foot_release_half_life_s must be in (0, 100] s, not {}", o.foot_release_half_life_s);
+  return {};
 }
 
 DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::Model> model,
@@ -42,6 +57,7 @@ DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::
       filter_(options.filter) {
   if (std::string err = validate(options.filter); !err.empty()) throw std::invalid_argument(err);
   if (std::string err = validate(options.body_filter); !err.empty()) throw std::invalid_argument(err);
+  if (std::string err = validate_foot_lock(options); !err.empty()) throw std::invalid_argument(err);
   if (std::string err = features::check_skeleton(skeleton_); !err.empty())
     throw std::invalid_argument(fmt::format("{}: model skeleton: {}", model_->source, err));
   if (network_->dim() != features::kDim)

@@ -16,6 +16,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <random>
 #include <stdexcept>
 #include <vector>
@@ -192,6 +193,18 @@ TEST(Diffusion, BodyFilterIsOnByDefaultAndRefusesBadOptions) {
   DiffusionOptions bad;
   bad.body_filter.rot_min_cutoff_hz = -1.0;
   EXPECT_THROW(DiffusionReconstructor(tiny_model(), bad), std::invalid_argument);
+  // The foot lock's options are checked too: a NaN or out-of-range value never reaches the state.
+  EXPECT_EQ(validate_foot_lock(DiffusionOptions{}), "");
+  DiffusionOptions lock = {};
+  lock.foot_unlock_distance_m = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_NE(validate_foot_lock(lock).find("foot_unlock_distance_m"), std::string::npos);
+  EXPECT_THROW(DiffusionReconstructor(tiny_model(), lock), std::invalid_argument);
+  lock = {};
+  lock.contact_on = 1.5f;
+  EXPECT_NE(validate_foot_lock(lock).find("contact_on"), std::string::npos);
+  lock = {};
+  lock.foot_release_half_life_s = 0.0;
+  EXPECT_NE(validate_foot_lock(lock).find("foot_release_half_life_s"), std::string::npos);
 }
 
 TEST(Diffusion, BodyFilterDoesNotAllocateAndResetStartsItOver) {

@@ -54,6 +54,10 @@ struct DiffusionOptions {
   BodySolverOptions body;
 };
 
+// Empty when the foot lock's options are usable (finite, contacts in [0, 1], distances, speed
+// and half-life in range), otherwise what is wrong; the constructor throws std::invalid_argument.
+[[nodiscard]] std::string validate_foot_lock(const DiffusionOptions& options);
+
 class DiffusionReconstructor final : public Reconstructor {
  public:
   // Throws std::invalid_argument if the model's skeleton does not match the features' skeleton.
