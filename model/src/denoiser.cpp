@@ -1,6 +1,7 @@
 // The architecture table (denoiser.h): one row per network this build runs.
 #include "bodyd/inference/denoiser.h"
 
+#include "bodyd/base/require.h"
 #include "bodyd/inference/network.h"
 #include "bodyd/inference/tcn.h"
 
@@ -53,6 +54,12 @@ std::shared_ptr<const Denoiser> make_denoiser(const Model& model) {
                                      name, architecture_names()));
   }
   return arch->make(model);
+}
+
+void Denoiser::forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+                              DenoiserScratch& scratch) const {
+  (void)x, (void)m, (void)t, (void)out, (void)scratch;
+  BODYD_REQUIRE(false, "forward_newest: this architecture has no newest-frame pass (computes_newest_alone() is false)");
 }
 
 }  // namespace bodyd::inference

@@ -108,6 +108,12 @@ void Sampler::run(std::span<const float> obs, std::span<const float> mask, std::
   const std::span<float> x0(x0_.data(), window);
   const std::span<const float> x0_uncond(x0_.data() + window, window);
   std::copy(mask.begin(), mask.end(), m_in_.begin());
+  // The online case: every frame but the newest fully observed. Their x0 estimates are replaced
+  // by the observations, so an architecture that can computes the newest frame's alone.
+  const std::size_t D = static_cast<std::size_t>(network_->dim());
+  const bool newest_only = !guided && network_->computes_newest_alone() &&
+                           std::all_of(mask.begin(), mask.end() - static_cast<std::ptrdiff_t>(D),
+                                       [](float v) { return v == 1.0f; });
 
   const int K = static_cast<int>(timesteps_.size());
   const float s = options_.guidance;
@@ -115,8 +121,13 @@ void Sampler::run(std::span<const float> obs, std::span<const float> mask, std::
     const int tau = timesteps_[static_cast<std::size_t>(k)];
     for (std::size_t i = 0; i < window; ++i) x[i] = mask[i] * obs[i] + (1.0f - mask[i]) * x[i];
     if (guided) std::copy(x.begin(), x.end(), x_uncond.begin());
-    network_->forward(std::span<const float>(x_in_.data(), batch_size), std::span<const float>(m_in_.data(), batch_size),
-                      tau, std::span<float>(x0_.data(), batch_size), *scratch_);
+    if (newest_only) {
+      network_->forward_newest(x, std::span<const float>(m_in_.data(), window), tau, x0.last(D), *scratch_);
+    } else {
+      network_->forward(std::span<const float>(x_in_.data(), batch_size),
+                        std::span<const float>(m_in_.data(), batch_size), tau, std::span<float>(x0_.data(), batch_size),
+                        *scratch_);
+    }
     if (guided) {
       for (std::size_t i = 0; i < window; ++i) x0[i] = x0_uncond[i] + s * (x0[i] - x0_uncond[i]);
     }

@@ -8,6 +8,8 @@
 #include "bodyd/base/require.h"
 #include "eigen_ops.h"
 
+#include <algorithm>
+#include <set>
 #include <string>
 
 namespace bodyd::inference {
@@ -77,6 +79,43 @@ Tcn::Tcn(const Model& model) : EigenDenoiser(model) {
 
   // The time MLP depends on t alone: evaluated once per step here (in double, then rounded).
   time_table_ = detail::time_table(load_linear(model, "time1"), load_linear(model, "time2"), c.TE, c.T, nullptr);
+  plan_newest();
+  enc_mask_ones_ = enc_.v.rowwise().sum();
+}
+
+void Tcn::plan_newest() {
+  const TcnConfig& c = config_;
+  // Top down: the newest output needs the last block's output at frame W-1; a block's output at
+  // frame f needs its input at f (the residual) and at f - (K-1-k) * dilation for each tap k that
+  // stays in the window. levels[b]: the frames of block b's input, ascending; levels[L]: {W-1}.
+  std::vector<std::vector<Eigen::Index>> levels(static_cast<std::size_t>(c.L) + 1);
+  levels.back() = {static_cast<Eigen::Index>(c.W) - 1};
+  for (int b = c.L - 1; b >= 0; --b) {
+    std::set<Eigen::Index> in;
+    for (Eigen::Index f : levels[static_cast<std::size_t>(b) + 1])
+      for (int k = 0; k < c.K; ++k)
+        if (const Eigen::Index g = f - static_cast<Eigen::Index>(c.K - 1 - k) * c.dilation(b); g >= 0) in.insert(g);
+    levels[static_cast<std::size_t>(b)].assign(in.begin(), in.end());
+  }
+  newest_frames_ = levels.front();
+  newest_blocks_.assign(static_cast<std::size_t>(c.L), {});
+  for (int b = 0; b < c.L; ++b) {
+    const auto& in = levels[static_cast<std::size_t>(b)];
+    const auto& outs = levels[static_cast<std::size_t>(b) + 1];
+    const auto column = [&in](Eigen::Index frame) -> Eigen::Index {
+      const auto it = std::lower_bound(in.begin(), in.end(), frame);
+      return it != in.end() && *it == frame ? static_cast<Eigen::Index>(it - in.begin()) : -1;
+    };
+    NewestBlock& nb = newest_blocks_[static_cast<std::size_t>(b)];
+    nb.taps.assign(static_cast<std::size_t>(c.K), {});
+    for (Eigen::Index f : outs) {
+      nb.residual.push_back(column(f));
+      for (int k = 0; k < c.K; ++k) {
+        const Eigen::Index g = f - static_cast<Eigen::Index>(c.K - 1 - k) * c.dilation(b);
+        nb.taps[static_cast<std::size_t>(k)].push_back(g >= 0 ? column(g) : -1);
+      }
+    }
+  }
 }
 
 TcnScratch::TcnScratch(const Tcn& network, int max_batch)
@@ -86,6 +125,9 @@ TcnScratch::TcnScratch(const Tcn& network, int max_batch)
   n_.resize(config_.C, cols);
   a_.resize(config_.C, cols);
   d_.resize(config_.C, cols);
+  g_.resize(config_.C, config_.W);
+  h2_.resize(config_.C, config_.W);
+  xg_.resize(config_.D, config_.W);
 }
 
 void Tcn::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
@@ -126,6 +168,95 @@ void Tcn::forward(std::span<const float> x, std::span<const float> m, int t, std
   }
 
   // y_w = dec2(SiLU(dec1(SiLU(LayerNorm_out(h_w))))).
+  layer_norm(h, out_norm_.weight, out_norm_.bias, n);
+  silu_inplace(n);
+  detail::linear(dec1_, n, d);
+  silu_inplace(d);
+  detail::linear(dec2_, d, Y);
+}
+
+void Tcn::forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+                         DenoiserScratch& scratch) const {
+  auto* s = dynamic_cast<TcnScratch*>(&scratch);
+  BODYD_REQUIRE(s != nullptr, kWrongScratch);
+  forward_newest(x, m, t, out, *s);
+}
+
+void Tcn::forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+                         TcnScratch& s) const {
+  const TcnConfig& c = config_;
+  BODYD_REQUIRE(s.config_.W == c.W && s.config_.D == c.D && s.config_.C == c.C, "TcnScratch was made for another network");
+  const std::size_t window = static_cast<std::size_t>(c.W) * static_cast<std::size_t>(c.D);
+  BODYD_REQUIRE(x.size() == window && m.size() == window, "forward_newest: x and m must hold one window of W * D floats");
+  BODYD_REQUIRE(out.size() == static_cast<std::size_t>(c.D), "forward_newest: out must hold one frame of D floats");
+  BODYD_REQUIRE(t >= 0 && t < c.T, "t must be in [0, T)");
+  const auto overlaps = [&out](std::span<const float> v) {
+    return out.data() < v.data() + v.size() && v.data() < out.data() + out.size();
+  };
+  BODYD_REQUIRE(!overlaps(x) && !overlaps(m), "out may not alias x or m");
+
+  const Eigen::Map<const Eigen::MatrixXf> X(x.data(), c.D, c.W);
+  const Eigen::Map<const Eigen::MatrixXf> M(m.data(), c.D, c.W);
+  Eigen::Map<Eigen::VectorXf> Y(out.data(), c.D);
+
+  // The encoder at the frames the newest output depends on. A fully observed frame's mask term
+  // is the same every time (enc_mask_ones_), so only a partly observed frame multiplies its mask.
+  const auto frames = static_cast<Eigen::Index>(newest_frames_.size());
+  for (Eigen::Index j = 0; j < frames; ++j) s.xg_.col(j) = X.col(newest_frames_[static_cast<std::size_t>(j)]);
+  {
+    auto h = s.h_.leftCols(frames);
+    h.noalias() = enc_.u * s.xg_.leftCols(frames);
+    for (Eigen::Index j = 0; j < frames; ++j) {
+      const auto mask = M.col(newest_frames_[static_cast<std::size_t>(j)]);
+      if ((mask.array() == 1.0f).all())
+        h.col(j) += enc_mask_ones_;
+      else
+        h.col(j).noalias() += enc_.v * mask;
+    }
+    h.colwise() += enc_.bias;
+    silu_inplace(h);
+    h.colwise() += time_table_.col(t);
+  }
+
+  // Each block at its output frames only: h_ holds the block's input columns, h2_ its output.
+  Eigen::Index in_cols = frames;
+  for (std::size_t b = 0; b < blocks_.size(); ++b) {
+    const Block& blk = blocks_[b];
+    const NewestBlock& plan = newest_blocks_[b];
+    const auto out_cols = static_cast<Eigen::Index>(plan.residual.size());
+    auto n = s.n_.leftCols(in_cols);
+    layer_norm(s.h_.leftCols(in_cols), blk.norm.weight, blk.norm.bias, n);
+    auto a = s.a_.leftCols(out_cols);
+    auto g = s.g_.leftCols(out_cols);
+    a.setZero();
+    a.colwise() += blk.conv_bias;
+    for (int k = 0; k < c.K; ++k) {
+      const auto& cols = plan.taps[static_cast<std::size_t>(k)];
+      bool any = false;
+      for (Eigen::Index j = 0; j < out_cols; ++j) {
+        const Eigen::Index col = cols[static_cast<std::size_t>(j)];
+        if (col >= 0) {
+          g.col(j) = n.col(col);
+          any = true;
+        } else {
+          g.col(j).setZero();  // before the window: zeros, as forward()'s
+        }
+      }
+      if (any) a.noalias() += blk.taps[static_cast<std::size_t>(k)] * g;
+    }
+    silu_inplace(a);
+    auto h2 = s.h2_.leftCols(out_cols);
+    for (Eigen::Index j = 0; j < out_cols; ++j) h2.col(j) = s.h_.col(plan.residual[static_cast<std::size_t>(j)]);
+    h2.noalias() += blk.fc.weight * a;
+    h2.colwise() += blk.fc.bias;
+    s.h_.leftCols(out_cols) = h2;
+    in_cols = out_cols;
+  }
+
+  // The decoder at the newest frame (the one column left).
+  auto h = s.h_.leftCols(1);
+  auto n = s.n_.leftCols(1);
+  auto d = s.d_.leftCols(1);
   layer_norm(h, out_norm_.weight, out_norm_.bias, n);
   silu_inplace(n);
   detail::linear(dec1_, n, d);

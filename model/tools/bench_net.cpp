@@ -1,5 +1,6 @@
 // bodyd-bench-net: times the denoiser's forward pass (whatever architecture the model file names),
-// a K-step DDIM sample and, for an architecture that streams, one streamed frame, on one thread.
+// a K-step DDIM sample, the sample of the online case (the past observed), and, where the
+// architecture has them, its newest-frame pass and one streamed frame, on one thread.
 //
 //   bodyd-bench-net --model MODEL.safetensors [--steps 4] [--guidance 1] [--runs 200]
 //
@@ -103,9 +104,22 @@ int main(int argc, char** argv) {
     const Stats smp = time_runs(runs, [&] { sampler.sample(x, m, out); });
     fmt::print("sample (K={}, s={}):      median {:8.1f} us  p90 {:8.1f} us  min {:8.1f} us\n", steps, guidance,
                smp.median_us, smp.p90_us, smp.min_us);
+    // The online reconstructor's case, what a frame costs: every frame but the newest observed,
+    // trackers in the newest (an architecture with a newest-frame pass computes that frame alone).
+    std::vector<float> online(m);
+    std::fill(online.begin(), online.end() - static_cast<std::ptrdiff_t>(dim), 1.0f);
+    const Stats onl = time_runs(runs, [&] { sampler.sample(x, online, out); });
+    fmt::print("sample online (K={}):     median {:8.1f} us  p90 {:8.1f} us  min {:8.1f} us\n", steps, onl.median_us,
+               onl.p90_us, onl.min_us);
   } catch (const std::invalid_argument& e) {
     std::fprintf(stderr, "bodyd-bench-net: %s\n", e.what());
     return 1;
+  }
+  if (net->computes_newest_alone()) {
+    std::vector<float> y(dim);
+    const Stats nw = time_runs(runs, [&] { net->forward_newest(x, m, t_mid, y, *scratch); });
+    fmt::print("forward newest frame:    median {:8.1f} us  p90 {:8.1f} us  min {:8.1f} us\n", nw.median_us, nw.p90_us,
+               nw.min_us);
   }
   // An architecture that streams (Denoiser::make_stream): one new frame at one step, the cost per
   // frame of a streamed step whatever the history.

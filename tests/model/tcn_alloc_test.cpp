@@ -1,4 +1,4 @@
-// tcn-v1's forward pass, the sampler over it and the streamed evaluation must not allocate
+// tcn-v1's forward pass, its newest-frame pass, the sampler over it and the streamed evaluation must not allocate
 // (the allocation counter of tests/support replaces malloc in this binary).
 #include "bodyd/inference/sampler.h"
 #include "bodyd/inference/tcn.h"
@@ -11,7 +11,7 @@
 namespace bodyd::test {
 namespace {
 
-TEST(TcnAllocation, ForwardSampleAndStreamDoNotAllocate) {
+TEST(TcnAllocation, ForwardNewestFrameSampleAndStreamDoNotAllocate) {
   if (!AllocationCounter::counts_malloc()) GTEST_SKIP() << "sanitizer build: malloc is not ours to count";
   const auto tiny = inference::load_model(fixtures() / "tiny_tcn.safetensors");
   // The default shape of training/train.py --arch tcn-v1 (2.1 s of history at 30 fps), so Eigen takes
@@ -27,12 +27,17 @@ TEST(TcnAllocation, ForwardSampleAndStreamDoNotAllocate) {
   const std::span<const float> x1(x.data(), n), m1(m.data(), n);
   const std::span<float> out1(out.data(), n);
   std::vector<float> frame_out(D);
+  // The online case: the past observed, so the sampler takes forward_newest().
+  std::vector<float> online(n, 1.0f);
+  for (std::size_t d = 0; d < D; d += 3) online[n - D + d] = 0.0f;
 
   AllocationCounter allocations;
   for (int i = 0; i < 2; ++i) {
     net->forward(x1, m1, 50, out1, scratch);
     net->forward(x, m, 99, out, scratch);
     sampler.sample(x1, m1, out1);
+    net->forward_newest(x1, m1, 50, frame_out, scratch);
+    sampler.sample(x1, online, out1);
     for (std::size_t f = 0; f < 70; ++f)
       stream->push(std::span(x).subspan((f % 64) * D, D), std::span(m).subspan((f % 64) * D, D), frame_out);
   }

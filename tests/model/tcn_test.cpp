@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <cmath>
 #include <cstdio>
 #include <random>
 
@@ -149,6 +150,94 @@ TEST(Tcn, StreamingEqualsFullRecomputation) {
   }
 }
 
+// The default shape of training/train.py --arch tcn-v1: W = 64, receptive field 63.
+std::shared_ptr<const Tcn> default_shape_tcn(std::uint32_t seed) {
+  const auto tiny = inference::load_model(tiny_tcn_path());
+  return std::make_shared<const Tcn>(
+      random_model(inference::TcnConfig{64, 191, 128, 3, 5, 5, 64, 100}.to_model_config(), seed, *tiny));
+}
+
+TEST(Tcn, NewestFrameAloneEqualsTheWindowsLastFrame) {
+  std::mt19937 rng(12);
+  // The fixture (dilations 1, 2, 1: W = 10 > receptive field 9) and the default shape (dilations
+  // 1..16: W = 64 > 63).
+  for (const auto& net : {tiny_tcn(), default_shape_tcn(3)}) {
+    TcnScratch s(*net);
+    const auto D = static_cast<std::size_t>(net->dim()), W = static_cast<std::size_t>(net->frames());
+    const std::size_t n = W * D;
+    EXPECT_EQ(net->newest_frames().size(), static_cast<std::size_t>(net->config().receptive_field()));
+    EXPECT_EQ(net->newest_frames().back(), static_cast<Eigen::Index>(W) - 1);
+    for (int t : {0, net->steps() / 2, net->steps() - 1}) {
+      auto x = random_window(rng, n, false);
+      const auto m = random_window(rng, n, true);
+      std::vector<float> full(n), newest(D);
+      net->forward(x, m, t, full, s);
+      net->forward_newest(x, m, t, newest, s);
+      EXPECT_LE(relative_error(newest, std::span(full).subspan((W - 1) * D, D)), 1e-5) << "W " << W << " t " << t;
+      // The same through the Denoiser interface.
+      std::vector<float> via_base(D);
+      const inference::Denoiser& base = *net;
+      const auto scratch = base.make_scratch(1);
+      EXPECT_TRUE(base.computes_newest_alone());
+      base.forward_newest(x, m, t, via_base, *scratch);
+      EXPECT_EQ(via_base, newest);
+      // The frame before the receptive field does not matter; the oldest frame in it does.
+      const std::size_t outside = W - 1 - static_cast<std::size_t>(net->config().receptive_field());
+      for (std::size_t d = 0; d < D; ++d) x[outside * D + d] += 3.0f;
+      std::vector<float> again(D);
+      net->forward_newest(x, m, t, again, s);
+      EXPECT_EQ(again, newest);
+      for (std::size_t d = 0; d < D; ++d) x[(outside + 1) * D + d] += 3.0f;
+      net->forward_newest(x, m, t, again, s);
+      EXPECT_GT(relative_error(again, newest), 1e-4);
+    }
+  }
+}
+
+// DDIM with eta 0 and no guidance, written out with forward() on the whole window (sampler.cpp's
+// loop, for the reference).
+std::vector<float> ddim_by_full_windows(const Tcn& net, std::span<const float> obs, std::span<const float> mask,
+                                        std::vector<float> x, int K) {
+  TcnScratch s(net);
+  std::vector<float> x0(x.size());
+  const auto taus = inference::ddim_timesteps(net.steps(), K);
+  for (std::size_t k = 0; k < taus.size(); ++k) {
+    for (std::size_t i = 0; i < x.size(); ++i) x[i] = mask[i] * obs[i] + (1 - mask[i]) * x[i];
+    net.forward(x, mask, taus[k], x0, s);
+    for (std::size_t i = 0; i < x.size(); ++i) x0[i] = mask[i] * obs[i] + (1 - mask[i]) * x0[i];
+    if (k + 1 == taus.size()) break;
+    const double ab = net.alpha_bar()[static_cast<std::size_t>(taus[k])];
+    const double ab_next = net.alpha_bar()[static_cast<std::size_t>(taus[k + 1])];
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      const double eps = (x[i] - std::sqrt(ab) * x0[i]) / std::sqrt(1 - ab);
+      x[i] = static_cast<float>(std::sqrt(ab_next) * x0[i] + std::sqrt(1 - ab_next) * eps);
+    }
+  }
+  return x0;
+}
+
+TEST(Tcn, TheSamplerWithAnObservedPastComputesTheNewestFrameAloneToTheSameResult) {
+  const auto net = default_shape_tcn(5);
+  const auto D = static_cast<std::size_t>(net->dim()), W = static_cast<std::size_t>(net->frames());
+  const std::size_t n = W * D;
+  std::mt19937 rng(21);
+  const auto obs = random_window(rng, n, false);
+  const auto noise = random_window(rng, n, false);
+  // The online case: every frame but the newest observed, the newest one in part (its trackers).
+  std::vector<float> mask(n, 1.0f);
+  const auto newest_mask = random_window(rng, D, true);
+  std::copy(newest_mask.begin(), newest_mask.end(), mask.begin() + static_cast<std::ptrdiff_t>((W - 1) * D));
+  inference::Sampler sampler(net, inference::SamplerOptions{3, 1.0f, 0.0f}, 1);
+  std::vector<float> out(n);
+  sampler.sample_from_noise(obs, mask, noise, out);
+  const auto reference = ddim_by_full_windows(*net, obs, mask, noise, 3);
+  EXPECT_LE(relative_error(out, reference), 1e-5);
+  // A past frame with one entry unobserved takes the whole-window path, and still matches.
+  mask[5 * D + 7] = 0.0f;
+  sampler.sample_from_noise(obs, mask, noise, out);
+  EXPECT_LE(relative_error(out, ddim_by_full_windows(*net, obs, mask, noise, 3)), 1e-5);
+}
+
 TEST(TcnDeathTest, BrokenPreconditionsAbort) {
   GTEST_FLAG_SET(death_test_style, "threadsafe");
   const auto net = tiny_tcn();
@@ -162,6 +251,17 @@ TEST(TcnDeathTest, BrokenPreconditionsAbort) {
   TcnStream stream(*net, 0);
   std::vector<float> frame(190), y(191);
   EXPECT_DEATH(stream.push(frame, frame, y), "one frame");
+  std::vector<float> one(191);
+  EXPECT_DEATH(net->forward_newest(x, m, 0, out, s), "one frame of D");
+  EXPECT_DEATH(net->forward_newest(x2, m2, 0, one, s), "one window");
+  EXPECT_DEATH(net->forward_newest(x, m, -1, one, s), "t must be in");
+  EXPECT_DEATH(net->forward_newest(x, m, 0, std::span(x).first(191), s), "alias");
+  // An architecture without a newest-frame pass refuses it.
+  const auto mlp = inference::make_denoiser(*inference::load_model(tiny_model_path()));
+  EXPECT_FALSE(mlp->computes_newest_alone());
+  const auto mlp_scratch = mlp->make_scratch(1);
+  std::vector<float> xw(static_cast<std::size_t>(mlp->window_size())), yw(static_cast<std::size_t>(mlp->dim()));
+  EXPECT_DEATH(mlp->forward_newest(xw, xw, 0, yw, *mlp_scratch), "no newest-frame pass");
 }
 
 }  // namespace

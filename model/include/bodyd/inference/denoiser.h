@@ -69,6 +69,16 @@ class Denoiser {
   // Does not allocate.
   virtual void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                        DenoiserScratch& scratch) const = 0;
+  // Whether forward_newest() is available: an architecture whose newest output frame depends on
+  // part of the window only (tcn-v1: its receptive field) computes it for less than forward().
+  [[nodiscard]] virtual bool computes_newest_alone() const { return false; }
+  // The newest frame's output alone, for one window at step t: x, m hold W * D floats as for
+  // forward(), out D floats, equal to forward()'s last frame on the same window. The Sampler uses
+  // it when every earlier frame is fully observed (the online case), where the other frames'
+  // outputs are replaced by the observations anyway. Only where computes_newest_alone() (a bug
+  // otherwise: abort with a message). Does not allocate.
+  virtual void forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+                              DenoiserScratch& scratch) const;
   // A streamed evaluation at step t (0 <= t < T), or nullptr for an architecture that cannot
   // stream (each output frame depends on the whole window). Allocates; call at set-up.
   [[nodiscard]] virtual std::unique_ptr<DenoiserStream> make_stream(int t) const {

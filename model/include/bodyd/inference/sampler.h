@@ -66,7 +66,9 @@ class Sampler {
 
   // obs, mask, out: W * D floats each, frame-major, normalised space; mask entries are 0 or 1.
   // Draws the initial noise (and, with eta > 0, the step noise) from this sampler's generator.
-  // Sizes must match (a bug otherwise: abort with a message). Does not allocate.
+  // Sizes must match (a bug otherwise: abort with a message). Does not allocate. When every
+  // frame but the newest is fully observed and there is no guidance, the network computes only
+  // the newest frame where it can (Denoiser::forward_newest); the result is the same.
   void sample(std::span<const float> obs, std::span<const float> mask, std::span<float> out);
   // The same, starting from the given initial noise x_{tau_0} (W * D floats).
   void sample_from_noise(std::span<const float> obs, std::span<const float> mask, std::span<const float> noise,

@@ -73,6 +73,21 @@ class Tcn final : public detail::EigenDenoiser<TcnConfig, Tcn, TcnScratch> {
   using EigenDenoiser::forward;
   // A TcnStream at step t.
   [[nodiscard]] std::unique_ptr<DenoiserStream> make_stream(int t) const override;
+  // The newest frame's output alone (Denoiser::forward_newest), which takes a TcnScratch.
+  [[nodiscard]] bool computes_newest_alone() const override { return true; }
+  void forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+                      DenoiserScratch& scratch) const override;
+  // One window's newest output frame, equal to forward()'s last frame: every layer is evaluated
+  // only at the frames that output depends on (newest_frames() for the encoder, fewer in each
+  // block above: with W = 64, K = 3 and dilations 1..16, 63 encoder frames and 31 + 15 + 7 + 3 + 1
+  // block outputs, where forward() computes 64 of each). x, m: W * D floats; out: D floats, not
+  // aliasing them; 0 <= t < T; a scratch made by this network (a bug otherwise: abort). Does not
+  // allocate.
+  void forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+                      TcnScratch& scratch) const;
+  // The window's frames that forward_newest() encodes, ascending (min(W, receptive_field()) of them
+  // when the dilations cover every offset, as with R >= L).
+  [[nodiscard]] std::span<const Eigen::Index> newest_frames() const { return newest_frames_; }
 
   // As Network::forward: `batch` windows at step t, frame-major, out the same size. Requirements
   // (a bug if broken: abort): whole windows, 1 <= batch <= scratch.max_batch(), 0 <= t < T, out
@@ -94,11 +109,22 @@ class Tcn final : public detail::EigenDenoiser<TcnConfig, Tcn, TcnScratch> {
     int dilation = 1;
   };
 
+  // Block b of forward_newest(): its output columns are the frames of level b + 1, its input
+  // columns those of level b (level 0: newest_frames_).
+  struct NewestBlock {
+    std::vector<Eigen::Index> residual;           // per output column: the input column of the same frame
+    std::vector<std::vector<Eigen::Index>> taps;  // [k][column]: the input column tap k reads, -1 before the window
+  };
+  void plan_newest();
+
   detail::SplitLinear enc_;  // enc.weight's columns for x_w and for m_w
   Eigen::MatrixXf time_table_;  // C x T: time2(SiLU(time1(sinusoid(t)))), column t
   std::vector<Block> blocks_;
   LayerNorm out_norm_;
   Linear dec1_, dec2_;
+  std::vector<Eigen::Index> newest_frames_;
+  std::vector<NewestBlock> newest_blocks_;
+  Eigen::VectorXf enc_mask_ones_;  // enc_.v times a mask of ones: a fully observed frame's mask term
 };
 
 // Per-session buffers for Tcn::forward, for up to max_batch windows per call.
@@ -109,6 +135,8 @@ class TcnScratch final : public detail::EigenScratch<TcnConfig> {
  private:
   friend class Tcn;
   Eigen::MatrixXf h_, n_, a_, d_;  // C x (W * batch) each
+  Eigen::MatrixXf g_, h2_;         // forward_newest(): a tap's gathered inputs, a block's output (C x W)
+  Eigen::MatrixXf xg_;             // forward_newest(): the encoded frames' x (D x W)
 };
 
 // Streaming evaluation of a Tcn at one diffusion step: push() takes one new frame (x_w, m_w) and
