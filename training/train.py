@@ -56,6 +56,8 @@ def parse_args():
                         "K-step DDIM from the trackers alone) instead of the truth: trains recovery from its own errors, "
                         "as the online loop feeds back what it emitted")
     p.add_argument("--self-prefix-steps", type=int, default=2, help="DDIM steps of the --self-prefix reconstruction")
+    p.add_argument("--observed-weight", type=float, default=0.1,
+                   help="loss weight of observed entries relative to unobserved ones (1 = equal)")
     p.add_argument("--tracker-noise", type=float, default=0.01, help="noise (normalised units) on observed tracker entries")
     p.add_argument("--holdout-every", type=int, default=20, help="every Nth training clip is held out for monitoring")
     p.add_argument("--exclude-split", action="append", default=[], metavar="FILE",
@@ -81,7 +83,10 @@ def parse_args():
                    help="body-scale augmentation: positions scaled by a factor uniform in [1-S, 1+S]")
     p.add_argument("--export-only", action="store_true",
                    help="write --out from the run's latest checkpoint (EMA weights) and exit, without training")
-    return p.parse_args()
+    a = p.parse_args()
+    if not 0.0 <= a.observed_weight <= 1.0:
+        p.error(f"--observed-weight must be in [0, 1], got {a.observed_weight}")
+    return a
 
 
 def read_clip_list(path):
@@ -406,7 +411,7 @@ def main():
                 obs[sel] = pf * roll + (1 - pf) * obs[sel]
         inp = m * obs + (1 - m) * xt
         pred = model(inp, m, t)
-        w = 1.0 - 0.9 * m  # the unobserved part is what the model is for
+        w = 1.0 - (1.0 - a.observed_weight) * m  # the unobserved part is what the model is for
         return ((pred - x0) ** 2 * w).sum() / w.sum()
 
     # Monitor: the online case (all frames but the newest observed, trackers in the newest), K-step DDIM,

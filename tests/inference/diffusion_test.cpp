@@ -117,6 +117,39 @@ TEST(Diffusion, ReconstructDoesNotAllocateOnceWarm) {
   EXPECT_EQ(allocations, 0);
 }
 
+// tcn-v1 (W = 10) through the same reconstructor: once the window is full of emitted frames the
+// sampler takes its newest-frame pass (Denoiser::forward_newest); it stays causal, finite and
+// allocation-free, and keeps the head on its tracker.
+TEST(Diffusion, ATemporalNetworkRunsOnlineCausallyWithoutAllocating) {
+  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
+  const auto samples = trackers(clip, 90.0);
+  const auto times = frame_times(clip);
+  const auto model = inference::load_model(test::fixtures() / "tiny_tcn.safetensors");
+  ASSERT_EQ(model->metadata.at("architecture"), "tcn-v1");
+  const CausalityReport report = check_causality([&] { return std::make_unique<DiffusionReconstructor>(model); },
+                                                 samples, times, times[30]);
+  EXPECT_TRUE(report.causal) << report.message;
+  EXPECT_TRUE(report.future_changed);
+
+  // Samples at the clip's 30 Hz, so the head tracker is the Head joint (HeadAndHandsExactlyOnCleanTrackers).
+  const auto at_30_hz = trackers(clip);
+  DiffusionReconstructor r(model);
+  BodyPose pose;
+  size_t next = 0;
+  std::int64_t allocations = 0;
+  const auto head = static_cast<size_t>(features::kHead);
+  for (size_t f = 0; f < times.size(); ++f) {
+    while (next < at_30_hz.size() && at_30_hz[next].t_ns <= times[f]) r.push(at_30_hz[next++]);
+    test::AllocationCounter counter;
+    ASSERT_TRUE(r.reconstruct(times[f], pose));
+    if (f >= 2) allocations += counter.count();  // the first calls may size `pose`
+    for (const Vec3& p : pose.global.positions) ASSERT_TRUE(p.allFinite()) << "frame " << f;
+    const GlobalPose truth = forward_kinematics(clip.skeleton, clip.frames[f]);
+    EXPECT_LT((pose.global.positions[head] - truth.positions[head]).norm(), 1e-3) << "frame " << f;
+  }
+  EXPECT_EQ(allocations, 0);
+}
+
 TEST(Diffusion, NoPoseBeforeTheFirstHeadSampleAndTimesMustIncrease) {
   DiffusionReconstructor r(tiny_model());
   BodyPose pose;
