@@ -114,6 +114,9 @@ void Sampler::run(std::span<const float> obs, std::span<const float> mask, std::
   const bool newest_only = !guided && network_->computes_newest_alone() &&
                            std::all_of(mask.begin(), mask.end() - static_cast<std::ptrdiff_t>(D),
                                        [](float v) { return v == 1.0f; });
+  // forward_newest() leaves the past frames of x0 alone: start them from the observations, not
+  // from whatever an earlier call left there.
+  if (newest_only) std::copy(obs.begin(), obs.end() - static_cast<std::ptrdiff_t>(D), x0.begin());
 
   const int K = static_cast<int>(timesteps_.size());
   const float s = options_.guidance;
