@@ -67,9 +67,10 @@ MetricsAccumulator::MetricsAccumulator(const Skeleton& skeleton) : sets_(joint_s
     for (size_t k = 0; k < sets_.all.size(); ++k)
       if (sets_.all[k] == sets_.hands[h]) hand_slot_[h] = k;
   hand_max_ = gap_jump_ = kNaN;
-  for (size_t k = 0; k < sets_.all.size(); ++k)
-    if (sets_.all[k] != sets_.head && sets_.all[k] != sets_.hands[0] && sets_.all[k] != sets_.hands[1])
-      untracked_slots_.push_back(k);
+  for (size_t k = 0; k < sets_.all.size(); ++k) {
+    const bool tracked = sets_.all[k] == sets_.head || sets_.all[k] == sets_.hands[0] || sets_.all[k] == sets_.hands[1];
+    (tracked ? tracked_lag_ : untracked_lag_).slots.push_back(k);
+  }
   lag_true_.resize(sets_.all.size() * (kMaxLagFrames + 1));
 }
 
@@ -84,8 +85,10 @@ void MetricsAccumulator::begin_clip(double fps) {
   clip_frames_ = 0;
   clip_hand_max_ = clip_gap_jump_ = kNaN;
   last_invalid_ = {kNoGap, kNoGap};
-  lag_error_ = {};
-  lag_frames_ = 0;
+  for (LagSums* lag : {&untracked_lag_, &tracked_lag_}) {
+    lag->error = {};
+    lag->frames = 0;
+  }
   in_clip_ = true;
 }
 
@@ -128,18 +131,20 @@ void MetricsAccumulator::add_frame(const GlobalPose& predicted, const GlobalPose
     pred_hist_[slot(f) + k] = predicted.positions[static_cast<size_t>(sets_.all[k])];
     true_hist_[slot(f) + k] = truth.positions[static_cast<size_t>(sets_.all[k])];
   }
-  // lag_ms: E(k) of this frame, k = -1..kMaxLagFrames (see metrics.h).
+  // lag_ms and tracked_lag_ms: E(k) of this frame, k = -1..kMaxLagFrames (see metrics.h).
   const auto lag_slot = [n](int frame) { return static_cast<size_t>(frame % (kMaxLagFrames + 1)) * n; };
   for (size_t k = 0; k < n; ++k) lag_true_[lag_slot(f) + k] = true_hist_[slot(f) + k];
   if (f >= kMaxLagFrames) {
-    for (int shift = -1; shift <= kMaxLagFrames; ++shift) {
-      // shift -1: the output a frame earlier against the truth now.
-      const size_t p_at = slot(shift < 0 ? f - 1 : f), g_at = lag_slot(shift < 0 ? f : f - shift);
-      double sum = 0.0;
-      for (size_t k : untracked_slots_) sum += (pred_hist_[p_at + k] - lag_true_[g_at + k]).norm();
-      lag_error_[static_cast<size_t>(shift + 1)] += sum / static_cast<double>(untracked_slots_.size());
+    for (LagSums* lag : {&untracked_lag_, &tracked_lag_}) {
+      for (int shift = -1; shift <= kMaxLagFrames; ++shift) {
+        // shift -1: the output a frame earlier against the truth now.
+        const size_t p_at = slot(shift < 0 ? f - 1 : f), g_at = lag_slot(shift < 0 ? f : f - shift);
+        double sum = 0.0;
+        for (size_t k : lag->slots) sum += (pred_hist_[p_at + k] - lag_true_[g_at + k]).norm();
+        lag->error[static_cast<size_t>(shift + 1)] += sum / static_cast<double>(lag->slots.size());
+      }
+      ++lag->frames;
     }
-    ++lag_frames_;
   }
   if (f >= 1) {
     for (size_t k = 0; k < n; ++k) {
@@ -195,10 +200,10 @@ void MetricsAccumulator::add_frame(const GlobalPose& predicted, const GlobalPose
   ++clip_frames_;
 }
 
-double MetricsAccumulator::clip_lag_ms() const {
-  if (lag_frames_ == 0) return kNaN;
-  // E(shift) is lag_error_[shift + 1] / lag_frames_; the common factor does not move the vertex.
-  const auto e = [&](int shift) { return lag_error_[static_cast<size_t>(shift + 1)]; };
+double MetricsAccumulator::LagSums::ms(double fps) const {
+  if (frames == 0) return kNaN;
+  // E(shift) is error[shift + 1] / frames; the common factor does not move the vertex.
+  const auto e = [&](int shift) { return error[static_cast<size_t>(shift + 1)]; };
   int best = 0;
   for (int shift = 1; shift <= kMaxLagFrames; ++shift)
     if (e(shift) < e(best)) best = shift;
@@ -207,7 +212,7 @@ double MetricsAccumulator::clip_lag_ms() const {
     const double curvature = e(best - 1) - 2.0 * e(best) + e(best + 1);
     if (curvature > 0.0) lag += 0.5 * (e(best - 1) - e(best + 1)) / curvature;
   }
-  return 1000.0 * lag / fps_;
+  return 1000.0 * lag / fps;
 }
 
 AccuracyMetrics MetricsAccumulator::end_clip() {
@@ -215,11 +220,12 @@ AccuracyMetrics MetricsAccumulator::end_clip() {
   AccuracyMetrics m;
   if (clip_frames_ == 0) {
     for (const MetricKey& k : kMetricKeys) m.*k.field = kNaN;
-    m.lag_ms = kNaN;
+    m.lag_ms = m.tracked_lag_ms = kNaN;
     last_truth_ = {kNaN, kNaN, kNaN};
     return m;
   }
-  if (const double lag = clip_lag_ms(); !std::isnan(lag)) terms_[kLag].add(lag);
+  if (const double lag = untracked_lag_.ms(fps_); !std::isnan(lag)) terms_[kLag].add(lag);
+  if (const double lag = tracked_lag_.ms(fps_); !std::isnan(lag)) terms_[kTrackedLag].add(lag);
   m.mpjpe_cm = terms_[kAll].finish(clip_frames_);
   m.upper_pe_cm = terms_[kUpper].finish(clip_frames_);
   m.lower_pe_cm = terms_[kLower].finish(clip_frames_);
@@ -237,6 +243,7 @@ AccuracyMetrics MetricsAccumulator::end_clip() {
   m.hand_pe_max_cm = clip_hand_max_;
   m.gap_hand_jump_cm = clip_gap_jump_;
   m.lag_ms = terms_[kLag].finish(clip_frames_);
+  m.tracked_lag_ms = terms_[kTrackedLag].finish(clip_frames_);
   hand_max_ = max_of(hand_max_, clip_hand_max_);
   gap_jump_ = max_of(gap_jump_, clip_gap_jump_);
   ++clips_;
@@ -261,6 +268,7 @@ AccuracyMetrics MetricsAccumulator::result() const {
   m.gap_hand_jump_cm = gap_jump_;
   m.gap_jerk_m_s3 = terms_[kGapJerk].mean();
   m.lag_ms = terms_[kLag].mean();
+  m.tracked_lag_ms = terms_[kTrackedLag].mean();
   return m;
 }
 

@@ -25,6 +25,8 @@
 //                   compares p[t-1] with g[t], so a lag under half a frame, or a lead, is
 //                   resolved too; at k = kMaxLagFrames the shift is not refined), x 1000 / fps.
 //                   A clip of fewer than kMaxLagFrames + 1 frames has none.
+//   tracked_lag_ms  the same over the tracked joints (Head, Hand_L, Hand_R): what the tracker
+//                   filter's smoothing costs in delay (issue 18 item 4)
 // hand_pe_max_cm and gap_hand_jump_cm combine over clips as the maximum, the others by frames.
 // Clips are combined by their frame count: result = sum(n_clip * clip_metric) / sum(n_clip),
 // over the clips where the metric is defined (a 1-frame clip has no velocities, a clip of
@@ -56,6 +58,7 @@ struct AccuracyMetrics {
   double gap_hand_jump_cm = 0.0;
   double gap_jerk_m_s3 = 0.0;
   double lag_ms = 0.0;  // issue 18 item 4 (above)
+  double tracked_lag_ms = 0.0;
 };
 
 // The metric keys of docs/conventions.md, in its order, with their fields.
@@ -75,12 +78,13 @@ inline constexpr std::array<MetricKey, 9> kMetricKeys{{
     {"foot_skate_ratio", &AccuracyMetrics::foot_skate_ratio},
 }};
 // The keys of the additions, after kMetricKeys in reports.
-inline constexpr std::array<MetricKey, 5> kExtraMetricKeys{{
+inline constexpr std::array<MetricKey, 6> kExtraMetricKeys{{
     {"head_pe_cm", &AccuracyMetrics::head_pe_cm},
     {"hand_pe_max_cm", &AccuracyMetrics::hand_pe_max_cm},
     {"gap_hand_jump_cm", &AccuracyMetrics::gap_hand_jump_cm},
     {"gap_jerk_m_s3", &AccuracyMetrics::gap_jerk_m_s3},
     {"lag_ms", &AccuracyMetrics::lag_ms},
+    {"tracked_lag_ms", &AccuracyMetrics::tracked_lag_ms},
 }};
 
 // The largest shift lag_ms searches, frames.
@@ -149,10 +153,17 @@ class MetricsAccumulator {
   };
   enum TermId {
     kAll, kUpper, kLower, kHands, kRoot, kRot, kVel, kJitter, kSkate, kTruthJitter, kTruthSkate,
-    kHead, kGapJerk, kTruthGapJerk, kLag, kTerms
+    kHead, kGapJerk, kTruthGapJerk, kLag, kTrackedLag, kTerms
   };
-  // The clip's lag (ms) from lag_error_ (NaN without frames for it).
-  [[nodiscard]] double clip_lag_ms() const;
+  // lag_ms or tracked_lag_ms of the clip: the slots (within sets_.all) of its joints and the
+  // clip's sums of E(k) for k = -1..kMaxLagFrames over `frames` frames.
+  struct LagSums {
+    std::vector<size_t> slots;
+    std::array<double, kMaxLagFrames + 2> error{};
+    int frames = 0;
+    // The clip's lag (ms) at `fps` (NaN without frames for it).
+    [[nodiscard]] double ms(double fps) const;
+  };
 
   JointSets sets_;
   double fps_ = 30.0;
@@ -170,13 +181,10 @@ class MetricsAccumulator {
   std::array<size_t, 2> hand_slot_{};
   // Positions of the body joints (sets_.all order) of the last 4 frames, slot = frame % 4.
   std::vector<Vec3> pred_hist_, true_hist_;
-  // lag_ms: the slots (within sets_.all) of the untracked joints, the truth's positions of the
-  // body joints over the last kMaxLagFrames + 1 frames (slot = frame % (kMaxLagFrames + 1)), and
-  // the clip's sums of E(k) for k = -1..kMaxLagFrames over its lag_frames_ frames.
-  std::vector<size_t> untracked_slots_;
+  // The truth's positions of the body joints over the last kMaxLagFrames + 1 frames (slot =
+  // frame % (kMaxLagFrames + 1)); lag_ms over the untracked joints, tracked_lag_ms over the others.
   std::vector<Vec3> lag_true_;
-  std::array<double, kMaxLagFrames + 2> lag_error_{};
-  int lag_frames_ = 0;
+  LagSums untracked_lag_, tracked_lag_;
 };
 
 }  // namespace bodyd
