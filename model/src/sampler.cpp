@@ -83,9 +83,17 @@ Sampler::Sampler(std::shared_ptr<const Denoiser> network, const SamplerOptions& 
 
 void Sampler::sample(std::span<const float> obs, std::span<const float> mask, std::span<float> out) {
   const auto window = static_cast<std::size_t>(network_->window_size());
-  BODYD_REQUIRE(out.size() == window, "out must hold W * D floats");
-  for (float& v : std::span<float>(x_in_).first(window)) v = rng_.normal();
+  BODYD_REQUIRE(out.size() == window && mask.size() == window, "mask and out must hold W * D floats");
+  // In the online case the past frames' noise is never used (they are the observations).
+  const std::size_t first = newest_only(mask) ? window - static_cast<std::size_t>(network_->dim()) : 0;
+  for (float& v : std::span<float>(x_in_).subspan(first, window - first)) v = rng_.normal();
   run(obs, mask, out);
+}
+
+bool Sampler::newest_only(std::span<const float> mask) const {
+  const auto D = static_cast<std::ptrdiff_t>(network_->dim());
+  return options_.guidance == 1.0f && network_->computes_newest_alone() &&
+         std::all_of(mask.begin(), mask.end() - D, [](float v) { return v == 1.0f; });
 }
 
 void Sampler::sample_from_noise(std::span<const float> obs, std::span<const float> mask, std::span<const float> noise,
@@ -111,20 +119,23 @@ void Sampler::run(std::span<const float> obs, std::span<const float> mask, std::
   // The online case: every frame but the newest fully observed. Their x0 estimates are replaced
   // by the observations, so an architecture that can computes the newest frame's alone.
   const std::size_t D = static_cast<std::size_t>(network_->dim());
-  const bool newest_only = !guided && network_->computes_newest_alone() &&
-                           std::all_of(mask.begin(), mask.end() - static_cast<std::ptrdiff_t>(D),
-                                       [](float v) { return v == 1.0f; });
+  const bool newest = newest_only(mask);
   // forward_newest() leaves the past frames of x0 alone: start them from the observations, not
-  // from whatever an earlier call left there.
-  if (newest_only) std::copy(obs.begin(), obs.end() - static_cast<std::ptrdiff_t>(D), x0.begin());
+  // from whatever an earlier call left there. The past frames of x are the observations at every
+  // step (their mask is 1), so the element-wise updates below need only the newest frame.
+  const std::size_t first = newest ? window - D : 0;
+  if (newest) {
+    std::copy(obs.begin(), obs.end() - static_cast<std::ptrdiff_t>(D), x0.begin());
+    std::copy(obs.begin(), obs.end() - static_cast<std::ptrdiff_t>(D), x.begin());
+  }
 
   const int K = static_cast<int>(timesteps_.size());
   const float s = options_.guidance;
   for (int k = 0; k < K; ++k) {
     const int tau = timesteps_[static_cast<std::size_t>(k)];
-    for (std::size_t i = 0; i < window; ++i) x[i] = mask[i] * obs[i] + (1.0f - mask[i]) * x[i];
+    for (std::size_t i = first; i < window; ++i) x[i] = mask[i] * obs[i] + (1.0f - mask[i]) * x[i];
     if (guided) std::copy(x.begin(), x.end(), x_uncond.begin());
-    if (newest_only) {
+    if (newest) {
       network_->forward_newest(x, std::span<const float>(m_in_.data(), window), tau, x0.last(D), *scratch_);
     } else {
       network_->forward(std::span<const float>(x_in_.data(), batch_size),
@@ -134,7 +145,7 @@ void Sampler::run(std::span<const float> obs, std::span<const float> mask, std::
     if (guided) {
       for (std::size_t i = 0; i < window; ++i) x0[i] = x0_uncond[i] + s * (x0[i] - x0_uncond[i]);
     }
-    for (std::size_t i = 0; i < window; ++i) x0[i] = mask[i] * obs[i] + (1.0f - mask[i]) * x0[i];
+    for (std::size_t i = first; i < window; ++i) x0[i] = mask[i] * obs[i] + (1.0f - mask[i]) * x0[i];
     if (k == K - 1) break;
 
     const double ab = network_->alpha_bar()[static_cast<std::size_t>(tau)];
@@ -144,13 +155,13 @@ void Sampler::run(std::span<const float> obs, std::span<const float> mask, std::
     const auto inv_sqrt_1mab = static_cast<float>(1.0 / std::sqrt(1.0 - ab));
     const auto sqrt_ab_next = static_cast<float>(std::sqrt(ab_next));
     const auto dir = static_cast<float>(std::sqrt(std::max(0.0, 1.0 - ab_next - sigma * sigma)));
-    for (std::size_t i = 0; i < window; ++i) {
+    for (std::size_t i = first; i < window; ++i) {
       const float eps = (x[i] - sqrt_ab * x0[i]) * inv_sqrt_1mab;
       x[i] = sqrt_ab_next * x0[i] + dir * eps;
     }
     if (sigma > 0.0) {
       const auto sig = static_cast<float>(sigma);
-      for (std::size_t i = 0; i < window; ++i) x[i] += sig * rng_.normal();
+      for (std::size_t i = first; i < window; ++i) x[i] += sig * rng_.normal();
     }
   }
   std::copy(x0.begin(), x0.end(), out.begin());

@@ -9,6 +9,7 @@
 #include "eigen_ops.h"
 
 #include <algorithm>
+#include <atomic>
 #include <set>
 #include <string>
 
@@ -51,7 +52,11 @@ TensorShapes Tcn::tensors(const ModelConfig& config) {
   return v;
 }
 
-Tcn::Tcn(const Model& model) : EigenDenoiser(model) {
+namespace {
+std::atomic<std::uint64_t> next_tcn_id{1};
+}  // namespace
+
+Tcn::Tcn(const Model& model) : EigenDenoiser(model), id_(next_tcn_id.fetch_add(1)) {
   const TcnConfig& c = config_;
   enc_ = detail::load_split_linear(model, "enc", c.D);
   for (int b = 0; b < c.L; ++b) {
@@ -128,6 +133,8 @@ TcnScratch::TcnScratch(const Tcn& network, int max_batch)
   g_.resize(config_.C, config_.W);
   h2_.resize(config_.C, config_.W);
   xg_.resize(config_.D, config_.W);
+  enc_past_.resize(config_.C, config_.W);
+  mg_.resize(config_.D, config_.W);
 }
 
 void Tcn::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
@@ -199,22 +206,44 @@ void Tcn::forward_newest(std::span<const float> x, std::span<const float> m, int
   const Eigen::Map<const Eigen::MatrixXf> M(m.data(), c.D, c.W);
   Eigen::Map<Eigen::VectorXf> Y(out.data(), c.D);
 
-  // The encoder at the frames the newest output depends on. A fully observed frame's mask term
-  // is the same every time (enc_mask_ones_), so only a partly observed frame multiplies its mask.
+  // The encoder at the frames the newest output depends on. Its output before the step embedding
+  // depends on a frame's x and m alone, so the past frames' columns are kept in the scratch and
+  // reused while the next call's past frames are the same (the steps of one online sample: the
+  // past is observed and only the newest frame changes). A fully observed frame's mask term is
+  // the same every time (enc_mask_ones_), so only a partly observed frame multiplies its mask.
   const auto frames = static_cast<Eigen::Index>(newest_frames_.size());
-  for (Eigen::Index j = 0; j < frames; ++j) s.xg_.col(j) = X.col(newest_frames_[static_cast<std::size_t>(j)]);
+  const Eigen::Index past = frames - 1;  // newest_frames_ ends with the newest frame, W - 1
+  bool reuse = s.enc_owner_ == id_;
+  for (Eigen::Index j = 0; reuse && j < past; ++j) {
+    const Eigen::Index f = newest_frames_[static_cast<std::size_t>(j)];
+    reuse = X.col(f) == s.xg_.col(j) && M.col(f) == s.mg_.col(j);
+  }
+  if (!reuse) {
+    s.enc_owner_ = 0;
+    for (Eigen::Index j = 0; j < past; ++j) {
+      s.xg_.col(j) = X.col(newest_frames_[static_cast<std::size_t>(j)]);
+      s.mg_.col(j) = M.col(newest_frames_[static_cast<std::size_t>(j)]);
+    }
+    auto e = s.enc_past_.leftCols(past);
+    e.noalias() = enc_.u * s.xg_.leftCols(past);
+    for (Eigen::Index j = 0; j < past; ++j) {
+      if ((s.mg_.col(j).array() == 1.0f).all())
+        e.col(j) += enc_mask_ones_;
+      else
+        e.col(j).noalias() += enc_.v * s.mg_.col(j);
+    }
+    e.colwise() += enc_.bias;
+    silu_inplace(e);
+    s.enc_owner_ = id_;
+  }
   {
     auto h = s.h_.leftCols(frames);
-    h.noalias() = enc_.u * s.xg_.leftCols(frames);
-    for (Eigen::Index j = 0; j < frames; ++j) {
-      const auto mask = M.col(newest_frames_[static_cast<std::size_t>(j)]);
-      if ((mask.array() == 1.0f).all())
-        h.col(j) += enc_mask_ones_;
-      else
-        h.col(j).noalias() += enc_.v * mask;
-    }
-    h.colwise() += enc_.bias;
-    silu_inplace(h);
+    h.leftCols(past) = s.enc_past_.leftCols(past);
+    auto newest = h.col(past);
+    newest.noalias() = enc_.u * X.col(c.W - 1);
+    newest.noalias() += enc_.v * M.col(c.W - 1);
+    newest += enc_.bias;
+    silu_inplace(newest);
     h.colwise() += time_table_.col(t);
   }
 

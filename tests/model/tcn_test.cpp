@@ -192,6 +192,18 @@ TEST(Tcn, NewestFrameAloneEqualsTheWindowsLastFrame) {
       EXPECT_GT(relative_error(again, newest), 1e-4);
     }
   }
+  // The scratch keeps the encoded past for the network that made it: another network of the same
+  // shape with other weights, given the same window in the same scratch, encodes it anew.
+  const auto a = default_shape_tcn(3), b = default_shape_tcn(4);
+  TcnScratch shared(*a);
+  const auto D = static_cast<std::size_t>(a->dim()), n = static_cast<std::size_t>(a->window_size());
+  const auto x = random_window(rng, n, false), m = random_window(rng, n, true);
+  std::vector<float> ya(D), yb(D), full(n);
+  a->forward_newest(x, m, 10, ya, shared);
+  b->forward_newest(x, m, 10, yb, shared);
+  b->forward(x, m, 10, full, shared);
+  EXPECT_LE(relative_error(yb, std::span(full).last(D)), 1e-5);
+  EXPECT_GT(relative_error(ya, yb), 1e-3);
 }
 
 // DDIM with eta 0 and no guidance, written out with forward() on the whole window (sampler.cpp's
@@ -236,6 +248,15 @@ TEST(Tcn, TheSamplerWithAnObservedPastComputesTheNewestFrameAloneToTheSameResult
   mask[5 * D + 7] = 0.0f;
   sampler.sample_from_noise(obs, mask, noise, out);
   EXPECT_LE(relative_error(out, ddim_by_full_windows(*net, obs, mask, noise, 3)), 1e-5);
+  // sample() in the online case draws the newest frame's noise alone (the past frames are the
+  // observations): the generator's first D normals, whatever the past frames' noise would be.
+  mask[5 * D + 7] = 1.0f;
+  sampler.reseed(9);
+  sampler.sample(obs, mask, out);
+  std::vector<float> drawn(noise);
+  inference::Rng gen(9);
+  for (std::size_t i = (W - 1) * D; i < n; ++i) drawn[i] = gen.normal();
+  EXPECT_LE(relative_error(out, ddim_by_full_windows(*net, obs, mask, drawn, 3)), 1e-5);
 }
 
 TEST(TcnDeathTest, BrokenPreconditionsAbort) {

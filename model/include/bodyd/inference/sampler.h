@@ -68,7 +68,8 @@ class Sampler {
   // Draws the initial noise (and, with eta > 0, the step noise) from this sampler's generator.
   // Sizes must match (a bug otherwise: abort with a message). Does not allocate. When every
   // frame but the newest is fully observed and there is no guidance, the network computes only
-  // the newest frame where it can (Denoiser::forward_newest); the result is the same.
+  // the newest frame where it can (Denoiser::forward_newest); the result is the same (the
+  // generator then draws the newest frame's noise alone: the past frames are the observations).
   void sample(std::span<const float> obs, std::span<const float> mask, std::span<float> out);
   // The same, starting from the given initial noise x_{tau_0} (W * D floats).
   void sample_from_noise(std::span<const float> obs, std::span<const float> mask, std::span<const float> noise,
@@ -76,6 +77,8 @@ class Sampler {
 
  private:
   void run(std::span<const float> obs, std::span<const float> mask, std::span<float> out);
+  // The online case above: the network computes the newest frame alone.
+  [[nodiscard]] bool newest_only(std::span<const float> mask) const;
 
   std::shared_ptr<const Denoiser> network_;
   SamplerOptions options_;

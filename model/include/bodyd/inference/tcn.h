@@ -20,6 +20,7 @@
 #include <Eigen/Core>
 
 #include <array>
+#include <cstdint>
 #include <memory>
 #include <span>
 #include <vector>
@@ -80,7 +81,9 @@ class Tcn final : public detail::EigenDenoiser<TcnConfig, Tcn, TcnScratch> {
   // One window's newest output frame, equal to forward()'s last frame: every layer is evaluated
   // only at the frames that output depends on (newest_frames() for the encoder, fewer in each
   // block above: with W = 64, K = 3 and dilations 1..16, 63 encoder frames and 31 + 15 + 7 + 3 + 1
-  // block outputs, where forward() computes 64 of each). x, m: W * D floats; out: D floats, not
+  // block outputs, where forward() computes 64 of each). The scratch keeps the encoded past
+  // frames (the encoder does not depend on t) and reuses them while a call's past frames equal
+  // the last call's, as in the steps of one online sample. x, m: W * D floats; out: D floats, not
   // aliasing them; 0 <= t < T; a scratch made by this network (a bug otherwise: abort). Does not
   // allocate.
   void forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
@@ -125,6 +128,7 @@ class Tcn final : public detail::EigenDenoiser<TcnConfig, Tcn, TcnScratch> {
   std::vector<Eigen::Index> newest_frames_;
   std::vector<NewestBlock> newest_blocks_;
   Eigen::VectorXf enc_mask_ones_;  // enc_.v times a mask of ones: a fully observed frame's mask term
+  std::uint64_t id_;               // this network's, unique in the process: whose encoded past a scratch holds
 };
 
 // Per-session buffers for Tcn::forward, for up to max_batch windows per call.
@@ -136,7 +140,10 @@ class TcnScratch final : public detail::EigenScratch<TcnConfig> {
   friend class Tcn;
   Eigen::MatrixXf h_, n_, a_, d_;  // C x (W * batch) each
   Eigen::MatrixXf g_, h2_;         // forward_newest(): a tap's gathered inputs, a block's output (C x W)
-  Eigen::MatrixXf xg_;             // forward_newest(): the encoded frames' x (D x W)
+  // forward_newest(): the encoded past frames' x and m (D x W) and their encoder outputs before
+  // the step embedding (C x W), valid for the network whose id is enc_owner_ (0: none).
+  Eigen::MatrixXf xg_, mg_, enc_past_;
+  std::uint64_t enc_owner_ = 0;
 };
 
 // Streaming evaluation of a Tcn at one diffusion step: push() takes one new frame (x_w, m_w) and
