@@ -74,6 +74,12 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--filter-beta", method_options.filter.beta_per_m_s, "diffusion: the tracker filter's beta_per_m_s")
       ->capture_default_str();
+  app.add_option("--filter-rot-min-cutoff-hz", method_options.filter.rot_min_cutoff_hz,
+                 "diffusion: the tracker filter's rot_min_cutoff_hz")
+      ->capture_default_str();
+  app.add_option("--filter-rot-beta", method_options.filter.rot_beta_per_rad_s,
+                 "diffusion: the tracker filter's rot_beta_per_rad_s")
+      ->capture_default_str();
   // The body filter (diffusion.h, one_euro.h BodyFilterOptions; the daemon's "body_filter" keys).
   bool no_body_filter = false;
   std::optional<double> body_min_cutoff_hz, body_rot_min_cutoff_hz;
