@@ -74,6 +74,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--filter-beta", method_options.filter.beta_per_m_s, "diffusion: the tracker filter's beta_per_m_s")
       ->capture_default_str();
+  app.add_option("--filter-d-cutoff-hz", method_options.filter.d_cutoff_hz,
+                 "diffusion: the tracker filter's d_cutoff_hz (cutoff of its speed estimate)")
+      ->capture_default_str();
   app.add_option("--filter-rot-min-cutoff-hz", method_options.filter.rot_min_cutoff_hz,
                  "diffusion: the tracker filter's rot_min_cutoff_hz")
       ->capture_default_str();
