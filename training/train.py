@@ -20,7 +20,34 @@ import sys
 import time
 
 import numpy as np
-import torch
+
+
+def _limit_blas_threads(argv: list[str]) -> None:
+    """--threads N also bounds the BLAS library's own thread pool. Debian's PyTorch calls OpenBLAS
+    (libopenblas0-pthread), whose pool has one thread per core whatever torch.set_num_threads says:
+    with --threads 1 a run still took both cores (perf: the second one in OpenBLAS's kernels and
+    sched_yield) and slowed everything else on the machine. With more than one thread, torch's
+    OpenMP threads spin between parallel regions and the BLAS threads spin too, so on two cores
+    they starve each other (mlpwin-v1, batch 256: 1112 samples/s against 2370-2640 with one
+    thread); OMP_WAIT_POLICY=PASSIVE makes idle OpenMP threads sleep (2330-2660 samples/s, so two
+    threads buy little for this small network on this machine). The pool's size and
+    the wait policy are read once, when the libraries load, so they are set here, before torch is
+    imported. A value already in the environment wins."""
+    n = None
+    for i, arg in enumerate(argv):
+        if arg == "--threads" and i + 1 < len(argv):
+            n = argv[i + 1]
+        elif arg.startswith("--threads="):
+            n = arg.split("=", 1)[1]
+    if n is not None and n.isdigit() and int(n) > 0:
+        for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
+            os.environ.setdefault(var, n)
+        if int(n) > 1:
+            os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+
+_limit_blas_threads(sys.argv[1:])
+import torch  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from model_net import ARCHITECTURES, MlpWin, TcnCausal, cosine_alpha_bars, ddim_sample, load_model, write_model  # noqa: E402
@@ -65,7 +92,7 @@ def parse_args():
                         "line relative to the dataset root, as training/style-heldout.txt (repeatable)")
     p.add_argument("--ema", type=float, default=0.999)
     p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--threads", type=int, default=0, help="CPU threads for torch (0 = torch default)")
+    p.add_argument("--threads", type=int, default=0, help="CPU threads for torch and its BLAS library (0 = their defaults: one per core)")
     p.add_argument("--device", default="auto")
     p.add_argument("--ckpt-every", type=int, default=1000)
     p.add_argument("--eval-every", type=int, default=1000)
