@@ -19,20 +19,20 @@ import subprocess
 import sys
 import time
 
-import numpy as np
-
 
 def _limit_blas_threads(argv: list[str]) -> None:
     """--threads N also bounds the BLAS library's own thread pool. Debian's PyTorch calls OpenBLAS
     (libopenblas0-pthread), whose pool has one thread per core whatever torch.set_num_threads says:
     with --threads 1 a run still took both cores (perf: the second one in OpenBLAS's kernels and
     sched_yield) and slowed everything else on the machine. With more than one thread, torch's
-    OpenMP threads spin between parallel regions and the BLAS threads spin too, so on two cores
-    they starve each other (mlpwin-v1, batch 256: 1112 samples/s against 2370-2640 with one
-    thread); OMP_WAIT_POLICY=PASSIVE makes idle OpenMP threads sleep (2330-2660 samples/s, so two
-    threads buy little for this small network on this machine). The pool's size and
-    the wait policy are read once, when the libraries load, so they are set here, before torch is
-    imported. A value already in the environment wins."""
+    OpenMP threads spin between parallel regions while the BLAS threads spin too, and on two cores
+    they starve each other; OMP_WAIT_POLICY=PASSIVE makes idle OpenMP threads sleep. Measured on
+    the 2-core development machine (samples/s, docs/models.md, "Training threads"): mlpwin-v1 at
+    batch 256, one core 1861, --threads 2 1965 (1018 with spinning OpenMP threads); tcn-v1 at
+    batch 128, 225 and 296. The pool's size and the wait policy are read once, when the libraries
+    load, so they are set here, before numpy (which loads the same OpenBLAS) and torch are
+    imported. A value already in the environment wins (OPENBLAS_NUM_THREADS=2 with --threads 1
+    ran mlpwin-v1 at 2519)."""
     n = None
     for i, arg in enumerate(argv):
         if arg == "--threads" and i + 1 < len(argv):
@@ -47,6 +47,7 @@ def _limit_blas_threads(argv: list[str]) -> None:
 
 
 _limit_blas_threads(sys.argv[1:])
+import numpy as np  # noqa: E402  (numpy loads OpenBLAS too)
 import torch  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
