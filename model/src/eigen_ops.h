@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <vector>
 
 namespace bodyd::inference::detail {
 
@@ -68,6 +69,42 @@ inline LayerNorm load_layer_norm(const Model& model, const std::string& name) {
 inline SplitLinear load_split_linear(const Model& model, const std::string& name, Eigen::Index u_size) {
   const RowMatrix w = to_matrix(model.tensor(name + ".weight"));
   return SplitLinear{w.leftCols(u_size), w.rightCols(w.cols() - u_size), to_vector(model.tensor(name + ".bias"))};
+}
+
+// blocks.<b>.{norm,fc1,fc2} for b < L, H wide: their tensors and their loading.
+inline void add_residual_blocks(TensorShapes& v, std::int64_t H, int L) {
+  for (int b = 0; b < L; ++b) {
+    const std::string p = "blocks." + std::to_string(b) + ".";
+    add_layer_norm(v, p + "norm", H);
+    add_linear(v, p + "fc1", H, H);
+    add_linear(v, p + "fc2", H, H);
+  }
+}
+inline std::vector<ResidualBlock> load_residual_blocks(const Model& model, int L) {
+  std::vector<ResidualBlock> blocks;
+  for (int b = 0; b < L; ++b) {
+    const std::string p = "blocks." + std::to_string(b) + ".";
+    blocks.push_back(
+        ResidualBlock{load_layer_norm(model, p + "norm"), load_linear(model, p + "fc1"), load_linear(model, p + "fc2")});
+  }
+  return blocks;
+}
+
+// h += fc2(SiLU(fc1(LayerNorm(h)))) for each block, on h's columns (one per window); n and a are
+// buffers of h's size. One matrix-vector product per column: with batch <= 2 that streams each
+// weight matrix from cache twice, which measured faster than Eigen's matrix-matrix path (and that
+// path would need heap workspace for these sizes).
+template <typename H, typename N, typename A>
+void residual_blocks(const std::vector<ResidualBlock>& blocks, Eigen::MatrixBase<H>& h, Eigen::MatrixBase<N>& n,
+                     Eigen::MatrixBase<A>& a) {
+  for (const ResidualBlock& blk : blocks) {
+    layer_norm(h, blk.norm.weight, blk.norm.bias, n);
+    for (Eigen::Index b = 0; b < h.cols(); ++b) a.col(b).noalias() = blk.fc1.weight * n.col(b);
+    a.colwise() += blk.fc1.bias;
+    silu_inplace(a);
+    for (Eigen::Index b = 0; b < h.cols(); ++b) h.col(b).noalias() += blk.fc2.weight * a.col(b);
+    h.colwise() += blk.fc2.bias;
+  }
 }
 
 // out = layer.weight * in + layer.bias, column by column.

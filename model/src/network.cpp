@@ -62,12 +62,7 @@ TensorShapes Network::tensors(const ModelConfig& config) {
   add_linear(v, "inp", W * E, H);
   add_linear(v, "time1", TE, H);
   add_linear(v, "time2", H, H);
-  for (int b = 0; b < c.L; ++b) {
-    const std::string p = "blocks." + std::to_string(b) + ".";
-    add_layer_norm(v, p + "norm", H);
-    add_linear(v, p + "fc1", H, H);
-    add_linear(v, p + "fc2", H, H);
-  }
+  add_residual_blocks(v, H, c.L);
   add_layer_norm(v, "out_norm", H);
   add_linear(v, "out", H, W * E);
   add_linear(v, "dec1", 2 * E, E);
@@ -79,10 +74,7 @@ Network::Network(const Model& model) : EigenDenoiser(model) {
   const MlpWinConfig& c = config_;
   enc_ = detail::load_split_linear(model, "enc", c.D);
   inp_ = load_linear(model, "inp");
-  for (int b = 0; b < c.L; ++b) {
-    const std::string p = "blocks." + std::to_string(b) + ".";
-    blocks_.push_back(Block{load_layer_norm(model, p + "norm"), load_linear(model, p + "fc1"), load_linear(model, p + "fc2")});
-  }
+  blocks_ = load_residual_blocks(model, c.L);
   out_norm_ = load_layer_norm(model, "out_norm");
   out_ = load_linear(model, "out");
   dec1_ = detail::load_split_linear(model, "dec1", c.E);
@@ -136,14 +128,7 @@ void Network::forward(std::span<const float> x, std::span<const float> m, int t,
   h.colwise() += time_table_.col(t);
 
   // 4. Residual blocks: h += fc2(SiLU(fc1(LayerNorm(h)))).
-  for (const Block& blk : blocks_) {
-    layer_norm(h, blk.norm.weight, blk.norm.bias, n);
-    for (Eigen::Index b = 0; b < batch; ++b) a.col(b).noalias() = blk.fc1.weight * n.col(b);
-    a.colwise() += blk.fc1.bias;
-    silu_inplace(a);
-    for (Eigen::Index b = 0; b < batch; ++b) h.col(b).noalias() += blk.fc2.weight * a.col(b);
-    h.colwise() += blk.fc2.bias;
-  }
+  residual_blocks(blocks_, h, n, a);
 
   // 5. z = out(SiLU(LayerNorm_out(h))).
   layer_norm(h, out_norm_.weight, out_norm_.bias, n);

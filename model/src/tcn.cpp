@@ -8,9 +8,7 @@
 #include "bodyd/base/require.h"
 #include "eigen_ops.h"
 
-#include <algorithm>
 #include <atomic>
-#include <set>
 #include <string>
 
 namespace bodyd::inference {
@@ -25,27 +23,16 @@ ModelConfig TcnConfig::to_model_config() const {
   return ModelConfig{{"W", W}, {"D", D}, {"C", C}, {"K", K}, {"L", L}, {"R", R}, {"TE", TE}, {"T", T}};
 }
 
-long TcnConfig::receptive_field() const {
-  long sum = 0;
-  for (int b = 0; b < L; ++b) sum += dilation(b);
-  return 1 + static_cast<long>(K - 1) * sum;
-}
+long TcnConfig::receptive_field() const { return CausalStack::receptive_field(K, L, R); }
 
 TensorShapes Tcn::tensors(const ModelConfig& config) {
-  using Shape = std::vector<std::int64_t>;
   const TcnConfig c = TcnConfig::from(config);
   TensorShapes v;
   const std::int64_t D = c.D, C = c.C, K = c.K, TE = c.TE;
   add_linear(v, "enc", 2 * D, C);
   add_linear(v, "time1", TE, C);
   add_linear(v, "time2", C, C);
-  for (int b = 0; b < c.L; ++b) {
-    const std::string p = "blocks." + std::to_string(b) + ".";
-    add_layer_norm(v, p + "norm", C);
-    v.emplace_back(p + "conv.weight", Shape{C, C, K});
-    v.emplace_back(p + "conv.bias", Shape{C});
-    add_linear(v, p + "fc", C, C);
-  }
+  CausalStack::add_tensors(v, "blocks.", C, K, c.L);
   add_layer_norm(v, "out_norm", C);
   add_linear(v, "dec1", C, C);
   add_linear(v, "dec2", C, D);
@@ -55,85 +42,19 @@ TensorShapes Tcn::tensors(const ModelConfig& config) {
 namespace {
 std::atomic<std::uint64_t> next_tcn_id{1};
 
-// out += w * in. Eigen's matrix-matrix product packs w on every call, which costs more than the
-// product itself for the few columns of forward_newest()'s upper blocks: there, one
-// matrix-vector product per column (measured with bodyd-bench-net, "sample online").
-constexpr Eigen::Index kMatrixVectorColumns = 8;
-template <typename In, typename Out>
-void mul_add(const detail::RowMatrix& w, const Eigen::MatrixBase<In>& in, Eigen::MatrixBase<Out>& out) {
-  if (in.cols() <= kMatrixVectorColumns) {
-    for (Eigen::Index j = 0; j < in.cols(); ++j) out.col(j).noalias() += w * in.col(j);
-  } else {
-    out.noalias() += w * in;
-  }
-}
 }  // namespace
 
 Tcn::Tcn(const Model& model) : EigenDenoiser(model), id_(next_tcn_id.fetch_add(1)) {
   const TcnConfig& c = config_;
   enc_ = detail::load_split_linear(model, "enc", c.D);
-  for (int b = 0; b < c.L; ++b) {
-    const std::string p = "blocks." + std::to_string(b) + ".";
-    Block blk;
-    blk.norm = load_layer_norm(model, p + "norm");
-    // PyTorch's Conv1d weight [out, in, K]: tap k of output o and input i at (o * C + i) * K + k.
-    const TensorF32& w = model.tensor(p + "conv.weight");
-    blk.taps.assign(static_cast<std::size_t>(c.K), RowMatrix(c.C, c.C));
-    for (int o = 0; o < c.C; ++o)
-      for (int i = 0; i < c.C; ++i)
-        for (int k = 0; k < c.K; ++k)
-          blk.taps[static_cast<std::size_t>(k)](o, i) =
-              w.data[(static_cast<std::size_t>(o) * static_cast<std::size_t>(c.C) + static_cast<std::size_t>(i)) *
-                         static_cast<std::size_t>(c.K) +
-                     static_cast<std::size_t>(k)];
-    blk.conv_bias = detail::to_vector(model.tensor(p + "conv.bias"));
-    blk.fc = load_linear(model, p + "fc");
-    blk.dilation = c.dilation(b);
-    blocks_.push_back(std::move(blk));
-  }
+  stack_ = CausalStack(model, "blocks.", c.W, c.C, c.K, c.L, c.R);
   out_norm_ = load_layer_norm(model, "out_norm");
   dec1_ = load_linear(model, "dec1");
   dec2_ = load_linear(model, "dec2");
 
   // The time MLP depends on t alone: evaluated once per step here (in double, then rounded).
   time_table_ = detail::time_table(load_linear(model, "time1"), load_linear(model, "time2"), c.TE, c.T, nullptr);
-  plan_newest();
   enc_mask_ones_ = enc_.v.rowwise().sum();
-}
-
-void Tcn::plan_newest() {
-  const TcnConfig& c = config_;
-  // Top down: the newest output needs the last block's output at frame W-1; a block's output at
-  // frame f needs its input at f (the residual) and at f - (K-1-k) * dilation for each tap k that
-  // stays in the window. levels[b]: the frames of block b's input, ascending; levels[L]: {W-1}.
-  std::vector<std::vector<Eigen::Index>> levels(static_cast<std::size_t>(c.L) + 1);
-  levels.back() = {static_cast<Eigen::Index>(c.W) - 1};
-  for (int b = c.L - 1; b >= 0; --b) {
-    std::set<Eigen::Index> in;
-    for (Eigen::Index f : levels[static_cast<std::size_t>(b) + 1])
-      for (int k = 0; k < c.K; ++k)
-        if (const Eigen::Index g = f - static_cast<Eigen::Index>(c.K - 1 - k) * c.dilation(b); g >= 0) in.insert(g);
-    levels[static_cast<std::size_t>(b)].assign(in.begin(), in.end());
-  }
-  newest_frames_ = levels.front();
-  newest_blocks_.assign(static_cast<std::size_t>(c.L), {});
-  for (int b = 0; b < c.L; ++b) {
-    const auto& in = levels[static_cast<std::size_t>(b)];
-    const auto& outs = levels[static_cast<std::size_t>(b) + 1];
-    const auto column = [&in](Eigen::Index frame) -> Eigen::Index {
-      const auto it = std::lower_bound(in.begin(), in.end(), frame);
-      return it != in.end() && *it == frame ? static_cast<Eigen::Index>(it - in.begin()) : -1;
-    };
-    NewestBlock& nb = newest_blocks_[static_cast<std::size_t>(b)];
-    nb.taps.assign(static_cast<std::size_t>(c.K), {});
-    for (Eigen::Index f : outs) {
-      nb.residual.push_back(column(f));
-      for (int k = 0; k < c.K; ++k) {
-        const Eigen::Index g = f - static_cast<Eigen::Index>(c.K - 1 - k) * c.dilation(b);
-        nb.taps[static_cast<std::size_t>(k)].push_back(g >= 0 ? column(g) : -1);
-      }
-    }
-  }
 }
 
 TcnScratch::TcnScratch(const Tcn& network, int max_batch)
@@ -170,22 +91,7 @@ void Tcn::forward(std::span<const float> x, std::span<const float> m, int t, std
   detail::split_linear_silu(enc_, X, M, h);
   h.colwise() += time_table_.col(t);
 
-  for (const Block& blk : blocks_) {
-    layer_norm(h, blk.norm.weight, blk.norm.bias, n);
-    a.setZero();
-    a.colwise() += blk.conv_bias;
-    // Tap k reads frame w - offset (offset = (K-1-k) * dilation); frames before the window are 0.
-    for (int k = 0; k < c.K; ++k) {
-      const Eigen::Index offset = static_cast<Eigen::Index>(c.K - 1 - k) * blk.dilation;
-      if (offset >= W) continue;
-      const RowMatrix& tap = blk.taps[static_cast<std::size_t>(k)];
-      for (Eigen::Index b = 0; b < batch; ++b)
-        a.middleCols(b * W + offset, W - offset).noalias() += tap * n.middleCols(b * W, W - offset);
-    }
-    silu_inplace(a);
-    h.noalias() += blk.fc.weight * a;
-    h.colwise() += blk.fc.bias;
-  }
+  stack_.forward(h, n, a, batch);
 
   // y_w = dec2(SiLU(dec1(SiLU(LayerNorm_out(h_w))))).
   layer_norm(h, out_norm_.weight, out_norm_.bias, n);
@@ -224,18 +130,18 @@ void Tcn::forward_newest(std::span<const float> x, std::span<const float> m, int
   // reused while the next call's past frames are the same (the steps of one online sample: the
   // past is observed and only the newest frame changes). A fully observed frame's mask term is
   // the same every time (enc_mask_ones_), so only a partly observed frame multiplies its mask.
-  const auto frames = static_cast<Eigen::Index>(newest_frames_.size());
-  const Eigen::Index past = frames - 1;  // newest_frames_ ends with the newest frame, W - 1
+  const auto frames = static_cast<Eigen::Index>(stack_.newest_frames().size());
+  const Eigen::Index past = frames - 1;  // stack_.newest_frames() ends with the newest frame, W - 1
   bool reuse = s.enc_owner_ == id_;
   for (Eigen::Index j = 0; reuse && j < past; ++j) {
-    const Eigen::Index f = newest_frames_[static_cast<std::size_t>(j)];
+    const Eigen::Index f = stack_.newest_frames()[static_cast<std::size_t>(j)];
     reuse = X.col(f) == s.xg_.col(j) && M.col(f) == s.mg_.col(j);
   }
   if (!reuse) {
     s.enc_owner_ = 0;
     for (Eigen::Index j = 0; j < past; ++j) {
-      s.xg_.col(j) = X.col(newest_frames_[static_cast<std::size_t>(j)]);
-      s.mg_.col(j) = M.col(newest_frames_[static_cast<std::size_t>(j)]);
+      s.xg_.col(j) = X.col(stack_.newest_frames()[static_cast<std::size_t>(j)]);
+      s.mg_.col(j) = M.col(stack_.newest_frames()[static_cast<std::size_t>(j)]);
     }
     auto e = s.enc_past_.leftCols(past);
     e.noalias() = enc_.u * s.xg_.leftCols(past);
@@ -260,40 +166,7 @@ void Tcn::forward_newest(std::span<const float> x, std::span<const float> m, int
     h.colwise() += time_table_.col(t);
   }
 
-  // Each block at its output frames only: h_ holds the block's input columns, h2_ its output.
-  Eigen::Index in_cols = frames;
-  for (std::size_t b = 0; b < blocks_.size(); ++b) {
-    const Block& blk = blocks_[b];
-    const NewestBlock& plan = newest_blocks_[b];
-    const auto out_cols = static_cast<Eigen::Index>(plan.residual.size());
-    auto n = s.n_.leftCols(in_cols);
-    layer_norm(s.h_.leftCols(in_cols), blk.norm.weight, blk.norm.bias, n);
-    auto a = s.a_.leftCols(out_cols);
-    auto g = s.g_.leftCols(out_cols);
-    a.setZero();
-    a.colwise() += blk.conv_bias;
-    for (int k = 0; k < c.K; ++k) {
-      const auto& cols = plan.taps[static_cast<std::size_t>(k)];
-      bool any = false;
-      for (Eigen::Index j = 0; j < out_cols; ++j) {
-        const Eigen::Index col = cols[static_cast<std::size_t>(j)];
-        if (col >= 0) {
-          g.col(j) = n.col(col);
-          any = true;
-        } else {
-          g.col(j).setZero();  // before the window: zeros, as forward()'s
-        }
-      }
-      if (any) mul_add(blk.taps[static_cast<std::size_t>(k)], g, a);
-    }
-    silu_inplace(a);
-    auto h2 = s.h2_.leftCols(out_cols);
-    for (Eigen::Index j = 0; j < out_cols; ++j) h2.col(j) = s.h_.col(plan.residual[static_cast<std::size_t>(j)]);
-    mul_add(blk.fc.weight, a, h2);
-    h2.colwise() += blk.fc.bias;
-    s.h_.leftCols(out_cols) = h2;
-    in_cols = out_cols;
-  }
+  stack_.forward_newest(s.h_, s.n_, s.a_, s.g_, s.h2_);
 
   // The decoder at the newest frame (the one column left).
   auto h = s.h_.leftCols(1);
@@ -311,7 +184,7 @@ std::unique_ptr<DenoiserStream> Tcn::make_stream(int t) const { return std::make
 TcnStream::TcnStream(const Tcn& network, int t) : network_(&network), t_(t) {
   const TcnConfig& c = network_->config();
   BODYD_REQUIRE(t >= 0 && t < c.T, "t must be in [0, T)");
-  for (const Tcn::Block& blk : network_->blocks_) {
+  for (const CausalStack::Block& blk : network_->stack_.blocks()) {
     // The current frame and the (K-1) * dilation before it.
     past_.emplace_back(c.C, static_cast<Eigen::Index>(c.K - 1) * blk.dilation + 1);
   }
@@ -339,8 +212,8 @@ void TcnStream::push(std::span<const float> x, std::span<const float> m, std::sp
   detail::split_linear_silu(net.enc_, X, M, h_);
   h_ += net.time_table_.col(t_);
 
-  for (std::size_t b = 0; b < net.blocks_.size(); ++b) {
-    const Tcn::Block& blk = net.blocks_[b];
+  for (std::size_t b = 0; b < net.stack_.blocks().size(); ++b) {
+    const CausalStack::Block& blk = net.stack_.blocks()[b];
     Eigen::MatrixXf& past = past_[b];
     const long size = past.cols();
     layer_norm(h_, blk.norm.weight, blk.norm.bias, n_);

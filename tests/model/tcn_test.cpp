@@ -51,36 +51,7 @@ TEST(Tcn, TheTableHasItsRowAndTheFixtureLoads) {
   EXPECT_EQ(model->tensor("blocks.1.conv.weight").shape, (std::vector<std::int64_t>{16, 16, 3}));
 }
 
-TEST(Tcn, MatchesPyTorchOnTheFixture) {
-  const auto net = tiny_tcn();
-  const auto io = inference::read_tensor_file(tiny_tcn_io_path());
-  const auto cases = nlohmann::json::parse(io.metadata.at("cases"));
-  const auto scratch = net->make_scratch(1);
-  ASSERT_EQ(cases["forward"].size(), 2u);
-  for (std::size_t i = 0; i < cases["forward"].size(); ++i) {
-    const std::string p = "forward." + std::to_string(i) + ".";
-    const int t = cases["forward"][i]["t"];
-    const auto& expected = io.tensors.at(p + "out").data;
-    std::vector<float> out(expected.size()), other(expected.size());
-    net->forward(io.tensors.at(p + "x").data, io.tensors.at(p + "m").data, t, out, *scratch);
-    const double err = relative_error(out, expected);
-    std::printf("tcn forward case %zu (t=%d): relative error vs PyTorch %.3g\n", i, t, err);
-    EXPECT_LE(err, kParityTolerance) << "case " << i;
-    // The check can fail: another step's output is far off.
-    net->forward(io.tensors.at(p + "x").data, io.tensors.at(p + "m").data, (t + 3) % net->steps(), other, *scratch);
-    EXPECT_GT(relative_error(other, expected), 100 * kParityTolerance);
-  }
-  ASSERT_EQ(cases["ddim"].size(), 1u);
-  const auto& c = cases["ddim"][0];
-  inference::Sampler sampler(net, inference::SamplerOptions{c["K"].get<int>(), c["guidance"].get<float>(), 0.0f});
-  const auto& expected = io.tensors.at("ddim.0.out").data;
-  std::vector<float> out(expected.size());
-  sampler.sample_from_noise(io.tensors.at("ddim.0.obs").data, io.tensors.at("ddim.0.mask").data,
-                            io.tensors.at("ddim.0.noise").data, out);
-  const double err = relative_error(out, expected);
-  std::printf("tcn ddim: relative error vs PyTorch %.3g\n", err);
-  EXPECT_LE(err, kParityTolerance);
-}
+TEST(Tcn, MatchesPyTorchOnTheFixture) { expect_fixture_parity(tiny_tcn(), tiny_tcn_io_path(), "tcn", kParityTolerance); }
 
 TEST(Tcn, OutputsDependOnlyOnTheFrameAndEarlierOnes) {
   const auto net = tiny_tcn();
@@ -204,28 +175,6 @@ TEST(Tcn, NewestFrameAloneEqualsTheWindowsLastFrame) {
   b->forward(x, m, 10, full, shared);
   EXPECT_LE(relative_error(yb, std::span(full).last(D)), 1e-5);
   EXPECT_GT(relative_error(ya, yb), 1e-3);
-}
-
-// DDIM with eta 0 and no guidance, written out with forward() on the whole window (sampler.cpp's
-// loop, for the reference).
-std::vector<float> ddim_by_full_windows(const Tcn& net, std::span<const float> obs, std::span<const float> mask,
-                                        std::vector<float> x, int K) {
-  TcnScratch s(net);
-  std::vector<float> x0(x.size());
-  const auto taus = inference::ddim_timesteps(net.steps(), K);
-  for (std::size_t k = 0; k < taus.size(); ++k) {
-    for (std::size_t i = 0; i < x.size(); ++i) x[i] = mask[i] * obs[i] + (1 - mask[i]) * x[i];
-    net.forward(x, mask, taus[k], x0, s);
-    for (std::size_t i = 0; i < x.size(); ++i) x0[i] = mask[i] * obs[i] + (1 - mask[i]) * x0[i];
-    if (k + 1 == taus.size()) break;
-    const double ab = net.alpha_bar()[static_cast<std::size_t>(taus[k])];
-    const double ab_next = net.alpha_bar()[static_cast<std::size_t>(taus[k + 1])];
-    for (std::size_t i = 0; i < x.size(); ++i) {
-      const double eps = (x[i] - std::sqrt(ab) * x0[i]) / std::sqrt(1 - ab);
-      x[i] = static_cast<float>(std::sqrt(ab_next) * x0[i] + std::sqrt(1 - ab_next) * eps);
-    }
-  }
-  return x0;
 }
 
 TEST(Tcn, TheSamplerWithAnObservedPastComputesTheNewestFrameAloneToTheSameResult) {

@@ -3,10 +3,16 @@
 
 #include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/model_file.h"
+#include "bodyd/inference/sampler.h"
 
 #include "../test_paths.h"
 
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
+#include <cstdio>
+#include <memory>
 #include <cmath>
 #include <cstdint>
 #include <random>
@@ -21,6 +27,8 @@ inline std::filesystem::path tiny_model_path() { return fixtures() / "tiny_model
 inline std::filesystem::path tiny_io_path() { return fixtures() / "tiny_model_io.safetensors"; }
 inline std::filesystem::path tiny_tcn_path() { return fixtures() / "tiny_tcn.safetensors"; }
 inline std::filesystem::path tiny_tcn_io_path() { return fixtures() / "tiny_tcn_io.safetensors"; }
+inline std::filesystem::path tiny_tcnmlp_path() { return fixtures() / "tiny_tcnmlp.safetensors"; }
+inline std::filesystem::path tiny_tcnmlp_io_path() { return fixtures() / "tiny_tcnmlp_io.safetensors"; }
 
 // n random floats: a mask (1 with probability 1/3, else 0) or standard normal values.
 inline std::vector<float> random_window(std::mt19937& rng, std::size_t n, bool mask) {
@@ -70,6 +78,61 @@ inline inference::Model random_model(const inference::ModelConfig& config, std::
     m.alpha_bar[i] = 0.999f - 0.99f * static_cast<float>(i) / static_cast<float>(m.alpha_bar.size());
   }
   return m;
+}
+
+// The parity fixture of a temporal network (training/export_fixture.py's write_temporal): its
+// forward cases and its DDIM run, each within `tolerance` of PyTorch's outputs; and, so that the
+// check can fail, another step's output far off.
+inline void expect_fixture_parity(std::shared_ptr<const inference::Denoiser> net, const std::filesystem::path& io_path,
+                                  const char* name, double tolerance) {
+  const auto io = inference::read_tensor_file(io_path);
+  const auto cases = nlohmann::json::parse(io.metadata.at("cases"));
+  const auto scratch = net->make_scratch(1);
+  ASSERT_EQ(cases["forward"].size(), 2u);
+  for (std::size_t i = 0; i < cases["forward"].size(); ++i) {
+    const std::string p = "forward." + std::to_string(i) + ".";
+    const int t = cases["forward"][i]["t"];
+    const auto& expected = io.tensors.at(p + "out").data;
+    std::vector<float> out(expected.size()), other(expected.size());
+    net->forward(io.tensors.at(p + "x").data, io.tensors.at(p + "m").data, t, out, *scratch);
+    const double err = relative_error(out, expected);
+    std::printf("%s forward case %zu (t=%d): relative error vs PyTorch %.3g\n", name, i, t, err);
+    EXPECT_LE(err, tolerance) << "case " << i;
+    net->forward(io.tensors.at(p + "x").data, io.tensors.at(p + "m").data, (t + 3) % net->steps(), other, *scratch);
+    EXPECT_GT(relative_error(other, expected), 100 * tolerance);
+  }
+  ASSERT_EQ(cases["ddim"].size(), 1u);
+  const auto& c = cases["ddim"][0];
+  inference::Sampler sampler(net, inference::SamplerOptions{c["K"].get<int>(), c["guidance"].get<float>(), 0.0f});
+  const auto& expected = io.tensors.at("ddim.0.out").data;
+  std::vector<float> out(expected.size());
+  sampler.sample_from_noise(io.tensors.at("ddim.0.obs").data, io.tensors.at("ddim.0.mask").data,
+                            io.tensors.at("ddim.0.noise").data, out);
+  const double err = relative_error(out, expected);
+  std::printf("%s ddim: relative error vs PyTorch %.3g\n", name, err);
+  EXPECT_LE(err, tolerance);
+}
+
+// DDIM with eta 0 and no guidance from the noise x, written out with forward() on the whole window
+// (sampler.cpp's loop, for the reference of the sampler's newest-frame path).
+inline std::vector<float> ddim_by_full_windows(const inference::Denoiser& net, std::span<const float> obs,
+                                               std::span<const float> mask, std::vector<float> x, int K) {
+  const auto s = net.make_scratch(1);
+  std::vector<float> x0(x.size());
+  const auto taus = inference::ddim_timesteps(net.steps(), K);
+  for (std::size_t k = 0; k < taus.size(); ++k) {
+    for (std::size_t i = 0; i < x.size(); ++i) x[i] = mask[i] * obs[i] + (1 - mask[i]) * x[i];
+    net.forward(x, mask, taus[k], x0, *s);
+    for (std::size_t i = 0; i < x.size(); ++i) x0[i] = mask[i] * obs[i] + (1 - mask[i]) * x0[i];
+    if (k + 1 == taus.size()) break;
+    const double ab = net.alpha_bar()[static_cast<std::size_t>(taus[k])];
+    const double ab_next = net.alpha_bar()[static_cast<std::size_t>(taus[k + 1])];
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      const double eps = (x[i] - std::sqrt(ab) * x0[i]) / std::sqrt(1 - ab);
+      x[i] = static_cast<float>(std::sqrt(ab_next) * x0[i] + std::sqrt(1 - ab_next) * eps);
+    }
+  }
+  return x0;
 }
 
 }  // namespace bodyd::test

@@ -35,6 +35,12 @@ struct SplitLinear {
   Eigen::VectorXf bias;
 };
 
+// mlpwin-v1's residual block (and tcnmlp-v1's trunk): h + fc2(SiLU(fc1(LayerNorm(h)))).
+struct ResidualBlock {
+  LayerNorm norm;
+  Linear fc1, fc2;
+};
+
 // The per-session buffers' base: the config they were sized for and the most windows per call.
 template <typename Config>
 class EigenScratch : public DenoiserScratch {

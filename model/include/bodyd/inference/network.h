@@ -79,16 +79,12 @@ class Network final : public detail::EigenDenoiser<MlpWinConfig, Network, Networ
  private:
   using Linear = detail::Linear;
   using LayerNorm = detail::LayerNorm;
-  struct Block {
-    LayerNorm norm;
-    Linear fc1, fc2;
-  };
 
   detail::SplitLinear enc_;  // enc.weight's columns for x_w and for m_w
   Linear inp_;
   // Column t: time2(SiLU(time1(sinusoid(t)))) + inp.bias (depends on t only), H x T.
   Eigen::MatrixXf time_table_;
-  std::vector<Block> blocks_;
+  std::vector<detail::ResidualBlock> blocks_;
   LayerNorm out_norm_;
   Linear out_;
   detail::SplitLinear dec1_;  // dec1.weight's columns for z_w and for e_w

@@ -13,6 +13,7 @@
 // in a TcnScratch (or a TcnStream) owned by one session. forward() does not allocate.
 #pragma once
 
+#include "bodyd/inference/causal_stack.h"
 #include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/eigen_denoiser.h"
 #include "bodyd/inference/model_file.h"
@@ -90,7 +91,7 @@ class Tcn final : public detail::EigenDenoiser<TcnConfig, Tcn, TcnScratch> {
                       TcnScratch& scratch) const;
   // The window's frames that forward_newest() encodes, ascending (min(W, receptive_field()) of them
   // when the dilations cover every offset, as with R >= L).
-  [[nodiscard]] std::span<const Eigen::Index> newest_frames() const { return newest_frames_; }
+  [[nodiscard]] std::span<const Eigen::Index> newest_frames() const { return stack_.newest_frames(); }
 
   // As Network::forward: `batch` windows at step t, frame-major, out the same size. Requirements
   // (a bug if broken: abort): whole windows, 1 <= batch <= scratch.max_batch(), 0 <= t < T, out
@@ -104,29 +105,11 @@ class Tcn final : public detail::EigenDenoiser<TcnConfig, Tcn, TcnScratch> {
   using RowMatrix = detail::RowMatrix;
   using Linear = detail::Linear;
   using LayerNorm = detail::LayerNorm;
-  struct Block {
-    LayerNorm norm;
-    std::vector<RowMatrix> taps;  // K matrices C x C: tap k multiplies frame w - (K-1-k) * dilation
-    Eigen::VectorXf conv_bias;
-    Linear fc;
-    int dilation = 1;
-  };
-
-  // Block b of forward_newest(): its output columns are the frames of level b + 1, its input
-  // columns those of level b (level 0: newest_frames_).
-  struct NewestBlock {
-    std::vector<Eigen::Index> residual;           // per output column: the input column of the same frame
-    std::vector<std::vector<Eigen::Index>> taps;  // [k][column]: the input column tap k reads, -1 before the window
-  };
-  void plan_newest();
-
   detail::SplitLinear enc_;  // enc.weight's columns for x_w and for m_w
   Eigen::MatrixXf time_table_;  // C x T: time2(SiLU(time1(sinusoid(t)))), column t
-  std::vector<Block> blocks_;
+  detail::CausalStack stack_;  // blocks.*
   LayerNorm out_norm_;
   Linear dec1_, dec2_;
-  std::vector<Eigen::Index> newest_frames_;
-  std::vector<NewestBlock> newest_blocks_;
   Eigen::VectorXf enc_mask_ones_;  // enc_.v times a mask of ones: a fully observed frame's mask term
   std::uint64_t id_;               // this network's, unique in the process: whose encoded past a scratch holds
 };
