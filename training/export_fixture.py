@@ -14,6 +14,9 @@ tiny_model_io.safetensors: the same container; metadata "cases" (JSON) lists the
 tiny_tcn.safetensors, tiny_tcn_io.safetensors: the same for a seeded random TcnCausal (tcn-v1) with
   D = 191 and W=10, C=16, K=3, L=3, R=2 (dilations 1, 2, 1: receptive field 9 <= W), TE=64, T=10; two
   forward cases and one DDIM run.
+tiny_tcnmlp.safetensors, tiny_tcnmlp_io.safetensors: the same for a seeded random TcnMlp (tcnmlp-v1)
+  with D = 191 and W=10, N=4, E=8, H=16, L=1, C=16, K=3, B=3, R=2 (receptive field 9 <= W), TE=64,
+  T=10.
 Deterministic: re-running rewrites identical files.
 """
 
@@ -32,6 +35,7 @@ import model_net as mn  # noqa: E402
 
 W, D, E, H, L, TE, T = 4, 191, 8, 16, 1, 64, 10
 TCN = {"W": 10, "D": D, "C": 16, "K": 3, "L": 3, "R": 2, "TE": 64, "T": 10}
+TCNMLP = {"W": 10, "D": D, "N": 4, "E": 8, "H": 16, "L": 1, "C": 16, "K": 3, "B": 3, "R": 2, "TE": 64, "T": 10}
 
 
 def randomise(net: torch.nn.Module, g: torch.Generator) -> None:
@@ -87,23 +91,27 @@ def main() -> None:
     io_path = os.path.join(a.out_dir, "tiny_model_io.safetensors")
     mn.write_tensor_file(io_path, tensors, {"cases": json.dumps(cases), "model": "tiny_model.safetensors",
                                             "written_by": "training/export_fixture.py"})
-    for p in (model_path, io_path) + write_tcn(a.out_dir, skeleton):
+    c = TCN
+    tcn = mn.TcnCausal(c["W"], c["D"], C=c["C"], K=c["K"], L=c["L"], R=c["R"], TE=c["TE"], T=c["T"])
+    temporal = write_temporal(a.out_dir, skeleton, "tiny_tcn", tcn, 20261202)
+    tcnmlp = mn.TcnMlp(**TCNMLP)
+    temporal += write_temporal(a.out_dir, skeleton, "tiny_tcnmlp", tcnmlp, 20261203)
+    for p in (model_path, io_path) + temporal:
         print(f"wrote {p} ({os.path.getsize(p)} bytes)")
 
 
-def write_tcn(out_dir: str, skeleton: dict) -> tuple[str, str]:
-    """tiny_tcn.safetensors and tiny_tcn_io.safetensors (own generator: the MlpWin files stay as they were)."""
-    g = torch.Generator().manual_seed(20261202)
-    c = TCN
-    net = mn.TcnCausal(c["W"], c["D"], C=c["C"], K=c["K"], L=c["L"], R=c["R"], TE=c["TE"], T=c["T"])
-    assert net.receptive_field() <= c["W"]
+def write_temporal(out_dir: str, skeleton: dict, name: str, net: torch.nn.Module, seed: int) -> tuple[str, str]:
+    """<name>.safetensors and <name>_io.safetensors for a temporal network (its own generator, so that
+    each fixture stays as it was when another is added)."""
+    g = torch.Generator().manual_seed(seed)
+    assert net.receptive_field() <= net.W
     randomise(net, g)
     net.eval()
-    Wt, Tt = c["W"], c["T"]
+    Wt, Tt = net.W, net.T
     mean = torch.randn(D, generator=g) * 0.1
     std = 0.5 + torch.rand(D, generator=g)
     ab = mn.cosine_alpha_bars(Tt)
-    model_path = os.path.join(out_dir, "tiny_tcn.safetensors")
+    model_path = os.path.join(out_dir, f"{name}.safetensors")
     mn.write_model(model_path, net, mean, std, ab, skeleton,
                    {"provenance": {"data": "none: seeded random parameters (training/export_fixture.py)",
                                    "command": "python3 training/export_fixture.py"}})
@@ -127,8 +135,8 @@ def write_tcn(out_dir: str, skeleton: dict) -> tuple[str, str]:
         out = mn.ddim_sample(net, obs[None], m[None], ab, K, None, guidance=s, noise=noise[None])[0]
         tensors.update({"ddim.0.obs": obs, "ddim.0.mask": m, "ddim.0.noise": noise, "ddim.0.out": out})
         cases["ddim"].append({"K": K, "guidance": s, "eta": 0.0, "timesteps": mn.ddim_timesteps(Tt, K)})
-    io_path = os.path.join(out_dir, "tiny_tcn_io.safetensors")
-    mn.write_tensor_file(io_path, tensors, {"cases": json.dumps(cases), "model": "tiny_tcn.safetensors",
+    io_path = os.path.join(out_dir, f"{name}_io.safetensors")
+    mn.write_tensor_file(io_path, tensors, {"cases": json.dumps(cases), "model": f"{name}.safetensors",
                                             "written_by": "training/export_fixture.py"})
     return model_path, io_path
 

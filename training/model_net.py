@@ -186,7 +186,81 @@ class TcnCausal(nn.Module):
         return self.dec2(F.silu(self.dec1(F.silu(self.out_norm(h)))))         # (B, W, D)
 
 
-ARCHITECTURES = {MlpWin.ARCHITECTURE: MlpWin, TcnCausal.ARCHITECTURE: TcnCausal}
+class TcnMlp(nn.Module):
+    """tcnmlp-v1: mlpwin-v1 over the newest N frames, given a causal TCN's summary of the whole window.
+
+    forward(x, m, t) as MlpWin's, on a W-frame window (W >= N). The context network sees only the
+    observations: per frame c_w = SiLU(cenc([m_w * x_w; m_w])), then B causal residual blocks
+    (CausalBlock, kernel K, dilation 2^(b mod R)) and SiLU(cnorm(.)). It does not see the step t nor
+    the noise, so it is the same at every diffusion step of a frame; its output at the newest frame,
+    which depends on frames W-F..W-1 (F = receptive_field()), enters the trunk as ctx(c_newest).
+    The newest N frames are mlpwin-v1's: e_w = SiLU(enc([x_w; m_w])), h = inp(e flattened) +
+    ctx(c_newest) + time embedding, L residual blocks, out and the per-frame decoder dec1/dec2 of
+    [z_w; e_w]. The W-N older frames are decoded from the context alone: cdec2(SiLU(cdec1(c_w))).
+    State-dict names: cenc.*, cblocks.<b>.{norm,conv,fc}.*, cnorm.*, cdec1.*, cdec2.*, ctx.*, and
+    mlpwin-v1's enc.*, inp.*, time1.*, time2.*, blocks.<b>.{norm,fc1,fc2}.*, out_norm.*, out.*,
+    dec1.*, dec2.*
+    """
+
+    ARCHITECTURE = "tcnmlp-v1"
+
+    def __init__(self, W: int, D: int, N: int = 20, E: int = 64, H: int = 512, L: int = 2, C: int = 64,
+                 K: int = 3, B: int = 5, R: int = 5, TE: int = 64, T: int = 100):
+        super().__init__()
+        if TE % 2 != 0:
+            raise ValueError(f"TE must be even, got {TE}")
+        if not 1 <= N <= W:
+            raise ValueError(f"N must be in [1, W={W}], got {N}")
+        if not 1 <= R <= 16:
+            raise ValueError(f"R must be in [1, 16], got {R}")
+        self.W, self.D, self.N, self.E, self.H, self.L = W, D, N, E, H, L
+        self.C, self.K, self.B, self.R, self.TE, self.T = C, K, B, R, TE, T
+        self.cenc = nn.Linear(2 * D, C)
+        self.cblocks = nn.ModuleList([CausalBlock(C, K, 2 ** (b % R)) for b in range(B)])
+        self.cnorm = nn.LayerNorm(C, eps=LAYERNORM_EPS)
+        self.cdec1 = nn.Linear(C, C)
+        self.cdec2 = nn.Linear(C, D)
+        self.ctx = nn.Linear(C, H)
+        self.enc = nn.Linear(2 * D, E)
+        self.inp = nn.Linear(N * E, H)
+        self.time1 = nn.Linear(TE, H)
+        self.time2 = nn.Linear(H, H)
+        self.blocks = nn.ModuleList([ResBlock(H) for _ in range(L)])
+        self.out_norm = nn.LayerNorm(H, eps=LAYERNORM_EPS)
+        self.out = nn.Linear(H, N * E)
+        self.dec1 = nn.Linear(2 * E, E)
+        self.dec2 = nn.Linear(E, D)
+
+    def config(self) -> dict:
+        return {"W": self.W, "D": self.D, "N": self.N, "E": self.E, "H": self.H, "L": self.L, "C": self.C,
+                "K": self.K, "B": self.B, "R": self.R, "TE": self.TE, "T": self.T}
+
+    def receptive_field(self) -> int:
+        return 1 + (self.K - 1) * sum(2 ** (b % self.R) for b in range(self.B))
+
+    def context(self, x: torch.Tensor, m: torch.Tensor) -> torch.Tensor:
+        c = F.silu(self.cenc(torch.cat([x * m, m], dim=-1)))                   # (B, W, C)
+        for blk in self.cblocks:
+            c = blk(c)
+        return F.silu(self.cnorm(c))
+
+    def forward(self, x: torch.Tensor, m: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        Bn, W, N = x.shape[0], self.W, self.N
+        c = self.context(x, m)
+        e = F.silu(self.enc(torch.cat([x[:, W - N:], m[:, W - N:]], dim=-1)))   # (B, N, E)
+        h = self.inp(e.reshape(Bn, N * self.E)) + self.ctx(c[:, W - 1])
+        h = h + self.time2(F.silu(self.time1(timestep_embedding(t, self.TE))))
+        for blk in self.blocks:
+            h = blk(h)
+        z = self.out(F.silu(self.out_norm(h))).reshape(Bn, N, self.E)
+        newest = self.dec2(F.silu(self.dec1(torch.cat([z, e], dim=-1))))       # (B, N, D)
+        if N == W:
+            return newest
+        older = self.cdec2(F.silu(self.cdec1(c[:, :W - N])))                     # (B, W-N, D)
+        return torch.cat([older, newest], dim=1)
+
+
+ARCHITECTURES = {MlpWin.ARCHITECTURE: MlpWin, TcnCausal.ARCHITECTURE: TcnCausal, TcnMlp.ARCHITECTURE: TcnMlp}
 
 
 def cosine_alpha_bars(T: int) -> torch.Tensor:
@@ -489,9 +563,11 @@ def main() -> None:
     ap.add_argument("--E", type=int, default=64)
     ap.add_argument("--H", type=int, default=512)
     ap.add_argument("--L", type=int, default=2)
-    ap.add_argument("--C", type=int, default=128, help="tcn-v1: channels")
-    ap.add_argument("--K", type=int, default=3, help="tcn-v1: kernel size")
-    ap.add_argument("--R", type=int, default=5, help="tcn-v1: dilation cycle (block b has dilation 2^(b mod R))")
+    ap.add_argument("--C", type=int, default=0, help="tcn-v1, tcnmlp-v1: channels (0 = default: 128, 64)")
+    ap.add_argument("--K", type=int, default=3, help="tcn-v1, tcnmlp-v1: kernel size")
+    ap.add_argument("--R", type=int, default=5, help="tcn-v1, tcnmlp-v1: dilation cycle (block b has dilation 2^(b mod R))")
+    ap.add_argument("--N", type=int, default=20, help="tcnmlp-v1: newest frames the trunk sees")
+    ap.add_argument("--B", type=int, default=5, help="tcnmlp-v1: causal blocks of the context")
     ap.add_argument("--TE", type=int, default=64)
     ap.add_argument("--T", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
@@ -506,7 +582,9 @@ def main() -> None:
         ap.error("give --random-model OUT or --restamp FILE...")
     torch.manual_seed(a.seed)
     if a.arch == TcnCausal.ARCHITECTURE:
-        net = TcnCausal(a.W, a.D, C=a.C, K=a.K, L=a.L, R=a.R, TE=a.TE, T=a.T)
+        net = TcnCausal(a.W, a.D, C=a.C or 128, K=a.K, L=a.L, R=a.R, TE=a.TE, T=a.T)
+    elif a.arch == TcnMlp.ARCHITECTURE:
+        net = TcnMlp(a.W, a.D, N=a.N, E=a.E, H=a.H, L=a.L, C=a.C or 64, K=a.K, B=a.B, R=a.R, TE=a.TE, T=a.T)
     else:
         net = MlpWin(a.W, a.D, a.E, a.H, a.L, a.TE, a.T)
     skeleton = skeleton_from_bvh(a.skeleton_bvh)

@@ -51,7 +51,7 @@ import numpy as np  # noqa: E402  (numpy loads OpenBLAS too)
 import torch  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from model_net import ARCHITECTURES, MlpWin, TcnCausal, cosine_alpha_bars, ddim_sample, load_model, write_model  # noqa: E402
+from model_net import ARCHITECTURES, MlpWin, TcnCausal, TcnMlp, cosine_alpha_bars, ddim_sample, load_model, write_model  # noqa: E402
 
 
 def parse_args():
@@ -69,8 +69,11 @@ def parse_args():
                    help="the network (docs/model-file.md, \"Architectures\"); --init-from takes the model's")
     p.add_argument("--E", type=int, default=64, help="mlpwin-v1: per-frame embedding")
     p.add_argument("--H", type=int, default=512, help="mlpwin-v1: trunk width")
-    p.add_argument("--L", type=int, default=0, help="residual blocks (0 = the architecture's default: mlpwin-v1 2, tcn-v1 5)")
-    p.add_argument("--C", type=int, default=128, help="tcn-v1: channels")
+    p.add_argument("--L", type=int, default=0,
+                   help="residual blocks (0 = the architecture's default: mlpwin-v1 and tcnmlp-v1's trunk 2, tcn-v1 5)")
+    p.add_argument("--C", type=int, default=0, help="tcn-v1, tcnmlp-v1: channels (0 = default: 128, 64)")
+    p.add_argument("--N", type=int, default=20, help="tcnmlp-v1: newest frames the MLP trunk sees")
+    p.add_argument("--B", type=int, default=5, help="tcnmlp-v1: causal blocks of the context network")
     p.add_argument("--K", type=int, default=3, help="tcn-v1: convolution kernel size in frames")
     p.add_argument("--R", type=int, default=5, help="tcn-v1: dilation cycle (block b has dilation 2^(b mod R))")
     p.add_argument("--T", type=int, default=100)
@@ -99,6 +102,10 @@ def parse_args():
     p.add_argument("--eval-every", type=int, default=1000)
     p.add_argument("--init-from", default="",
                    help="start from this model file's weights and normalisation (fine-tuning); a run's checkpoint wins when resuming")
+    p.add_argument("--init-trunk", default="", metavar="MODEL",
+                   help="tcnmlp-v1: start its trunk (enc, inp, time, blocks, out, dec) and normalisation from an "
+                        "mlpwin-v1 model with W = --N; the context's input to the trunk (ctx) starts at zero, so the "
+                        "new model starts as that model")
     p.add_argument("--window", type=int, default=0,
                    help="model window W in frames (0 = the dataset's); a dataset with longer windows allows --time-warp")
     p.add_argument("--balance", type=float, default=0.0,
@@ -300,6 +307,16 @@ def main():
             if k not in ("W", "D"):
                 setattr(a, k, v)
         mean, std = init[1]["norm.mean"], init[1]["norm.std"]
+    elif a.init_trunk:
+        if a.arch != TcnMlp.ARCHITECTURE:
+            sys.exit("--init-trunk is for --arch tcnmlp-v1")
+        trunk = load_model(a.init_trunk)
+        tcfg = trunk[0].config()
+        if trunk[0].ARCHITECTURE != MlpWin.ARCHITECTURE or (tcfg["W"], tcfg["D"]) != (a.N, D):
+            sys.exit(f"--init-trunk {a.init_trunk}: need an mlpwin-v1 model with W = --N = {a.N} and D = {D}, "
+                     f"got {trunk[0].ARCHITECTURE} W={tcfg['W']} D={tcfg['D']}")
+        a.E, a.H, a.L, a.T = tcfg["E"], tcfg["H"], tcfg["L"], tcfg["T"]
+        mean, std = trunk[1]["norm.mean"], trunk[1]["norm.std"]
     else:
         newest = x_raw[torch.from_numpy(train_idx).to(dev), Ws - W:].reshape(-1, D)
         mean = newest.mean(0).cpu()
@@ -364,7 +381,9 @@ def main():
 
     def make_net():
         if a.arch == TcnCausal.ARCHITECTURE:
-            return TcnCausal(W, D, C=a.C, K=a.K, L=a.L or 5, R=a.R, T=a.T).to(dev)
+            return TcnCausal(W, D, C=a.C or 128, K=a.K, L=a.L or 5, R=a.R, T=a.T).to(dev)
+        if a.arch == TcnMlp.ARCHITECTURE:
+            return TcnMlp(W, D, N=a.N, E=a.E, H=a.H, L=a.L or 2, C=a.C or 64, K=a.K, B=a.B, R=a.R, T=a.T).to(dev)
         return MlpWin(W, D, E=a.E, H=a.H, L=a.L or 2, T=a.T).to(dev)
 
     net = make_net()
@@ -372,6 +391,14 @@ def main():
     if init is not None:
         net.load_state_dict(init[0].state_dict())
         print(f"initialised from {a.init_from}", flush=True)
+    if init is None and a.init_trunk:
+        own = net.state_dict()
+        for k, v in trunk[0].state_dict().items():
+            own[k] = v
+        own["ctx.weight"].zero_()
+        own["ctx.bias"].zero_()
+        net.load_state_dict(own)
+        print(f"trunk initialised from {a.init_trunk}", flush=True)
     ema.load_state_dict(net.state_dict())
     for p in ema.parameters():
         p.requires_grad_(False)
@@ -450,9 +477,13 @@ def main():
     lower_idx = torch.tensor([pos_entries[n] for n in lower_names], device=dev)
     mon_idx = hold_idx_t[torch.randperm(len(hold_idx_t), generator=torch.Generator().manual_seed(7))[:512].to(dev)] \
         if len(hold_idx_t) else None
+    # The same on the --exclude-split clips (the held-out styles): watched, never trained on.
+    excl_idx_t = torch.from_numpy(np.nonzero(excl)[0]).to(dev)
+    style_idx = excl_idx_t[torch.randperm(len(excl_idx_t), generator=torch.Generator().manual_seed(7))[:512].to(dev)] \
+        if len(excl_idx_t) else None
 
-    def monitor(model):
-        x0 = draw(mon_idx, None, False)
+    def monitor(model, idx):
+        x0 = draw(idx, None, False)
         B = x0.shape[0]
         m = torch.zeros_like(x0)
         m[:, :W - 1, :] = 1.0
@@ -511,9 +542,11 @@ def main():
                 hl = sum(loss_on(ema, hold_idx_t[i:i + 1024], hold_gen).item()
                          for i in range(0, min(len(hold_idx_t), 4096), 1024))
                 hl /= len(range(0, min(len(hold_idx_t), 4096), 1024))
-                all_cm, lower_cm = monitor(ema)
+                all_cm, lower_cm = monitor(ema, mon_idx)
+                style = (" excluded_newest_frame_cm all {:.2f} lower {:.2f}".format(*monitor(ema, style_idx))
+                         if style_idx is not None else "")
             msg = (f"step {step} train_loss {loss.item():.5f} holdout_loss_ema {hl:.5f} "
-                   f"holdout_newest_frame_cm all {all_cm:.2f} lower {lower_cm:.2f} "
+                   f"holdout_newest_frame_cm all {all_cm:.2f} lower {lower_cm:.2f}{style} "
                    f"wall_min {(time.time() - t0 + wall_before) / 60:.1f}")
             print("\n" + msg, flush=True)
             log.write(msg + "\n")

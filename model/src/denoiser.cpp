@@ -4,6 +4,7 @@
 #include "bodyd/base/require.h"
 #include "bodyd/inference/network.h"
 #include "bodyd/inference/tcn.h"
+#include "bodyd/inference/tcnmlp.h"
 
 #include <fmt/format.h>
 
@@ -15,6 +16,7 @@ namespace {
 constexpr std::array kArchitectures = {
     Architecture{kArchitectureMlpWin, Network::kConfigFields, &Network::tensors, &Network::make},
     Architecture{kArchitectureTcn, Tcn::kConfigFields, &Tcn::tensors, &Tcn::make},
+    Architecture{kArchitectureTcnMlp, TcnMlp::kConfigFields, &TcnMlp::tensors, &TcnMlp::make},
 };
 
 }  // namespace

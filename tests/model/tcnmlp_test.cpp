@@ -1,0 +1,206 @@
+// tcnmlp-v1 (tcnmlp.h): the loader's row, PyTorch parity on the fixture written by
+// training/export_fixture.py (forward and DDIM), what the context sees, the newest-frame pass and
+// its cache against whole windows, and the sampler's online path.
+#include "bodyd/inference/denoiser.h"
+#include "bodyd/inference/sampler.h"
+#include "bodyd/inference/tcnmlp.h"
+#include "test_util.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace bodyd::test {
+namespace {
+
+using inference::TcnMlp;
+using inference::TcnMlpConfig;
+using inference::TcnMlpScratch;
+
+constexpr double kParityTolerance = 1e-4;
+
+std::shared_ptr<const TcnMlp> tiny_tcnmlp() {
+  return std::make_shared<const TcnMlp>(*inference::load_model(tiny_tcnmlp_path()));
+}
+
+// The default shape of training/train.py --arch tcnmlp-v1 on 64-frame windows: receptive field 63.
+std::shared_ptr<const TcnMlp> default_shape(std::uint32_t seed) {
+  const auto tiny = inference::load_model(tiny_tcnmlp_path());
+  return std::make_shared<const TcnMlp>(
+      random_model(TcnMlpConfig{64, 191, 20, 64, 512, 2, 64, 3, 5, 5, 64, 100}.to_model_config(), seed, *tiny));
+}
+
+TEST(TcnMlp, TheTableHasItsRowAndTheFixtureLoads) {
+  const inference::Architecture* row = inference::find_architecture("tcnmlp-v1");
+  ASSERT_NE(row, nullptr);
+  const auto model = inference::load_model(tiny_tcnmlp_path());
+  const std::vector<std::pair<std::string, int>> config = {{"W", 10}, {"D", 191}, {"N", 4}, {"E", 8},
+                                                           {"H", 16}, {"L", 1},   {"C", 16}, {"K", 3},
+                                                           {"B", 3},  {"R", 2},   {"TE", 64}, {"T", 10}};
+  EXPECT_EQ(model->config.values(), config);
+  const auto denoiser = inference::make_denoiser(*model);
+  EXPECT_EQ(denoiser->architecture(), "tcnmlp-v1");
+  EXPECT_EQ(denoiser->frames(), 10);
+  EXPECT_TRUE(denoiser->computes_newest_alone());
+  EXPECT_EQ(denoiser->make_stream(0), nullptr);  // the trunk sees N frames at once
+  EXPECT_EQ(dynamic_cast<const TcnMlp&>(*denoiser).config().receptive_field(), 9);
+  // cenc, 3 blocks * (norm, conv, fc), cnorm, cdec1, cdec2, ctx, enc, inp, time1, time2, 1 block *
+  // (norm, fc1, fc2), out_norm, out, dec1, dec2: 25 weight/bias pairs, + norm.mean, norm.std, alpha_bar.
+  EXPECT_EQ(inference::expected_tensors(*row, model->config).size(), 2u * 25u + 3u);
+  EXPECT_EQ(model->tensor("inp.weight").shape, (std::vector<std::int64_t>{16, 4 * 8}));
+  EXPECT_EQ(model->tensor("cblocks.2.conv.weight").shape, (std::vector<std::int64_t>{16, 16, 3}));
+  // A trunk longer than the window is refused, naming the file and the fields.
+  auto config_n = TcnMlpConfig::from(model->config);
+  config_n.N = 11;
+  const auto too_long = random_model(config_n.to_model_config(), 1, *model);
+  try {
+    (void)inference::make_denoiser(too_long);
+    ADD_FAILURE() << "N > W loaded";
+  } catch (const inference::ModelFileError& e) {
+    EXPECT_NE(std::string(e.what()).find("N = 11 is more than W = 10"), std::string::npos) << e.what();
+  }
+}
+
+TEST(TcnMlp, MatchesPyTorchOnTheFixture) {
+  expect_fixture_parity(tiny_tcnmlp(), tiny_tcnmlp_io_path(), "tcnmlp", kParityTolerance);
+}
+
+TEST(TcnMlp, TheContextSeesOnlyObservationsAndTheTrunkOnlyTheNewestFrames) {
+  const auto net = tiny_tcnmlp();
+  TcnMlpScratch s(*net);
+  std::mt19937 rng(3);
+  const std::size_t D = 191, W = 10, N = 4, n = W * D;
+  auto x = random_window(rng, n, false);
+  const auto m = random_window(rng, n, true);
+  std::vector<float> a(n), b(n);
+  net->forward(x, m, 5, a, s);
+  // An unobserved entry of an older frame reaches nothing: the context reads m * x.
+  std::size_t hidden = 0;
+  while (m[2 * D + hidden] != 0.0f) ++hidden;
+  x[2 * D + hidden] += 5.0f;
+  net->forward(x, m, 5, b, s);
+  EXPECT_EQ(a, b);
+  // An observed one of the same frame reaches that frame and every later one, through the context.
+  std::size_t seen = 0;
+  while (m[2 * D + seen] != 1.0f) ++seen;
+  x[2 * D + seen] += 5.0f;
+  net->forward(x, m, 5, b, s);
+  EXPECT_EQ(std::vector<float>(a.begin(), a.begin() + 2 * D), std::vector<float>(b.begin(), b.begin() + 2 * D));
+  EXPECT_GT(relative_error(std::span(b).subspan(2 * D, D), std::span(a).subspan(2 * D, D)), 1e-4);
+  EXPECT_GT(relative_error(std::span(b).last(D), std::span(a).last(D)), 1e-4);
+  // An unobserved entry of the newest N frames reaches the trunk's outputs (the noisy sample).
+  x = random_window(rng, n, false);
+  net->forward(x, m, 5, a, s);
+  std::size_t noisy = (W - N) * D;
+  while (m[noisy] != 0.0f) ++noisy;
+  x[noisy] += 5.0f;
+  net->forward(x, m, 5, b, s);
+  EXPECT_EQ(std::vector<float>(a.begin(), a.begin() + (W - N) * D),
+            std::vector<float>(b.begin(), b.begin() + (W - N) * D));
+  EXPECT_GT(relative_error(std::span(b).last(N * D), std::span(a).last(N * D)), 1e-4);
+}
+
+TEST(TcnMlp, BatchOfTwoEqualsTwoSingles) {
+  const auto net = tiny_tcnmlp();
+  TcnMlpScratch single(*net, 1), pair(*net, 2);
+  std::mt19937 rng(8);
+  const std::size_t n = static_cast<std::size_t>(net->window_size());
+  const auto x = random_window(rng, 2 * n, false);
+  const auto m = random_window(rng, 2 * n, true);
+  std::vector<float> out2(2 * n), a(n), b(n);
+  net->forward(x, m, 2, out2, pair);
+  net->forward(std::span(x).first(n), std::span(m).first(n), 2, a, single);
+  net->forward(std::span(x).subspan(n), std::span(m).subspan(n), 2, b, single);
+  EXPECT_LE(relative_error(std::span(out2).first(n), a), 1e-6);
+  EXPECT_LE(relative_error(std::span(out2).subspan(n), b), 1e-6);
+}
+
+TEST(TcnMlp, NewestFrameAloneEqualsTheWindowsLastFrameWhatTheCacheHolds) {
+  std::mt19937 rng(12);
+  for (const auto& net : {tiny_tcnmlp(), default_shape(3)}) {
+    TcnMlpScratch s(*net);
+    const auto D = static_cast<std::size_t>(net->dim()), W = static_cast<std::size_t>(net->frames());
+    const std::size_t n = W * D;
+    auto x = random_window(rng, n, false);
+    const auto m = random_window(rng, n, true);
+    std::vector<float> full(n), newest(D);
+    const auto expect_equal = [&](int t, const char* what) {
+      net->forward(x, m, t, full, s);
+      net->forward_newest(x, m, t, newest, s);
+      EXPECT_LE(relative_error(newest, std::span(full).last(D)), 1e-5) << "W " << W << " t " << t << ": " << what;
+    };
+    // The steps of one sample: the same observations, the newest frame's noisy entries changing.
+    for (int t : {net->steps() - 1, net->steps() / 2, 0}) {
+      for (std::size_t d = 0; d < D; ++d)
+        if (m[n - D + d] == 0.0f) x[n - D + d] = static_cast<float>(t) * 0.01f - 0.3f;
+      expect_equal(t, "steps of one sample");
+    }
+    // A past frame changes (the next sample): recomputed.
+    x[(W - 2) * D + 1] += 1.0f;
+    expect_equal(1, "a past frame changed");
+    // An observed entry of the newest frame changes: recomputed.
+    std::size_t obs = n - D;
+    while (m[obs] != 1.0f) ++obs;
+    x[obs] += 1.0f;
+    expect_equal(1, "an observation of the newest frame changed");
+    // The same through the Denoiser interface, from a fresh scratch.
+    const inference::Denoiser& base = *net;
+    const auto scratch = base.make_scratch(1);
+    std::vector<float> via_base(D);
+    base.forward_newest(x, m, 1, via_base, *scratch);
+    EXPECT_LE(relative_error(via_base, newest), 1e-6);
+  }
+  // Two networks of one shape sharing a scratch: each computes its own past.
+  const auto a = default_shape(3), b = default_shape(4);
+  TcnMlpScratch shared(*a);
+  const auto D = static_cast<std::size_t>(a->dim()), n = static_cast<std::size_t>(a->window_size());
+  const auto x = random_window(rng, n, false), m = random_window(rng, n, true);
+  std::vector<float> ya(D), yb(D), full(n);
+  a->forward_newest(x, m, 10, ya, shared);
+  b->forward_newest(x, m, 10, yb, shared);
+  b->forward(x, m, 10, full, shared);
+  EXPECT_LE(relative_error(yb, std::span(full).last(D)), 1e-5);
+  EXPECT_GT(relative_error(ya, yb), 1e-3);
+}
+
+TEST(TcnMlp, TheSamplerWithAnObservedPastComputesTheNewestFrameAloneToTheSameResult) {
+  const auto net = default_shape(5);
+  const auto D = static_cast<std::size_t>(net->dim()), W = static_cast<std::size_t>(net->frames());
+  const std::size_t n = W * D;
+  std::mt19937 rng(21);
+  const auto obs = random_window(rng, n, false);
+  const auto noise = random_window(rng, n, false);
+  std::vector<float> mask(n, 1.0f);
+  const auto newest_mask = random_window(rng, D, true);
+  std::copy(newest_mask.begin(), newest_mask.end(), mask.begin() + static_cast<std::ptrdiff_t>((W - 1) * D));
+  inference::Sampler sampler(net, inference::SamplerOptions{4, 1.0f, 0.0f}, 1);
+  std::vector<float> out(n);
+  sampler.sample_from_noise(obs, mask, noise, out);
+  EXPECT_LE(relative_error(out, ddim_by_full_windows(*net, obs, mask, noise, 4)), 1e-5);
+  // The next frame: the window moves on by one frame; the cache must not serve the old past.
+  std::vector<float> next(obs.begin() + static_cast<std::ptrdiff_t>(D), obs.end());
+  next.insert(next.end(), obs.begin(), obs.begin() + static_cast<std::ptrdiff_t>(D));
+  sampler.sample_from_noise(next, mask, noise, out);
+  EXPECT_LE(relative_error(out, ddim_by_full_windows(*net, next, mask, noise, 4)), 1e-5);
+}
+
+TEST(TcnMlpDeathTest, BrokenPreconditionsAbort) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  const auto net = tiny_tcnmlp();
+  TcnMlpScratch s(*net);
+  const std::size_t n = static_cast<std::size_t>(net->window_size());
+  std::vector<float> x(n, 0.0f), m(n, 0.0f), out(n), one(191);
+  EXPECT_DEATH(net->forward(x, m, net->steps(), out, s), "t must be in");
+  std::vector<float> x2(2 * n), m2(2 * n), out2(2 * n);
+  EXPECT_DEATH(net->forward(x2, m2, 0, out2, s), "batch");
+  EXPECT_DEATH(net->forward_newest(x, m, 0, out, s), "one frame of D");
+  EXPECT_DEATH(net->forward_newest(x2, m2, 0, one, s), "one window");
+  EXPECT_DEATH(net->forward_newest(x, m, -1, one, s), "t must be in");
+  EXPECT_DEATH(net->forward_newest(x, m, 0, std::span(x).first(191), s), "alias");
+  const auto other = inference::make_denoiser(*inference::load_model(tiny_tcn_path()));
+  const auto wrong = other->make_scratch(1);
+  EXPECT_DEATH(net->forward_newest(x, m, 0, one, *wrong), "TcnMlpScratch");
+}
+
+}  // namespace
+}  // namespace bodyd::test
