@@ -107,6 +107,34 @@ void residual_blocks(const std::vector<ResidualBlock>& blocks, Eigen::MatrixBase
   }
 }
 
+// mlpwin-v1's tensors over a window of W frames (tcnmlp-v1's trunk: W = N), in PyTorch's order.
+inline void add_mlpwin_tensors(TensorShapes& v, std::int64_t W, std::int64_t D, std::int64_t E, std::int64_t H, int L,
+                               std::int64_t TE) {
+  add_linear(v, "enc", 2 * D, E);
+  add_linear(v, "inp", W * E, H);
+  add_linear(v, "time1", TE, H);
+  add_linear(v, "time2", H, H);
+  add_residual_blocks(v, H, L);
+  add_layer_norm(v, "out_norm", H);
+  add_linear(v, "out", H, W * E);
+  add_linear(v, "dec1", 2 * E, E);
+  add_linear(v, "dec2", E, D);
+}
+
+// The requirements of forward_newest() (a bug if broken: abort with a message): x and m one window
+// of W * D floats, out one frame of D floats not aliasing them, 0 <= t < T.
+inline void check_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out, int W, int D,
+                         int T) {
+  const std::size_t window = static_cast<std::size_t>(W) * static_cast<std::size_t>(D);
+  BODYD_REQUIRE(x.size() == window && m.size() == window, "forward_newest: x and m must hold one window of W * D floats");
+  BODYD_REQUIRE(out.size() == static_cast<std::size_t>(D), "forward_newest: out must hold one frame of D floats");
+  BODYD_REQUIRE(t >= 0 && t < T, "t must be in [0, T)");
+  const auto overlaps = [&out](std::span<const float> v) {
+    return out.data() < v.data() + v.size() && v.data() < out.data() + out.size();
+  };
+  BODYD_REQUIRE(!overlaps(x) && !overlaps(m), "out may not alias x or m");
+}
+
 // out = layer.weight * in + layer.bias, column by column.
 template <typename In, typename Out>
 void linear(const Linear& layer, const Eigen::MatrixBase<In>& in, Eigen::MatrixBase<Out>& out) {

@@ -58,15 +58,7 @@ TensorShapes Network::tensors(const ModelConfig& config) {
   TensorShapes v;
   // In 64 bits: config values are at most 2^16, so products like W * E cannot overflow.
   const std::int64_t W = c.W, D = c.D, E = c.E, H = c.H, TE = c.TE;
-  add_linear(v, "enc", 2 * D, E);
-  add_linear(v, "inp", W * E, H);
-  add_linear(v, "time1", TE, H);
-  add_linear(v, "time2", H, H);
-  add_residual_blocks(v, H, c.L);
-  add_layer_norm(v, "out_norm", H);
-  add_linear(v, "out", H, W * E);
-  add_linear(v, "dec1", 2 * E, E);
-  add_linear(v, "dec2", E, D);
+  add_mlpwin_tensors(v, W, D, E, H, c.L, TE);
   return v;
 }
 

@@ -112,14 +112,7 @@ void Tcn::forward_newest(std::span<const float> x, std::span<const float> m, int
                          TcnScratch& s) const {
   const TcnConfig& c = config_;
   BODYD_REQUIRE(s.config_.W == c.W && s.config_.D == c.D && s.config_.C == c.C, "TcnScratch was made for another network");
-  const std::size_t window = static_cast<std::size_t>(c.W) * static_cast<std::size_t>(c.D);
-  BODYD_REQUIRE(x.size() == window && m.size() == window, "forward_newest: x and m must hold one window of W * D floats");
-  BODYD_REQUIRE(out.size() == static_cast<std::size_t>(c.D), "forward_newest: out must hold one frame of D floats");
-  BODYD_REQUIRE(t >= 0 && t < c.T, "t must be in [0, T)");
-  const auto overlaps = [&out](std::span<const float> v) {
-    return out.data() < v.data() + v.size() && v.data() < out.data() + out.size();
-  };
-  BODYD_REQUIRE(!overlaps(x) && !overlaps(m), "out may not alias x or m");
+  check_newest(x, m, t, out, c.W, c.D, c.T);
 
   const Eigen::Map<const Eigen::MatrixXf> X(x.data(), c.D, c.W);
   const Eigen::Map<const Eigen::MatrixXf> M(m.data(), c.D, c.W);

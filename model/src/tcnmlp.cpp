@@ -41,15 +41,7 @@ TensorShapes TcnMlp::tensors(const ModelConfig& config) {
   add_linear(v, "cdec1", C, C);
   add_linear(v, "cdec2", C, D);
   add_linear(v, "ctx", C, H);
-  add_linear(v, "enc", 2 * D, E);
-  add_linear(v, "inp", N * E, H);
-  add_linear(v, "time1", TE, H);
-  add_linear(v, "time2", H, H);
-  add_residual_blocks(v, H, c.L);
-  add_layer_norm(v, "out_norm", H);
-  add_linear(v, "out", H, N * E);
-  add_linear(v, "dec1", 2 * E, E);
-  add_linear(v, "dec2", E, D);
+  add_mlpwin_tensors(v, N, D, E, H, c.L, TE);
   return v;
 }
 
@@ -191,14 +183,7 @@ void TcnMlp::forward_newest(std::span<const float> x, std::span<const float> m, 
   BODYD_REQUIRE(s.config_.W == c.W && s.config_.D == c.D && s.config_.N == c.N && s.config_.E == c.E &&
                     s.config_.H == c.H && s.config_.C == c.C,
                 "TcnMlpScratch was made for another network");
-  const std::size_t window = static_cast<std::size_t>(c.W) * static_cast<std::size_t>(c.D);
-  BODYD_REQUIRE(x.size() == window && m.size() == window, "forward_newest: x and m must hold one window of W * D floats");
-  BODYD_REQUIRE(out.size() == static_cast<std::size_t>(c.D), "forward_newest: out must hold one frame of D floats");
-  BODYD_REQUIRE(t >= 0 && t < c.T, "t must be in [0, T)");
-  const auto overlaps = [&out](std::span<const float> v) {
-    return out.data() < v.data() + v.size() && v.data() < out.data() + out.size();
-  };
-  BODYD_REQUIRE(!overlaps(x) && !overlaps(m), "out may not alias x or m");
+  check_newest(x, m, t, out, c.W, c.D, c.T);
 
   const Eigen::Index W = c.W, N = c.N, past = N - 1;
   const Eigen::Map<const Eigen::MatrixXf> X(x.data(), c.D, W);
