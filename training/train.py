@@ -55,7 +55,8 @@ from model_net import ARCHITECTURES, MlpWin, TcnCausal, TcnMlp, cosine_alpha_bar
 
 
 def parse_args():
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
+                                allow_abbrev=False)  # whole names: --threads is read before argparse runs
     p.add_argument("--data", required=True, help="dataset base path (without .npy/.json)")
     p.add_argument("--run-dir", required=True, help="checkpoints and logs")
     p.add_argument("--out", required=True, help="model file to write at the end")
