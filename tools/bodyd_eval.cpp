@@ -83,6 +83,9 @@ int main(int argc, char** argv) {
   app.add_option("--filter-rot-beta", method_options.filter.rot_beta_per_rad_s,
                  "diffusion: the tracker filter's rot_beta_per_rad_s")
       ->capture_default_str();
+  app.add_option("--filter-head-correction-cutoff-hz", method_options.filter.head_correction_cutoff_hz,
+                 "diffusion: the head correction's cutoff on a noisy head tracker, Hz (docs/model.md, \"Tracked joints\")")
+      ->capture_default_str();
   // The body filter (diffusion.h, one_euro.h BodyFilterOptions; the daemon's "body_filter" keys).
   bool no_body_filter = false;
   std::optional<double> body_min_cutoff_hz, body_rot_min_cutoff_hz;

@@ -129,6 +129,9 @@ std::vector<ConfigKey> make_rows() {
        .help = "rotation cutoff of a still tracker, Hz", .doc = kTrackerFilter});
   add({.group = "filter", .name = "rot_beta_per_rad_s", .field = &filter_at<&OneEuroOptions::rot_beta_per_rad_s>,
        .help = "rotation cutoff increase per rad/s of angular speed", .doc = kTrackerFilter});
+  add({.group = "filter", .name = "head_correction_cutoff_hz",
+       .field = &filter_at<&OneEuroOptions::head_correction_cutoff_hz>,
+       .help = "cutoff of the head correction on a noisy head tracker, Hz", .doc = kTrackerFilter});
   // The diffusion method's body filter (issue 18 item 4); validate(BodyFilterOptions) checks the values.
   add({.group = "body_filter", .name = "enabled", .field = &body_filter_enabled, .flag = "!--no-body-filter",
        .help = "no One Euro filter on the model's decoded body (config \"body_filter\": {\"enabled\": false})",

@@ -14,6 +14,17 @@
 namespace bodyd {
 
 namespace {
+// The head correction's low-pass (OneEuroOptions::head_correction_cutoff_hz): the One Euro
+// filter at that cutoff with a little speed adaptation, no noise gate of its own (the head
+// tracker filter's gain decides how much of it applies).
+OneEuroOptions head_correction_options(const OneEuroOptions& filter) {
+  OneEuroOptions o;
+  o.min_cutoff_hz = filter.head_correction_cutoff_hz;
+  o.beta_per_m_s = 1.0;
+  o.noise_gate = false;
+  return o;
+}
+
 constexpr double kNsPerS = 1e9;
 
 // push() checks positions against the user's bound before scaling them into the model's
@@ -54,7 +65,8 @@ DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::
       skeleton_(model_->skeleton),
       user_skeleton_(model_->skeleton),
       history_(model_scale_history(options.history)),
-      filter_(options.filter) {
+      filter_(options.filter),
+      head_correction_(head_correction_options(options.filter)) {
   if (std::string err = validate(options.filter); !err.empty()) throw std::invalid_argument(err);
   if (std::string err = validate(options.body_filter); !err.empty()) throw std::invalid_argument(err);
   if (std::string err = validate_foot_lock(options); !err.empty()) throw std::invalid_argument(err);
@@ -109,6 +121,7 @@ void DiffusionReconstructor::reset() {
   history_.clear();
   filter_.reset();
   body_filter_.reset();
+  head_correction_.reset();
   emitted_head_ = emitted_count_ = 0;
   emitted_dropped_ = false;
   have_last_ = false;
@@ -273,7 +286,7 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
   const double frame_dt_s = have_last_ ? static_cast<double>(t_ns - last_t_ns_) / kNsPerS : 0.0;
   TrackedTargets targets;
   const HandGoals hands = hand_goals(t_ns, frame_dt_s, trackers, targets);
-  fit_tracked_joints(head, targets);
+  fit_tracked_joints(t_ns, head, targets);
   if (options_.foot_lock) lock_feet(contact, frame_dt_s);
   fit_arms(canon, hands);
 
@@ -435,17 +448,32 @@ DiffusionReconstructor::HandGoals DiffusionReconstructor::hand_goals(std::int64_
   return goals;
 }
 
-void DiffusionReconstructor::fit_tracked_joints(const HeadNow& head, TrackedTargets& targets) {
+void DiffusionReconstructor::fit_tracked_joints(std::int64_t t_ns, const HeadNow& head, TrackedTargets& targets) {
   // The Head joint on the head tracker, the shoulders moved where a hand is out of reach
   // (body_solver.h). The trackers are the filtered ones: the filter passes clean samples
   // unchanged (its noise gate, one_euro.h), and on noisy ones the body and the tracked joints
   // follow one smooth signal instead of the neck and hips taking up the noise.
   if (!options_.exact_tracked_joints || !upper_body_) return;
   targets.head_valid = head.valid;
-  if (targets.head_valid) {
+  if (head.valid) {
     targets.head_m = head.p;
     targets.head_rotation = head.q;
-    targets.head_body_m = head.p;
+    // The head correction: the body moves the whole of itself with the Head joint, so what is
+    // left of a noisy tracker's noise after the filter would shake every joint (the network's own
+    // body is smoother). Where the filter's noise gate is open, the Head joint goes to the
+    // network's head plus the low-passed correction instead: the body keeps the network's
+    // smoothness and follows the tracker within millimetres. A clean tracker (gain 0) is exact.
+    const double gain = filter_.of(Role::Head).position_gain();
+    const Vec3 network_head = out_global_.positions[static_cast<size_t>(upper_body_->head)];
+    TrackerSample correction;
+    correction.t_ns = t_ns;
+    correction.valid = true;
+    correction.position_m = head.p - network_head;
+    const Vec3 smooth = network_head + head_correction_.filter(correction).position_m;
+    if (gain > 0.0) targets.head_m += gain * (smooth - head.p);
+    targets.head_body_m = targets.head_m;
+  } else {
+    head_correction_.reset();  // the correction starts over with the head's next sample
   }
   (void)solve_tracked_body(skeleton_, *upper_body_, options_.body, targets, scratch_pose_, out_global_);
 }

@@ -28,6 +28,8 @@ std::string validate(const OneEuroOptions& o, std::string_view group) {
     return fmt::format("{} beta_per_m_s must be >= 0, not {}", group, o.beta_per_m_s);
   if (!non_negative(o.rot_beta_per_rad_s))
     return fmt::format("{} rot_beta_per_rad_s must be >= 0, not {}", group, o.rot_beta_per_rad_s);
+  if (!positive(o.head_correction_cutoff_hz))
+    return fmt::format("{} head_correction_cutoff_hz must be > 0, not {}", group, o.head_correction_cutoff_hz);
   if (!positive(o.restart_after_s))
     return fmt::format("{} restart_after_s must be > 0, not {}", group, o.restart_after_s);
   if (!non_negative(o.noise_gate_low_mm) || !(std::isfinite(o.noise_gate_high_mm) && o.noise_gate_high_mm > o.noise_gate_low_mm))

@@ -183,7 +183,8 @@ TEST(AutoCalibration, AManualOrConfiguredHeightWinsAndTheFlagTurnsItOff) {
 TEST(DaemonConfigKeys, AutoCalibrateAndFilterParseValidateAndPrint) {
   DaemonConfig c;
   ASSERT_EQ(daemon::apply_config_json(json::parse(R"({"auto_calibrate": false, "filter": {"enabled": false,
-      "min_cutoff_hz": 0.5, "beta_per_m_s": 10, "d_cutoff_hz": 2, "rot_min_cutoff_hz": 0.7, "rot_beta_per_rad_s": 3}})"),
+      "min_cutoff_hz": 0.5, "beta_per_m_s": 10, "d_cutoff_hz": 2, "rot_min_cutoff_hz": 0.7, "rot_beta_per_rad_s": 3,
+      "head_correction_cutoff_hz": 2.5}})"),
                                         "c.json", c),
             "");
   EXPECT_FALSE(c.auto_calibrate);
@@ -193,6 +194,7 @@ TEST(DaemonConfigKeys, AutoCalibrateAndFilterParseValidateAndPrint) {
   EXPECT_DOUBLE_EQ(c.filter.d_cutoff_hz, 2.0);
   EXPECT_DOUBLE_EQ(c.filter.rot_min_cutoff_hz, 0.7);
   EXPECT_DOUBLE_EQ(c.filter.rot_beta_per_rad_s, 3.0);
+  EXPECT_DOUBLE_EQ(c.filter.head_correction_cutoff_hz, 2.5);
   EXPECT_EQ(daemon::validate_config(c), "");
   // Printed as read: --print-config's output loads back to the same values.
   DaemonConfig back;
@@ -218,6 +220,8 @@ TEST(DaemonConfigKeys, AutoCalibrateAndFilterParseValidateAndPrint) {
   EXPECT_NE(e.find("docs/daemon.md"), std::string::npos) << e;
   e = error(R"({"filter": {"beta_per_m_s": -1}})");
   EXPECT_NE(e.find("beta_per_m_s must be >= 0"), std::string::npos) << e;
+  e = error(R"({"filter": {"head_correction_cutoff_hz": -4}})");
+  EXPECT_NE(e.find("filter head_correction_cutoff_hz must be > 0, not -4"), std::string::npos) << e;
 
   // The flags.
   DaemonConfig f;

@@ -101,8 +101,9 @@ struct DaemonConfig {
   // is configured above or the control socket calibrates first; a later calibrate replaces it.
   bool auto_calibrate = true;
   // The diffusion method's One Euro tracker filter (config "filter"; docs/daemon.md, "Tracker
-  // filter"). Only enabled, min_cutoff_hz, beta_per_m_s, d_cutoff_hz, rot_min_cutoff_hz and
-  // rot_beta_per_rad_s are configurable; the rest keep the defaults of one_euro.h.
+  // filter"). Only enabled, min_cutoff_hz, beta_per_m_s, d_cutoff_hz, rot_min_cutoff_hz,
+  // rot_beta_per_rad_s and head_correction_cutoff_hz are configurable; the rest keep the defaults
+  // of one_euro.h.
   OneEuroOptions filter;
   // The diffusion method's output-side body filter (config "body_filter"; docs/daemon.md, "Body
   // filter"; one_euro.h BodyFilterOptions): off by default.

@@ -115,8 +115,9 @@ class DiffusionReconstructor final : public Reconstructor {
   void filter_body(std::int64_t t_ns);
   // The hands' goals (and the easing state), and the hands in `targets`.
   HandGoals hand_goals(std::int64_t t_ns, double frame_dt_s, const TrackersNow& trackers, TrackedTargets& targets);
-  // The Head joint on the head tracker, the shoulders toward out-of-reach hands (body_solver.h).
-  void fit_tracked_joints(const HeadNow& head, TrackedTargets& targets);
+  // The Head joint on the head tracker (through the head correction when it is noisy), the
+  // shoulders toward out-of-reach hands (body_solver.h).
+  void fit_tracked_joints(std::int64_t t_ns, const HeadNow& head, TrackedTargets& targets);
   // The arms by two-bone IK onto the hand goals.
   void fit_arms(const features::Canonical& canon, const HandGoals& hands);
   // Keeps the emitted frame (model scale) for the next windows.
@@ -146,6 +147,9 @@ class DiffusionReconstructor final : public Reconstructor {
   TrackerHistory history_;      // filtered samples (model scale): observations and tracked joints
   TrackerFilter filter_;
   PoseFilter body_filter_;      // the decoded pose (model scale, world)
+  // The head correction (one_euro.h, OneEuroOptions::head_correction_cutoff_hz): the filtered
+  // head tracker minus the network's head, low-passed (position only; no noise gate of its own).
+  OneEuroFilter head_correction_;
   std::optional<UpperBody> upper_body_;
   std::optional<TwoBoneChain> arms_[2];
   std::optional<TwoBoneChain> legs_[2];

@@ -63,6 +63,12 @@ struct OneEuroOptions {
   int noise_window = 64;             // samples the noise is measured over (16..kMaxNoiseWindow)
   // false: no noise measurement, the full filter always (gain 1; PoseFilter's setting).
   bool noise_gate = true;
+  // Head correction (the diffusion reconstructor, diffusion.h; docs/model.md "Tracked joints"):
+  // on a noisy head tracker the Head joint goes to the network's head plus the low-passed
+  // difference between the filtered tracker and the network's head (this cutoff, Hz), weighted
+  // by the head filter's noise-gate gain: a clean head stays exactly on its tracker. Chosen on the
+  // style-held-out clips (docs/models.md, "Tracker noise on unseen styles").
+  double head_correction_cutoff_hz = 4.0;
 };
 inline constexpr int kMaxNoiseWindow = 256;
 inline constexpr int kNoiseOrder = 6;  // the order of the differences the noise is measured by
