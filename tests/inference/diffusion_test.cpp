@@ -308,6 +308,18 @@ double jitter_m_s3(const std::vector<GlobalPose>& poses, double fps, size_t firs
   return sum / n;
 }
 
+// The simulator at the clip's frame rate (seed 3), with 2 mm / 1 degree tracker noise when `noisy`.
+SimOptions sim_at_clip_rate(const Motion& clip, bool noisy) {
+  SimOptions o;
+  o.rate_hz = clip.fps();
+  o.seed = 3;
+  if (noisy) {
+    o.position_noise_mm = 2.0;
+    o.rotation_noise_deg = 1.0;
+  }
+  return o;
+}
+
 std::vector<GlobalPose> globals(const Outputs& run) {
   std::vector<GlobalPose> out;
   for (const BodyPose& p : run.poses) out.push_back(p.global);
@@ -349,13 +361,8 @@ TEST_F(DefaultModel, HeadAndHandsExactlyOnCleanTrackers) {
 TEST_F(DefaultModel, TrackerNoiseDoesNotShakeTheBody) {
   const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
   const auto times = frame_times(clip);
-  SimOptions o;
-  o.rate_hz = clip.fps();
-  o.seed = 3;
-  const auto clean = simulate_trackers(clip, o);
-  o.position_noise_mm = 2.0;
-  o.rotation_noise_deg = 1.0;
-  const auto noisy = simulate_trackers(clip, o);
+  const auto clean = simulate_trackers(clip, sim_at_clip_rate(clip, false));
+  const auto noisy = simulate_trackers(clip, sim_at_clip_rate(clip, true));
   DiffusionOptions no_body_filter;
   no_body_filter.body_filter.enabled = false;
   DiffusionReconstructor a(model_, no_body_filter), b(model_, no_body_filter);
@@ -385,12 +392,7 @@ TEST_F(DefaultModel, TrackerNoiseDoesNotShakeTheBody) {
 TEST_F(DefaultModel, ANoisyHeadTrackerDoesNotShakeTheHips) {
   const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
   const auto times = frame_times(clip);
-  SimOptions o;
-  o.rate_hz = clip.fps();
-  o.seed = 3;
-  o.position_noise_mm = 2.0;
-  o.rotation_noise_deg = 1.0;
-  const auto noisy = simulate_trackers(clip, o);
+  const auto noisy = simulate_trackers(clip, sim_at_clip_rate(clip, true));
   DiffusionOptions corrected, unfiltered;
   unfiltered.filter.head_correction_cutoff_hz = 1e4;
   DiffusionReconstructor a(model_, corrected), b(model_, unfiltered);
