@@ -20,6 +20,7 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <deque>
 #include <string>
 #include <string_view>
@@ -72,9 +73,11 @@ class OscBundle : NonCopyable {
   // takes ownership. Returns its index.
   int add_message(const std::string& path, lo_message message);
   // The arguments of message `index`, pointing into the message: write numbers here
-  // (args(i)[k]->f for a float) before serialise().
+  // (set_float for a float) before serialise().
   [[nodiscard]] lo_arg** args(int index) const { return argv_[static_cast<std::size_t>(index)]; }
-  void set_float(int index, int arg, float value) { args(index)[arg]->f = value; }
+  // By bytes: liblo packs the arguments at 4-byte steps, so an lo_arg (a union with 8-byte
+  // members) may be misaligned and ->f on it is undefined behaviour (UBSan, make sanitize).
+  void set_float(int index, int arg, float value) { std::memcpy(args(index)[arg], &value, sizeof value); }
   // Serialises the bundle (time tag "immediately") into the owned buffer. Empty on failure.
   [[nodiscard]] const std::vector<std::uint8_t>& serialise();
 

@@ -5,6 +5,7 @@
 #include <lo/lo.h>
 
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <memory>
 #include <optional>
@@ -87,13 +88,19 @@ InputReject decode_message(const std::uint8_t* data, std::size_t size, OscMessag
   for (int i = 0; i < argc; ++i) {
     OscArg a;
     a.type = out.type_tags[static_cast<std::size_t>(i)];
+    // By bytes: liblo packs the arguments at 4-byte steps, so an lo_arg (a union with 8-byte
+    // members) may be misaligned and a member access on it is undefined behaviour.
+    const auto read = [&]<typename T>(T value) {
+      std::memcpy(&value, argv[i], sizeof value);
+      return value;
+    };
     switch (a.type) {
-      case LO_FLOAT: a.number = argv[i]->f; break;
-      case LO_DOUBLE: a.number = argv[i]->d; break;
-      case LO_INT32: a.number = argv[i]->i; break;
-      case LO_INT64: a.number = static_cast<double>(argv[i]->h); break;
+      case LO_FLOAT: a.number = read(0.0f); break;
+      case LO_DOUBLE: a.number = read(0.0); break;
+      case LO_INT32: a.number = read(std::int32_t{0}); break;
+      case LO_INT64: a.number = static_cast<double>(read(std::int64_t{0})); break;
       case LO_STRING:
-      case LO_SYMBOL: a.text = &argv[i]->s; break;
+      case LO_SYMBOL: a.text = reinterpret_cast<const char*>(argv[i]); break;
       default: break;
     }
     out.args.push_back(std::move(a));
