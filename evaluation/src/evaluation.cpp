@@ -473,7 +473,10 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
   for (size_t m = 0; m < options.methods.size(); ++m) {
     MethodReport r;
     r.name = options.methods[m];
-    if (!metrics.empty()) r.metrics = metrics[m].result();
+    if (!metrics.empty()) {
+      r.metrics = metrics[m].result();
+      r.jitter_by_joint_m_s3 = metrics[m].jitter_by_joint();
+    }
     // Nearest rank (bodyd/base/percentile.h); NaN, written as null, for a method that never ran.
     r.ms_per_frame_p50 = percentile(times[m], 0.5).value_or(std::numeric_limits<double>::quiet_NaN());
     r.ms_per_frame_p99 = percentile(times[m], 0.99).value_or(std::numeric_limits<double>::quiet_NaN());
@@ -481,7 +484,10 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
     report.methods.push_back(r);
     if (options.methods[m] == "diffusion") timed = m;
   }
-  if (!metrics.empty()) report.ground_truth = metrics[0].truth_result();
+  if (!metrics.empty()) {
+    report.ground_truth = metrics[0].truth_result();
+    report.ground_truth_jitter_by_joint_m_s3 = metrics[0].truth_jitter_by_joint();
+  }
   for (size_t c = 0; c < 3; ++c)
     for (const auto& [name, g] : groups[c]) {
       GroupReport r;
@@ -523,6 +529,12 @@ void metric_fields(const AccuracyMetrics& m, nlohmann::ordered_json& o) {
   for (const MetricKey& k : kExtraMetricKeys) o[std::string(k.key)] = number(m.*k.field);
 }
 
+nlohmann::ordered_json by_joint(const std::vector<std::pair<std::string, double>>& values) {
+  nlohmann::ordered_json o = nlohmann::ordered_json::object();
+  for (const auto& [joint, value] : values) o[joint] = number(value);
+  return o;
+}
+
 nlohmann::ordered_json truth_fields(const MotionQuality& q) {
   nlohmann::ordered_json o;
   o["jitter_m_s3"] = number(q.jitter_m_s3);
@@ -543,10 +555,12 @@ std::string report_json(const EvalReport& report) {
     metric_fields(m.metrics, o);
     o["ms_per_frame_p50"] = number(m.ms_per_frame_p50);
     o["ms_per_frame_p99"] = number(m.ms_per_frame_p99);
+    o["jitter_by_joint_m_s3"] = by_joint(m.jitter_by_joint_m_s3);
     methods[m.name] = o;
   }
   doc["methods"] = methods;
   doc["ground_truth"] = truth_fields(report.ground_truth);
+  doc["ground_truth"]["jitter_by_joint_m_s3"] = by_joint(report.ground_truth_jitter_by_joint_m_s3);
   doc["timing"] = {{"ms_per_frame_p50", number(report.ms_per_frame_p50)},
                    {"ms_per_frame_p99", number(report.ms_per_frame_p99)}};
   nlohmann::ordered_json groups = nlohmann::ordered_json::object();

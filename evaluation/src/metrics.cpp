@@ -72,12 +72,20 @@ MetricsAccumulator::MetricsAccumulator(const Skeleton& skeleton) : sets_(joint_s
     (tracked ? tracked_lag_ : untracked_lag_).slots.push_back(k);
   }
   lag_true_.resize(sets_.all.size() * (kMaxLagFrames + 1));
+  for (int j : sets_.all) joint_names_.push_back(skeleton.names[static_cast<size_t>(j)]);
+  joint_jitter_.resize(sets_.all.size());
+  truth_joint_jitter_.resize(sets_.all.size());
 }
 
 void MetricsAccumulator::begin_clip(double fps) {
   if (!(fps > 0.0) || !std::isfinite(fps))
     throw std::invalid_argument("metrics: fps must be positive, got " + std::to_string(fps));
   fps_ = fps;
+  for (auto* terms : {&joint_jitter_, &truth_joint_jitter_})
+    for (Term& t : *terms) {
+      t.clip_sum = 0.0;
+      t.clip_count = 0;
+    }
   for (Term& t : terms_) {
     t.clip_sum = 0.0;
     t.clip_count = 0;
@@ -183,8 +191,11 @@ void MetricsAccumulator::add_frame(const GlobalPose& predicted, const GlobalPose
         return (h[slot(f) + k] - 3.0 * h[slot(f - 1) + k] + 3.0 * h[slot(f - 2) + k] - h[slot(f - 3) + k]).norm() *
                fps3;
       };
-      terms_[kJitter].add(third(pred_hist_));
-      terms_[kTruthJitter].add(third(true_hist_));
+      const double pred = third(pred_hist_), true_ = third(true_hist_);
+      terms_[kJitter].add(pred);
+      terms_[kTruthJitter].add(true_);
+      joint_jitter_[k].add(pred);
+      truth_joint_jitter_[k].add(true_);
     }
     for (size_t h = 0; h < 2; ++h) {
       if (since_gap[h] < 1 || since_gap[h] > second) continue;
@@ -234,6 +245,8 @@ AccuracyMetrics MetricsAccumulator::end_clip() {
   m.mpjre_deg = terms_[kRot].finish(clip_frames_);
   m.mpjve_cm_s = terms_[kVel].finish(clip_frames_);
   m.jitter_m_s3 = terms_[kJitter].finish(clip_frames_);
+  for (auto* terms : {&joint_jitter_, &truth_joint_jitter_})
+    for (Term& t : *terms) (void)t.finish(clip_frames_);
   m.foot_skate_ratio = terms_[kSkate].finish(clip_frames_);
   last_truth_.jitter_m_s3 = terms_[kTruthJitter].finish(clip_frames_);
   last_truth_.foot_skate_ratio = terms_[kTruthSkate].finish(clip_frames_);
@@ -274,6 +287,20 @@ AccuracyMetrics MetricsAccumulator::result() const {
 
 MotionQuality MetricsAccumulator::truth_result() const {
   return {terms_[kTruthJitter].mean(), terms_[kTruthSkate].mean(), terms_[kTruthGapJerk].mean()};
+}
+
+std::vector<std::pair<std::string, double>> MetricsAccumulator::named_means(const std::vector<Term>& terms) const {
+  std::vector<std::pair<std::string, double>> out;
+  for (size_t k = 0; k < joint_names_.size(); ++k) out.emplace_back(joint_names_[k], terms[k].mean());
+  return out;
+}
+
+std::vector<std::pair<std::string, double>> MetricsAccumulator::jitter_by_joint() const {
+  return named_means(joint_jitter_);
+}
+
+std::vector<std::pair<std::string, double>> MetricsAccumulator::truth_jitter_by_joint() const {
+  return named_means(truth_joint_jitter_);
 }
 
 }  // namespace bodyd

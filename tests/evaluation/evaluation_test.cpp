@@ -225,9 +225,17 @@ TEST(Evaluation, JsonHasExactlyTheDocumentedKeys) {
   for (const MetricKey& k : kExtraMetricKeys) EXPECT_TRUE(j["methods"]["ik"].contains(std::string(k.key))) << k.key;
   EXPECT_TRUE(j["groups"]["dataset"].contains("other"));
   for (const MetricKey& k : kMetricKeys) EXPECT_TRUE(j["methods"]["ik"][std::string(k.key)].is_number()) << k.key;
-  EXPECT_EQ(j["ground_truth"].size(), 3u);
+  EXPECT_EQ(j["ground_truth"].size(), 4u);
   EXPECT_TRUE(j["ground_truth"]["jitter_m_s3"].is_number());
   EXPECT_TRUE(j["ground_truth"]["foot_skate_ratio"].is_number());
+  // jitter_by_joint_m_s3: the 21 body joints by name, in the method and in the truth.
+  for (const auto* o : {&j["methods"]["ik"], &j["ground_truth"]}) {
+    const auto& by_joint = (*o)["jitter_by_joint_m_s3"];
+    ASSERT_TRUE(by_joint.is_object());
+    EXPECT_EQ(by_joint.size(), 21u);
+    EXPECT_EQ(by_joint.begin().key(), "Spine");
+    EXPECT_TRUE(by_joint["Toes_R"].is_number());
+  }
   EXPECT_EQ(j["timing"].size(), 2u);
   EXPECT_TRUE(j["timing"]["ms_per_frame_p50"].is_number());
   EXPECT_TRUE(j["timing"]["ms_per_frame_p99"].is_number());

@@ -291,3 +291,41 @@ TEST(Metrics, TrackedLagIsTheHeadAndHandsAlone) {
   EXPECT_NEAR(m.lag_ms, 0.0, 1e-9);
   EXPECT_NEAR(acc.result().tracked_lag_ms, m.tracked_lag_ms, 1e-9);
 }
+
+// jitter_by_joint: one elbow shaken by +-1 cm alternately (third difference 8 cm, jerk 8 cm x
+// 30^3 = 2160 m/s^3 at every quadruple) shows up at that joint alone; the joints' mean is
+// jitter_m_s3, over two clips of different lengths too; the truth's by joint is its own.
+TEST(Metrics, JitterByJointFindsTheShakenJoint) {
+  MetricsAccumulator acc(walk().skeleton);
+  const int elbow = walk().skeleton.find("LowerArm_L");
+  for (const int frames : {walk().frame_count(), 20}) {
+    acc.begin_clip(30.0);
+    for (int f = 0; f < frames; ++f) {
+      const GlobalPose truth = frame(f);
+      GlobalPose pred = truth;
+      pred.positions[static_cast<size_t>(elbow)].y() += (f % 2 == 0 ? 0.01 : -0.01);
+      acc.add_frame(pred, truth);
+    }
+    (void)acc.end_clip();
+  }
+  const auto pred = acc.jitter_by_joint(), truth = acc.truth_jitter_by_joint();
+  ASSERT_EQ(pred.size(), 21u);
+  ASSERT_EQ(truth.size(), 21u);
+  double mean = 0.0;
+  for (size_t k = 0; k < pred.size(); ++k) {
+    mean += pred[k].second / 21.0;
+    EXPECT_EQ(pred[k].first, truth[k].first);
+    // The shaken elbow's is 2160 give or take the true elbow's own (the triangle inequality per
+    // quadruple); every other joint is the truth's.
+    if (pred[k].first == "LowerArm_L") {
+      EXPECT_LT(truth[k].second, 500.0);
+      EXPECT_NEAR(pred[k].second, 2160.0, truth[k].second + 1e-6);
+    } else {
+      EXPECT_NEAR(pred[k].second, truth[k].second, 1e-9) << pred[k].first;
+    }
+  }
+  EXPECT_NEAR(mean, acc.result().jitter_m_s3, 1e-9);
+  double truth_mean = 0.0;
+  for (const auto& [joint, value] : truth) truth_mean += value / 21.0;
+  EXPECT_NEAR(truth_mean, acc.truth_result().jitter_m_s3, 1e-9);
+}

@@ -107,6 +107,8 @@ struct MethodReport {
   double ms_per_frame_p50 = 0.0;
   double ms_per_frame_p99 = 0.0;
   std::int64_t unanswered_frames = 0;
+  // jitter_m_s3 joint by joint (MetricsAccumulator::jitter_by_joint; whole report only, empty in groups).
+  std::vector<std::pair<std::string, double>> jitter_by_joint_m_s3;
 };
 
 // The results of the clips of one group (docs/evaluation.md, "Groups").
@@ -132,6 +134,7 @@ struct EvalReport {
   std::int64_t frames = 0;
   std::vector<MethodReport> methods;  // in the order of EvalOptions::methods
   MotionQuality ground_truth;
+  std::vector<std::pair<std::string, double>> ground_truth_jitter_by_joint_m_s3;
   // Per group, by category ("dataset", "content", "style") then name, in sorted order.
   std::vector<GroupReport> groups;
   double body_scale = 1.0;

@@ -37,7 +37,9 @@
 
 #include <array>
 #include <cstdint>
+#include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 namespace bodyd {
@@ -137,6 +139,10 @@ class MetricsAccumulator {
   // Frame-weighted means over the finished clips (NaN where no clip defines a metric).
   [[nodiscard]] AccuracyMetrics result() const;
   [[nodiscard]] MotionQuality truth_result() const;
+  // jitter_m_s3 joint by joint (the 21 body joints, upper then lower as JointSets::all, by name;
+  // their mean is jitter_m_s3), of the reconstruction and of the truth: where the jitter is.
+  [[nodiscard]] std::vector<std::pair<std::string, double>> jitter_by_joint() const;
+  [[nodiscard]] std::vector<std::pair<std::string, double>> truth_jitter_by_joint() const;
   [[nodiscard]] int clips() const { return clips_; }
   [[nodiscard]] std::int64_t frames() const { return frames_; }
 
@@ -185,6 +191,10 @@ class MetricsAccumulator {
   // frame % (kMaxLagFrames + 1)); lag_ms over the untracked joints, tracked_lag_ms over the others.
   std::vector<Vec3> lag_true_;
   LagSums untracked_lag_, tracked_lag_;
+  // jitter_by_joint(): the names of sets_.all and a term per joint (reconstruction, truth).
+  std::vector<std::string> joint_names_;
+  std::vector<Term> joint_jitter_, truth_joint_jitter_;
+  [[nodiscard]] std::vector<std::pair<std::string, double>> named_means(const std::vector<Term>& terms) const;
 };
 
 }  // namespace bodyd
