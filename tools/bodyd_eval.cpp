@@ -86,6 +86,15 @@ int main(int argc, char** argv) {
   app.add_option("--filter-head-correction-cutoff-hz", method_options.filter.head_correction_cutoff_hz,
                  "diffusion: the head correction's cutoff on a noisy head tracker, Hz (docs/model.md, \"Tracked joints\")")
       ->capture_default_str();
+  app.add_option("--filter-anchor-cutoff-hz", method_options.filter.anchor_cutoff_hz,
+                 "diffusion: the smoothed anchor's cutoff on a noisy head tracker, Hz (0: off; docs/model.md, \"Tracked joints\")")
+      ->capture_default_str();
+  app.add_option("--filter-hand-reach-slack-m", method_options.filter.hand_reach_slack_m,
+                 "diffusion: how far a noisy hand may be out of reach before the body chases it, m (0: off; docs/model.md, \"Tracked joints\")")
+      ->capture_default_str();
+  app.add_option("--filter-arm-soft-zone-m", method_options.filter.arm_soft_zone_m,
+                 "diffusion: the arms' soft reach on a noisy hand tracker, m (0: off; docs/model.md, \"Tracked joints\")")
+      ->capture_default_str();
   // The body filter (diffusion.h, one_euro.h BodyFilterOptions; the daemon's "body_filter" keys).
   bool no_body_filter = false;
   std::optional<double> body_min_cutoff_hz, body_rot_min_cutoff_hz;

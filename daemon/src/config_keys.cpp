@@ -132,6 +132,12 @@ std::vector<ConfigKey> make_rows() {
   add({.group = "filter", .name = "head_correction_cutoff_hz",
        .field = &filter_at<&OneEuroOptions::head_correction_cutoff_hz>,
        .help = "cutoff of the head correction on a noisy head tracker, Hz", .doc = kTrackerFilter});
+  add({.group = "filter", .name = "anchor_cutoff_hz", .field = &filter_at<&OneEuroOptions::anchor_cutoff_hz>,
+       .help = "cutoff of the smoothed anchor on a noisy head tracker, Hz (0: off)", .doc = kTrackerFilter});
+  add({.group = "filter", .name = "hand_reach_slack_m", .field = &filter_at<&OneEuroOptions::hand_reach_slack_m>,
+       .help = "how far a noisy hand may be out of reach before the body chases it, m (0: off)", .doc = kTrackerFilter});
+  add({.group = "filter", .name = "arm_soft_zone_m", .field = &filter_at<&OneEuroOptions::arm_soft_zone_m>,
+       .help = "soft reach of the arms on a noisy hand tracker, m (0: off)", .doc = kTrackerFilter});
   // The diffusion method's body filter (issue 18 item 4); validate(BodyFilterOptions) checks the values.
   add({.group = "body_filter", .name = "enabled", .field = &body_filter_enabled, .flag = "!--no-body-filter",
        .help = "no One Euro filter on the model's decoded body (config \"body_filter\": {\"enabled\": false})",

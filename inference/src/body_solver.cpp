@@ -76,10 +76,12 @@ BodySolverResult solve_tracked_body(const Skeleton& skeleton, const UpperBody& b
                                     const TrackedTargets& t, Pose& pose, GlobalPose& global) {
   BodySolverResult result;
   const auto P = [&](int j) -> const Vec3& { return global.positions[static_cast<size_t>(j)]; };
-  std::array<double, 2> reach{};
-  for (size_t s = 0; s < 2; ++s)
-    reach[s] = o.reach_fraction * (skeleton.offsets[static_cast<size_t>(b.lower_arm[s])].norm() +
-                                   skeleton.offsets[static_cast<size_t>(b.hand[s])].norm());
+  std::array<double, 2> arm{}, reach{};  // the arm's length; the shoulder-to-hand distance the body keeps
+  for (size_t s = 0; s < 2; ++s) {
+    arm[s] = skeleton.offsets[static_cast<size_t>(b.lower_arm[s])].norm() +
+             skeleton.offsets[static_cast<size_t>(b.hand[s])].norm();
+    reach[s] = o.reach_fraction * arm[s] + (std::isfinite(t.hand_slack_m[s]) ? std::max(0.0, t.hand_slack_m[s]) : 0.0);
+  }
   // The reach of a tracked hand as a one-dimensional task on its shoulder (UpperArm joint): its
   // distance to the hand's target may not exceed `reach`. Active within kBand of the limit (with
   // zero error inside it) so that iterations do not toggle it and undo each other.
@@ -228,7 +230,7 @@ BodySolverResult solve_tracked_body(const Skeleton& skeleton, const UpperBody& b
   }
   for (size_t s = 0; s < 2; ++s)
     result.reach_deficit_m[s] =
-        t.hand_valid[s] ? std::max(0.0, (t.hand_m[s] - P(b.upper_arm[s])).norm() - reach[s] / o.reach_fraction) : 0.0;
+        t.hand_valid[s] ? std::max(0.0, (t.hand_m[s] - P(b.upper_arm[s])).norm() - arm[s]) : 0.0;
   return result;
 }
 

@@ -25,6 +25,17 @@ OneEuroOptions head_correction_options(const OneEuroOptions& filter) {
   return o;
 }
 
+// The smoothed anchor's filter (OneEuroOptions::anchor_cutoff_hz), like the head correction's:
+// position and rotation at `cutoff_hz`, a little speed adaptation, no noise gate of its own. An
+// unused one (cutoff 0) gets 1 Hz.
+OneEuroOptions smoothing_options(double cutoff_hz) {
+  OneEuroOptions o;
+  o.min_cutoff_hz = o.rot_min_cutoff_hz = cutoff_hz > 0.0 ? cutoff_hz : 1.0;
+  o.beta_per_m_s = 1.0;
+  o.noise_gate = false;
+  return o;
+}
+
 constexpr double kNsPerS = 1e9;
 
 // push() checks positions against the user's bound before scaling them into the model's
@@ -66,7 +77,8 @@ DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::
       user_skeleton_(model_->skeleton),
       history_(model_scale_history(options.history)),
       filter_(options.filter),
-      head_correction_(head_correction_options(options.filter)) {
+      head_correction_(head_correction_options(options.filter)),
+      anchor_filter_(smoothing_options(options.filter.anchor_cutoff_hz)) {
   if (std::string err = validate(options.filter); !err.empty()) throw std::invalid_argument(err);
   if (std::string err = validate(options.body_filter); !err.empty()) throw std::invalid_argument(err);
   if (std::string err = validate_foot_lock(options); !err.empty()) throw std::invalid_argument(err);
@@ -122,6 +134,7 @@ void DiffusionReconstructor::reset() {
   filter_.reset();
   body_filter_.reset();
   head_correction_.reset();
+  anchor_filter_.reset();
   emitted_head_ = emitted_count_ = 0;
   emitted_dropped_ = false;
   have_last_ = false;
@@ -269,6 +282,26 @@ void DiffusionReconstructor::lock_feet(const std::array<bool, 2>& contact, doubl
   }
 }
 
+features::Canonical DiffusionReconstructor::anchor(std::int64_t t_ns, const HeadNow& head) {
+  if (!(options_.filter.anchor_cutoff_hz > 0.0)) return features::canonical_from_head(head.p, head.q);
+  if (!head.valid) {
+    anchor_filter_.reset();  // starts over with the head's next sample
+    return features::canonical_from_head(head.p, head.q);
+  }
+  TrackerSample sample;
+  sample.t_ns = t_ns;
+  sample.valid = true;
+  sample.position_m = head.p;
+  sample.rotation = head.q;
+  const TrackerSample smooth = anchor_filter_.filter(sample);  // kept up to date on clean heads too
+  const OneEuroFilter& head_filter = filter_.of(Role::Head);
+  const double position_gain = head_filter.position_gain(), rotation_gain = head_filter.rotation_gain();
+  if (position_gain <= 0.0 && rotation_gain <= 0.0) return features::canonical_from_head(head.p, head.q);
+  const Vec3 p = head.p + position_gain * (smooth.position_m - head.p);
+  const Quat q = head.q.slerp(rotation_gain, smooth.rotation).normalized();
+  return features::canonical_from_head(p, q);
+}
+
 // reconstruct() in its stages: the head (the window's anchor), the window of observations, the
 // network's newest frame, the tracked joints (head and hands), the feet, the arms, then what is
 // kept for the next windows and what goes out at the user's size.
@@ -276,7 +309,7 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
   if (have_last_ && t_ns <= last_t_ns_) return false;  // times must increase
   HeadNow head;
   if (!head_now(t_ns, head)) return false;
-  const features::Canonical canon = features::canonical_from_head(head.p, head.q);
+  const features::Canonical canon = anchor(t_ns, head);
   TrackersNow trackers;
   build_window(t_ns, head, canon, trackers);
   std::array<bool, 2> contact{};
@@ -475,6 +508,11 @@ void DiffusionReconstructor::fit_tracked_joints(std::int64_t t_ns, const HeadNow
   } else {
     head_correction_.reset();  // the correction starts over with the head's next sample
   }
+  // The reach slack (OneEuroOptions::hand_reach_slack_m): the body does not chase a noisy hand
+  // that is just out of reach.
+  for (size_t s = 0; s < 2; ++s)
+    targets.hand_slack_m[s] = options_.filter.hand_reach_slack_m *
+                              filter_.of(s == 0 ? Role::LeftHand : Role::RightHand).position_gain();
   (void)solve_tracked_body(skeleton_, *upper_body_, options_.body, targets, scratch_pose_, out_global_);
 }
 
@@ -495,6 +533,10 @@ void DiffusionReconstructor::fit_arms(const features::Canonical& canon, const Ha
       const auto elbow = static_cast<size_t>(arms_[side]->lower);
       target.pole_m = out_global_.positions[elbow] + options_.elbow_pole_bias_m * hint;
     }
+    // The soft reach on a noisy hand (OneEuroOptions::arm_soft_zone_m): the zone grows with the
+    // hand filter's noise-gate gain, so a clean hand (gain 0) is reached exactly.
+    const Role role = side == 0 ? Role::LeftHand : Role::RightHand;
+    target.soft_zone_m = options_.filter.arm_soft_zone_m * filter_.of(role).position_gain();
     (void)solve_two_bone_ik(skeleton_, *arms_[side], target, scratch_pose_, out_global_);
   }
 }

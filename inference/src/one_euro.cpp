@@ -30,6 +30,12 @@ std::string validate(const OneEuroOptions& o, std::string_view group) {
     return fmt::format("{} rot_beta_per_rad_s must be >= 0, not {}", group, o.rot_beta_per_rad_s);
   if (!positive(o.head_correction_cutoff_hz))
     return fmt::format("{} head_correction_cutoff_hz must be > 0, not {}", group, o.head_correction_cutoff_hz);
+  if (!non_negative(o.hand_reach_slack_m))
+    return fmt::format("{} hand_reach_slack_m must be >= 0, not {}", group, o.hand_reach_slack_m);
+  if (!non_negative(o.anchor_cutoff_hz))
+    return fmt::format("{} anchor_cutoff_hz must be >= 0, not {}", group, o.anchor_cutoff_hz);
+  if (!non_negative(o.arm_soft_zone_m))
+    return fmt::format("{} arm_soft_zone_m must be >= 0, not {}", group, o.arm_soft_zone_m);
   if (!positive(o.restart_after_s))
     return fmt::format("{} restart_after_s must be > 0, not {}", group, o.restart_after_s);
   if (!non_negative(o.noise_gate_low_mm) || !(std::isfinite(o.noise_gate_high_mm) && o.noise_gate_high_mm > o.noise_gate_low_mm))

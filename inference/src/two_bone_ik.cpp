@@ -81,8 +81,16 @@ TwoBoneResult solve_two_bone_ik(const Skeleton& skeleton, const TwoBoneChain& ch
     d = (b - a) / len_ab;
 
   const double min_reach = std::abs(len_ab - len_bc), max_reach = len_ab + len_bc;
-  const double reach = std::clamp(dist, min_reach, max_reach);
+  double reach = std::clamp(dist, min_reach, max_reach);
   result.reachable = dist >= min_reach && dist <= max_reach;
+  // Soft reach (TwoBoneTarget::soft_zone_m): a zone wider than the chain's range of reach is
+  // narrowed to it, so the soft curve stays above min_reach.
+  const double zone = std::min(std::isfinite(target.soft_zone_m) ? std::max(0.0, target.soft_zone_m) : 0.0,
+                               max_reach - min_reach);
+  if (zone > 0.0 && dist > max_reach - zone) {
+    reach = max_reach - zone * std::exp(-(dist - max_reach + zone) / zone);
+    result.reachable = false;
+  }
 
   // The plane of the elbow: the pole's direction across d; fall back to the current elbow's,
   // then the current hand-to-elbow bend, then any direction across d.

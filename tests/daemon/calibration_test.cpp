@@ -184,7 +184,8 @@ TEST(DaemonConfigKeys, AutoCalibrateAndFilterParseValidateAndPrint) {
   DaemonConfig c;
   ASSERT_EQ(daemon::apply_config_json(json::parse(R"({"auto_calibrate": false, "filter": {"enabled": false,
       "min_cutoff_hz": 0.5, "beta_per_m_s": 10, "d_cutoff_hz": 2, "rot_min_cutoff_hz": 0.7, "rot_beta_per_rad_s": 3,
-      "head_correction_cutoff_hz": 2.5}})"),
+      "head_correction_cutoff_hz": 2.5, "anchor_cutoff_hz": 0.75, "hand_reach_slack_m": 0.03,
+      "arm_soft_zone_m": 0.02}})"),
                                         "c.json", c),
             "");
   EXPECT_FALSE(c.auto_calibrate);
@@ -195,6 +196,9 @@ TEST(DaemonConfigKeys, AutoCalibrateAndFilterParseValidateAndPrint) {
   EXPECT_DOUBLE_EQ(c.filter.rot_min_cutoff_hz, 0.7);
   EXPECT_DOUBLE_EQ(c.filter.rot_beta_per_rad_s, 3.0);
   EXPECT_DOUBLE_EQ(c.filter.head_correction_cutoff_hz, 2.5);
+  EXPECT_DOUBLE_EQ(c.filter.anchor_cutoff_hz, 0.75);
+  EXPECT_DOUBLE_EQ(c.filter.hand_reach_slack_m, 0.03);
+  EXPECT_DOUBLE_EQ(c.filter.arm_soft_zone_m, 0.02);
   EXPECT_EQ(daemon::validate_config(c), "");
   // Printed as read: --print-config's output loads back to the same values.
   DaemonConfig back;
@@ -222,6 +226,12 @@ TEST(DaemonConfigKeys, AutoCalibrateAndFilterParseValidateAndPrint) {
   EXPECT_NE(e.find("beta_per_m_s must be >= 0"), std::string::npos) << e;
   e = error(R"({"filter": {"head_correction_cutoff_hz": -4}})");
   EXPECT_NE(e.find("filter head_correction_cutoff_hz must be > 0, not -4"), std::string::npos) << e;
+  e = error(R"({"filter": {"anchor_cutoff_hz": -0.5}})");
+  EXPECT_NE(e.find("filter anchor_cutoff_hz must be >= 0, not -0.5"), std::string::npos) << e;
+  e = error(R"({"filter": {"hand_reach_slack_m": -1}})");
+  EXPECT_NE(e.find("filter hand_reach_slack_m must be >= 0, not -1"), std::string::npos) << e;
+  e = error(R"({"filter": {"arm_soft_zone_m": -0.01}})");
+  EXPECT_NE(e.find("filter arm_soft_zone_m must be >= 0, not -0.01"), std::string::npos) << e;
 
   // The flags.
   DaemonConfig f;

@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
 using namespace bodyd;
 
@@ -174,4 +175,49 @@ TEST(BodySolver, ASmoothPathThroughFullReachGivesASmoothArmWithoutFlips) {
     last_hand = t.hand_m[1];
   }
   EXPECT_LT(worst_ratio, 10.0);  // an elbow flip moves the elbow ~20 cm for a sub-cm hand step
+}
+
+// The reach slack (TrackedTargets::hand_slack_m, a noisy hand's): a hand 1.5 cm beyond the arm's
+// reach moves nothing with 2 cm of slack (the arm stretches, the hand falls 1.5 cm short); with
+// 1 cm of slack the body brings the shoulder to within the slack; a hand 9 cm out is chased
+// either way; a slack that is not finite or negative counts as none.
+TEST(BodySolver, ReachSlackLeavesTheBodyAloneForAHandJustOutOfReach) {
+  const Pose start = walk().frames[30];
+  const GlobalPose g0 = forward_kinematics(sk(), start);
+  const Vec3 shoulder = pos(g0, "UpperArm_R");
+  const Vec3 out = (pos(g0, "UpperArm_R") - pos(g0, "UpperArm_L")).normalized();
+  const Vec3 dir = (out + Vec3(0, 0.3, 0) + 0.5 * (out.cross(Vec3::UnitY()))).normalized();
+  const auto solve = [&](double beyond_m, double slack_m, GlobalPose& g) {
+    Pose pose = start;
+    g = g0;
+    TrackedTargets t;
+    t.head_valid = true;
+    t.head_m = t.head_body_m = pos(g0, "Head");
+    t.head_rotation = g0.rotations[static_cast<size_t>(J("Head"))];
+    t.hand_valid = {false, true};
+    t.hand_m[1] = shoulder + (arm_length(1) + beyond_m) * dir;
+    t.hand_slack_m[1] = slack_m;
+    solve_all(t, pose, g);
+    return t.hand_m[1];
+  };
+  GlobalPose g;
+  Vec3 hand = solve(0.015, 0.02, g);
+  EXPECT_LT((pos(g, "UpperArm_R") - shoulder).norm(), 1e-9);  // the body did not move
+  EXPECT_NEAR((pos(g, "Hand_R") - hand).norm(), 0.015, 1e-6);
+
+  hand = solve(0.015, 0.01, g);
+  EXPECT_GT((pos(g, "UpperArm_R") - shoulder).dot(dir), 0.003);
+  EXPECT_LT((pos(g, "Hand_R") - hand).norm(), 0.0101);
+
+  hand = solve(0.09, 0.02, g);
+  EXPECT_GT((pos(g, "UpperArm_R") - shoulder).dot(dir), 0.06);
+  EXPECT_LT((pos(g, "Hand_R") - hand).norm(), 0.0201);
+
+  for (const double bad : {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(), -0.5}) {
+    GlobalPose none;
+    const Vec3 h = solve(0.015, bad, g);
+    (void)solve(0.015, 0.0, none);
+    EXPECT_LT((pos(g, "UpperArm_R") - pos(none, "UpperArm_R")).norm(), 1e-12) << bad;
+    EXPECT_LT((pos(g, "Hand_R") - h).norm(), 0.01) << bad;
+  }
 }

@@ -7,7 +7,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <random>
+#include <tuple>
 
 using namespace bodyd;
 
@@ -152,6 +154,66 @@ TEST(TwoBoneIk, UnreachableTargetsClampAlongTheDirection) {
     EXPECT_TRUE(std::isfinite(r.error_m));
     for (const Vec3& p : g.positions) EXPECT_TRUE(p.allFinite());
     EXPECT_NEAR((g.positions[l] - a).norm(), lab, 1e-9);
+  }
+}
+
+// The soft reach (TwoBoneTarget::soft_zone_m): targets short of the zone are hit exactly; inside
+// it the hand lands on the shoulder-to-target line at the reach of the exponential curve, and
+// the elbow moves far less for a millimetre of target motion near a straight arm than the hard
+// law of cosines makes it.
+TEST(TwoBoneIk, SoftReachSlowsTheElbowNearAStraightArm) {
+  const Arm arm = left_arm();
+  const Skeleton& sk = arm.motion.skeleton;
+  const TwoBoneChain& c = arm.chain;
+  const auto u = static_cast<size_t>(c.upper), l = static_cast<size_t>(c.lower), e = static_cast<size_t>(c.end);
+  const Pose start = arm.motion.frames[3];
+  const GlobalPose g0 = forward_kinematics(sk, start);
+  const Vec3 a = g0.positions[u];
+  const double full = (g0.positions[l] - a).norm() + (g0.positions[e] - g0.positions[l]).norm();
+  const Vec3 dir = Vec3(0.3, -0.9, 0.2).normalized();
+  const double zone = 0.03;
+
+  // Solves for a target at distance `dist` along dir; returns the elbow and hand.
+  const auto solve = [&](double dist, double soft) {
+    Pose pose = start;
+    GlobalPose g = g0;
+    TwoBoneTarget t;
+    t.position_m = a + dist * dir;
+    t.soft_zone_m = soft;
+    const TwoBoneResult r = solve_two_bone_ik(sk, c, t, pose, g);
+    return std::tuple{g.positions[l], g.positions[e], r};
+  };
+
+  // Before the zone: exact, as without it.
+  const auto [elbow_in, hand_in, r_in] = solve(full - 2.0 * zone, zone);
+  EXPECT_TRUE(r_in.reachable);
+  EXPECT_LT((hand_in - (a + (full - 2.0 * zone) * dir)).norm(), 1e-9);
+  EXPECT_LT((elbow_in - std::get<0>(solve(full - 2.0 * zone, 0.0))).norm(), 1e-9);
+
+  // In the zone and beyond full reach: on the line, at full - z exp(-(d - full + z) / z).
+  for (const double dist : {full - 0.5 * zone, full, full + 0.05}) {
+    const auto [elbow, hand, r] = solve(dist, zone);
+    const double reach = full - zone * std::exp(-(dist - full + zone) / zone);
+    EXPECT_FALSE(r.reachable);
+    EXPECT_LT((hand - (a + reach * dir)).norm(), 1e-9) << dist;
+    EXPECT_NEAR(r.error_m, dist - reach, 1e-9) << dist;
+    EXPECT_NEAR((elbow - a).norm(), (g0.positions[l] - a).norm(), 1e-9);  // bones kept
+  }
+  // At full reach the hand falls short by z / e.
+  EXPECT_NEAR(std::get<2>(solve(full, zone)).error_m, zone / std::exp(1.0), 1e-9);
+
+  // The elbow's motion for 1 mm of target motion 3 mm short of full reach.
+  const double d = full - 0.003;
+  const double hard = (std::get<0>(solve(d + 0.001, 0.0)) - std::get<0>(solve(d, 0.0))).norm();
+  const double soft = (std::get<0>(solve(d + 0.001, zone)) - std::get<0>(solve(d, zone))).norm();
+  EXPECT_GT(hard, 0.004);  // the hard law of cosines: over 4 mm
+  EXPECT_LT(soft, 0.4 * hard);
+
+  // A zone wider than the arm's range of reach, or not finite, stays finite.
+  for (const double bad : {10.0, std::numeric_limits<double>::infinity(), std::numeric_limits<double>::quiet_NaN(),
+                           -1.0}) {
+    const auto [elbow, hand, r] = solve(full - 0.01, bad);
+    EXPECT_TRUE(elbow.allFinite() && hand.allFinite() && std::isfinite(r.error_m)) << bad;
   }
 }
 

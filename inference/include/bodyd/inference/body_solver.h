@@ -57,6 +57,10 @@ struct TrackedTargets {
   Quat head_rotation = Quat::Identity();
   std::array<bool, 2> hand_valid{};  // left, right
   std::array<Vec3, 2> hand_m{Vec3::Zero(), Vec3::Zero()};
+  // How far (metres, >= 0) each hand may be beyond the arm's reach before the body chases it:
+  // 0 for a clean tracker; a noisy one's slack keeps its noise from pulling the body near full
+  // reach (OneEuroOptions::hand_reach_slack_m).
+  std::array<double, 2> hand_slack_m{};
 };
 
 struct BodySolverResult {

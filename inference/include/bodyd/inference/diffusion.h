@@ -21,6 +21,7 @@
 #include "bodyd/inference/one_euro.h"
 #include "bodyd/inference/two_bone_ik.h"
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -106,6 +107,8 @@ class DiffusionReconstructor final : public Reconstructor {
   };
   // reconstruct()'s stages, in order (diffusion.cpp). False: no valid head sample yet.
   bool head_now(std::int64_t t_ns, HeadNow& head) const;
+  // The window's canonical frame: the head's, or on a noisy head the smoothed anchor's.
+  features::Canonical anchor(std::int64_t t_ns, const HeadNow& head);
   // The window's observations and mask (obs_, mask_), normalised; the trackers at its newest frame.
   void build_window(std::int64_t t_ns, const HeadNow& head, const features::Canonical& canon, TrackersNow& trackers);
   // Samples the window and decodes its newest frame into scratch_pose_ / out_global_; the feet's
@@ -150,6 +153,8 @@ class DiffusionReconstructor final : public Reconstructor {
   // The head correction (one_euro.h, OneEuroOptions::head_correction_cutoff_hz): the filtered
   // head tracker minus the network's head, low-passed (position only; no noise gate of its own).
   OneEuroFilter head_correction_;
+  // The smoothed anchor (OneEuroOptions::anchor_cutoff_hz): the head low-passed for the window's frame.
+  OneEuroFilter anchor_filter_;
   std::optional<UpperBody> upper_body_;
   std::optional<TwoBoneChain> arms_[2];
   std::optional<TwoBoneChain> legs_[2];

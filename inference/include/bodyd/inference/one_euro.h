@@ -69,6 +69,28 @@ struct OneEuroOptions {
   // by the head filter's noise-gate gain: a clean head stays exactly on its tracker. Chosen on the
   // style-held-out clips (docs/models.md, "Tracker noise on unseen styles").
   double head_correction_cutoff_hz = 4.0;
+  // Soft reach of the arms on a noisy hand tracker (metres, >= 0; 0: off): near a straight arm the
+  // two-bone IK turns millimetres of hand noise into centimetres of elbow motion, so within this
+  // distance of full reach the arm's reach approaches full length smoothly (two_bone_ik.h,
+  // TwoBoneTarget::soft_zone_m), the zone scaled by the hand filter's noise-gate gain: a clean
+  // hand is reached exactly.
+  double arm_soft_zone_m = 0.01;
+  // Smoothed anchor on a noisy head tracker (Hz, >= 0; 0: off). Each window is expressed in the
+  // frame of its newest head (docs/model.md, "Canonical frame"), so a noisy head moves that frame
+  // and the whole body with it. With this cutoff the frame's origin and heading come from the
+  // head low-passed at it (a One Euro filter like the head correction's), weighted by the head
+  // filter's noise-gate gain: with a clean head the frame is the head's own, as in training.
+  double anchor_cutoff_hz = 0.5;
+  // Reach slack on a noisy hand tracker (metres, >= 0; 0: off). The body is moved so that each
+  // shoulder stays within reach of its hand (body_solver.h, TrackedTargets::hand_slack_m); a noisy
+  // hand near full reach crossed that limit frame by frame and pulled the whole body with its
+  // noise. With slack the body chases only a hand further than this beyond full reach; within
+  // it the arm stretches as far as it goes (arm_soft_zone_m) and the hand falls short of its
+  // tracker by at most the slack. Scaled by the hand filter's noise-gate gain: a clean hand is
+  // reached exactly as before.
+  double hand_reach_slack_m = 0.06;
+  // anchor_cutoff_hz, hand_reach_slack_m and arm_soft_zone_m were chosen together on the
+  // style-held-out clips (docs/models.md, "The smoothed anchor, the reach slack and the soft arms").
 };
 inline constexpr int kMaxNoiseWindow = 256;
 inline constexpr int kNoiseOrder = 6;  // the order of the differences the noise is measured by

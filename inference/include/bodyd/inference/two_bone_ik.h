@@ -45,6 +45,13 @@ struct TwoBoneTarget {
   // the current pose has it (e.g. a reference pose's), instead of carrying the upper arm's twist
   // along. Falls back to the smallest rotations when the current chain is straight (bend < 1 deg).
   bool keep_hinge = false;
+  // Soft reach (metres, >= 0; 0: off). The law of cosines makes the elbow swing fast near a
+  // straight arm: a millimetre of target motion there moves it by centimetres, so a noisy target
+  // shakes the elbow. Within soft_zone_m of full reach the chain's reach follows the target's
+  // distance d on an exponential, full - z + z (1 - exp(-(d - full + z) / z)), which has slope 1
+  // where the zone starts and never reaches full length: the elbow's motion stays bounded, and the
+  // end joint falls short of the target by up to 0.37 z at full reach (more beyond it).
+  double soft_zone_m = 0.0;
 };
 
 struct TwoBoneResult {
