@@ -326,6 +326,56 @@ std::vector<GlobalPose> globals(const Outputs& run) {
   return out;
 }
 
+// The mean third difference of joint j from 0.5 s on (m/s^3 at the clip's rate).
+double joint_jitter(const Outputs& run, size_t j, double fps) {
+  double sum = 0;
+  int n = 0;
+  for (size_t f = 18; f < run.poses.size(); ++f) {
+    const auto p = [&](size_t k) { return run.poses[k].global.positions[j]; };
+    sum += (p(f) - 3.0 * p(f - 1) + 3.0 * p(f - 2) - p(f - 3)).norm() * std::pow(fps, 3);
+    ++n;
+  }
+  return sum / n;
+}
+
+// walk_60 through two reconstructors of `model`, options `a` and `b`, its trackers at the clip's
+// rate, with 2 mm / 1 degree noise or clean; and the mean distance of `joints` to the truth.
+struct TwoRuns {
+  Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
+  Outputs a, b;
+  TwoRuns(const std::shared_ptr<const inference::Model>& model, bool noisy, const DiffusionOptions& oa,
+          const DiffusionOptions& ob) {
+    const auto times = frame_times(clip);
+    const auto samples = simulate_trackers(clip, sim_at_clip_rate(clip, noisy));
+    DiffusionReconstructor ra(model, oa), rb(model, ob);
+    a = feed_and_reconstruct(ra, samples, times);
+    b = feed_and_reconstruct(rb, samples, times);
+  }
+  [[nodiscard]] double error(const Outputs& run, std::initializer_list<int> joints) const {
+    double sum = 0;
+    for (size_t f = 0; f < run.poses.size(); ++f) {
+      const GlobalPose truth = forward_kinematics(clip.skeleton, clip.frames[f]);
+      for (const int j : joints)
+        sum += (run.poses[f].global.positions[static_cast<size_t>(j)] - truth.positions[static_cast<size_t>(j)]).norm();
+    }
+    return sum / static_cast<double>(run.poses.size() * joints.size());
+  }
+  [[nodiscard]] double jitter(const Outputs& run, std::initializer_list<const char*> joints) const {
+    double sum = 0;
+    for (const char* name : joints) sum += joint_jitter(run, static_cast<size_t>(clip.skeleton.find(name)), clip.fps());
+    return sum / static_cast<double>(joints.size());
+  }
+};
+
+// The three noisy-tracker measures off (the behaviour before them).
+DiffusionOptions without_noise_measures() {
+  DiffusionOptions o;
+  o.filter.anchor_cutoff_hz = 0.0;
+  o.filter.hand_reach_slack_m = 0.0;
+  o.filter.arm_soft_zone_m = 0.0;
+  return o;
+}
+
 }  // namespace
 
 // Issue 10 item 3: on clean trackers (no noise) the Head joint is on the head tracker within
@@ -398,17 +448,7 @@ TEST_F(DefaultModel, ANoisyHeadTrackerDoesNotShakeTheHips) {
   DiffusionReconstructor a(model_, corrected), b(model_, unfiltered);
   const Outputs ra = feed_and_reconstruct(a, noisy, times), rb = feed_and_reconstruct(b, noisy, times);
   const auto hips = static_cast<size_t>(features::kHips), head = static_cast<size_t>(features::kHead);
-  const auto joint_jitter = [&](const Outputs& run, size_t j) {
-    double sum = 0;
-    int n = 0;
-    for (size_t f = 18; f < run.poses.size(); ++f) {  // from 0.5 s on, as above
-      const auto p = [&](size_t k) { return run.poses[k].global.positions[j]; };
-      sum += (p(f) - 3.0 * p(f - 1) + 3.0 * p(f - 2) - p(f - 3)).norm() * std::pow(clip.fps(), 3);
-      ++n;
-    }
-    return sum / n;
-  };
-  const double with = joint_jitter(ra, hips), without = joint_jitter(rb, hips);
+  const double with = joint_jitter(ra, hips, clip.fps()), without = joint_jitter(rb, hips, clip.fps());
   EXPECT_LT(with, 0.92 * without) << "Hips jitter with the correction " << with << ", unfiltered " << without;
   double head_err = 0;
   for (size_t f = 0; f < times.size(); ++f)
@@ -417,93 +457,62 @@ TEST_F(DefaultModel, ANoisyHeadTrackerDoesNotShakeTheHips) {
   EXPECT_LT(head_err / static_cast<double>(times.size()), 0.01);
 }
 
-// The mean third difference of joint j from 0.5 s on (m/s^3 at the clip's rate).
-double joint_jitter(const Outputs& run, size_t j, double fps) {
-  double sum = 0;
-  int n = 0;
-  for (size_t f = 18; f < run.poses.size(); ++f) {
-    const auto p = [&](size_t k) { return run.poses[k].global.positions[j]; };
-    sum += (p(f) - 3.0 * p(f - 1) + 3.0 * p(f - 2) - p(f - 3)).norm() * std::pow(fps, 3);
-    ++n;
-  }
-  return sum / n;
+// Issue 18 item 4: the smoothed anchor (OneEuroOptions::anchor_cutoff_hz), the reach slack
+// (hand_reach_slack_m) and the arms' soft reach (arm_soft_zone_m) act on noisy trackers only; on
+// clean ones every joint of every frame is what it is with all three off.
+TEST_F(DefaultModel, TheNoisyTrackerMeasuresLeaveCleanTrackersAsTheyWere) {
+  DiffusionOptions strong;
+  strong.filter.anchor_cutoff_hz = 1.0;
+  strong.filter.hand_reach_slack_m = 0.2;
+  strong.filter.arm_soft_zone_m = 0.05;
+  const TwoRuns runs(model_, false, without_noise_measures(), strong);
+  ASSERT_EQ(runs.a.poses.size(), runs.b.poses.size());
+  for (size_t f = 0; f < runs.a.poses.size(); ++f)
+    for (size_t j = 0; j < runs.a.poses[f].global.positions.size(); ++j)
+      ASSERT_EQ(runs.a.poses[f].global.positions[j], runs.b.poses[f].global.positions[j]) << "frame " << f << " joint " << j;
 }
 
-// Issue 18 item 4: the smoothed anchor (OneEuroOptions::anchor_cutoff_hz) and the arms' soft
-// reach (arm_soft_zone_m) act on noisy trackers only; on clean ones every joint of every frame is
-// what it is with both off.
-TEST_F(DefaultModel, TheSmoothedAnchorAndSoftArmsLeaveCleanTrackersAsTheyWere) {
-  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
-  const auto times = frame_times(clip);
-  const auto clean = simulate_trackers(clip, sim_at_clip_rate(clip, false));
-  DiffusionOptions off, on;
-  off.filter.anchor_cutoff_hz = 0.0;
-  off.filter.arm_soft_zone_m = 0.0;
-  on.filter.anchor_cutoff_hz = 1.0;
-  on.filter.arm_soft_zone_m = 0.05;
-  DiffusionReconstructor a(model_, off), b(model_, on);
-  const Outputs ra = feed_and_reconstruct(a, clean, times), rb = feed_and_reconstruct(b, clean, times);
-  ASSERT_EQ(ra.poses.size(), rb.poses.size());
-  for (size_t f = 0; f < ra.poses.size(); ++f)
-    for (size_t j = 0; j < ra.poses[f].global.positions.size(); ++j)
-      ASSERT_EQ(ra.poses[f].global.positions[j], rb.poses[f].global.positions[j]) << "frame " << f << " joint " << j;
+// Issue 18 item 4: with the defaults a noisy body shakes less than with the three measures off,
+// joint for joint over the whole body (the held-out styles: 2.32x the truth's jitter -> 1.84x,
+// docs/models.md), while the Head stays within a centimetre of the truth and the hands within
+// 1.5 cm more than before (the slack lets a hand at full reach fall short).
+TEST_F(DefaultModel, TheNoisyTrackerMeasuresCalmTheWholeBody) {
+  const TwoRuns runs(model_, true, without_noise_measures(), DiffusionOptions{});
+  const std::initializer_list<const char*> body = {"Hips", "Spine", "Chest", "Neck", "Head", "UpperArm_L", "UpperArm_R",
+                                                   "LowerArm_L", "LowerArm_R", "UpperLeg_L", "UpperLeg_R"};
+  const double before = runs.jitter(runs.a, body), after = runs.jitter(runs.b, body);
+  EXPECT_LT(after, 0.92 * before) << "body jitter with the defaults " << after << ", with the measures off " << before;
+  EXPECT_LT(runs.error(runs.b, {features::kHead}), 0.01);
+  EXPECT_LT(runs.error(runs.b, {features::kHandL, features::kHandR}),
+            runs.error(runs.a, {features::kHandL, features::kHandR}) + 0.015);
 }
 
 // Issue 18 item 4: each window is expressed in the frame of its newest head, so a noisy head
 // tracker moved that frame, and the whole body with it, frame by frame. With the smoothed anchor
-// the body's trunk shakes less, and the Head still follows its tracker within a centimetre.
+// (the other two measures at their defaults in both runs) the trunk shakes less.
 TEST_F(DefaultModel, TheSmoothedAnchorKeepsANoisyHeadFromShakingTheTrunk) {
-  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
-  const auto times = frame_times(clip);
-  const auto noisy = simulate_trackers(clip, sim_at_clip_rate(clip, true));
-  DiffusionOptions off, on;
+  DiffusionOptions off;
   off.filter.anchor_cutoff_hz = 0.0;
-  on.filter.anchor_cutoff_hz = 1.0;
-  DiffusionReconstructor a(model_, off), b(model_, on);
-  const Outputs ra = feed_and_reconstruct(a, noisy, times), rb = feed_and_reconstruct(b, noisy, times);
+  const TwoRuns runs(model_, true, off, DiffusionOptions{});
   for (const char* name : {"Hips", "Spine", "Chest"}) {
-    const auto j = static_cast<size_t>(clip.skeleton.find(name));
-    const double without = joint_jitter(ra, j, clip.fps()), with = joint_jitter(rb, j, clip.fps());
+    const double without = runs.jitter(runs.a, {name}), with = runs.jitter(runs.b, {name});
     EXPECT_LT(with, 0.95 * without) << name << ": with the anchor " << with << ", without " << without;
   }
-  const auto head = static_cast<size_t>(features::kHead);
-  double head_err = 0;
-  for (size_t f = 0; f < times.size(); ++f)
-    head_err += (rb.poses[f].global.positions[head] - forward_kinematics(clip.skeleton, clip.frames[f]).positions[head]).norm();
-  EXPECT_LT(head_err / static_cast<double>(times.size()), 0.01);
 }
 
 // Issue 18 item 4: near a straight arm two-bone IK turns a noisy hand's millimetres into
-// centimetres at the elbow; the soft reach (arm_soft_zone_m) calms the elbows, and the hands stay
-// about as close to their true places.
+// centimetres at the elbow; the soft reach (arm_soft_zone_m) calms the elbows, and the hands'
+// mean error (the noise and the filter's lag in both runs) grows by under 2 mm.
 TEST_F(DefaultModel, SoftArmsKeepANoisyHandFromShakingTheElbow) {
-  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
-  const auto times = frame_times(clip);
-  const auto noisy = simulate_trackers(clip, sim_at_clip_rate(clip, true));
   DiffusionOptions off, on;
   off.filter.arm_soft_zone_m = 0.0;
   on.filter.arm_soft_zone_m = 0.02;
-  DiffusionReconstructor a(model_, off), b(model_, on);
-  const Outputs ra = feed_and_reconstruct(a, noisy, times), rb = feed_and_reconstruct(b, noisy, times);
-  double without = 0, with = 0, hand_err = 0;
-  for (const char* name : {"LowerArm_L", "LowerArm_R"}) {
-    const auto j = static_cast<size_t>(clip.skeleton.find(name));
-    without += joint_jitter(ra, j, clip.fps());
-    with += joint_jitter(rb, j, clip.fps());
-  }
+  const TwoRuns runs(model_, true, off, on);
+  const double without = runs.jitter(runs.a, {"LowerArm_L", "LowerArm_R"}),
+               with = runs.jitter(runs.b, {"LowerArm_L", "LowerArm_R"});
   EXPECT_LT(with, 0.95 * without) << "elbow jitter with the soft reach " << with << ", without " << without;
-  // The hands' mean error (the noise and the filter's lag in both runs) grows by under 2 mm.
-  double hand_err_without = 0;
-  for (size_t f = 0; f < times.size(); ++f) {
-    const GlobalPose truth = forward_kinematics(clip.skeleton, clip.frames[f]);
-    for (const int j : {features::kHandL, features::kHandR}) {
-      const auto k = static_cast<size_t>(j);
-      hand_err += (rb.poses[f].global.positions[k] - truth.positions[k]).norm();
-      hand_err_without += (ra.poses[f].global.positions[k] - truth.positions[k]).norm();
-    }
-  }
-  const double n = static_cast<double>(2 * times.size());
-  EXPECT_LT(hand_err / n, hand_err_without / n + 0.002) << "without the soft reach " << hand_err_without / n;
+  EXPECT_LT(runs.error(runs.b, {features::kHandL, features::kHandR}),
+            runs.error(runs.a, {features::kHandL, features::kHandR}) + 0.002);
 }
 
 // Issue 10 item 4: a hand back from a gap moves to its tracker without a jump: on every frame
