@@ -14,20 +14,10 @@
 namespace bodyd {
 
 namespace {
-// The head correction's low-pass (OneEuroOptions::head_correction_cutoff_hz): the One Euro
-// filter at that cutoff with a little speed adaptation, no noise gate of its own (the head
-// tracker filter's gain decides how much of it applies).
-OneEuroOptions head_correction_options(const OneEuroOptions& filter) {
-  OneEuroOptions o;
-  o.min_cutoff_hz = filter.head_correction_cutoff_hz;
-  o.beta_per_m_s = 1.0;
-  o.noise_gate = false;
-  return o;
-}
-
-// The smoothed anchor's filter (OneEuroOptions::anchor_cutoff_hz), like the head correction's:
-// position and rotation at `cutoff_hz`, a little speed adaptation, no noise gate of its own. An
-// unused one (cutoff 0) gets 1 Hz.
+// The low-pass of the head correction (OneEuroOptions::head_correction_cutoff_hz, position only)
+// and of the smoothed anchor (anchor_cutoff_hz): a One Euro filter with position and rotation at
+// `cutoff_hz`, a little speed adaptation and no noise gate of its own (the tracker filter's gain
+// decides how much of it applies). An unused one (cutoff 0) gets 1 Hz.
 OneEuroOptions smoothing_options(double cutoff_hz) {
   OneEuroOptions o;
   o.min_cutoff_hz = o.rot_min_cutoff_hz = cutoff_hz > 0.0 ? cutoff_hz : 1.0;
@@ -77,7 +67,7 @@ DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::
       user_skeleton_(model_->skeleton),
       history_(model_scale_history(options.history)),
       filter_(options.filter),
-      head_correction_(head_correction_options(options.filter)),
+      head_correction_(smoothing_options(options.filter.head_correction_cutoff_hz)),
       anchor_filter_(smoothing_options(options.filter.anchor_cutoff_hz)) {
   if (std::string err = validate(options.filter); !err.empty()) throw std::invalid_argument(err);
   if (std::string err = validate(options.body_filter); !err.empty()) throw std::invalid_argument(err);
