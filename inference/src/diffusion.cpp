@@ -164,7 +164,9 @@ void DiffusionReconstructor::set_head_height_m(double height_m) {
     }
 }
 
-bool DiffusionReconstructor::emitted_at(std::int64_t t_ns, GlobalPose& out, std::array<bool, 2>& contact) const {
+bool DiffusionReconstructor::emitted_at(std::int64_t t_ns, GlobalPose& out, std::array<bool, 2>& contact,
+                                        const Emitted** exact) const {
+  if (exact != nullptr) *exact = nullptr;
   if (emitted_count_ == 0) return false;
   constexpr std::int64_t kTolNs = 1'000'000;  // 1 ms: treat as the same frame
   const Emitted& oldest = emitted(0);
@@ -174,11 +176,15 @@ bool DiffusionReconstructor::emitted_at(std::int64_t t_ns, GlobalPose& out, std:
     // Before the first emitted frame: pad with it, as the training windows pad a clip's start with
     // its first frame. Once older frames have been dropped from the ring, there is no padding.
     if (emitted_dropped_) return false;
+    contact = oldest.contact;
+    if (exact != nullptr) {
+      *exact = &oldest;
+      return true;
+    }
     for (size_t j = 0; j < out.positions.size(); ++j) {
       out.positions[j] = oldest.global.positions[j];
       out.rotations[j] = oldest.global.rotations[j];
     }
-    contact = oldest.contact;
     return true;
   }
   // Last emitted frame at or before t_ns (binary search over the ring, times increase).
@@ -188,11 +194,15 @@ bool DiffusionReconstructor::emitted_at(std::int64_t t_ns, GlobalPose& out, std:
     if (emitted(mid).t_ns <= t_ns) lo = mid; else hi = mid - 1;
   }
   auto copy = [&](const Emitted& e) {
+    contact = e.contact;
+    if (exact != nullptr) {
+      *exact = &e;
+      return true;
+    }
     for (size_t j = 0; j < out.positions.size(); ++j) {
       out.positions[j] = e.global.positions[j];
       out.rotations[j] = e.global.rotations[j];
     }
-    contact = e.contact;
     return true;
   };
   const Emitted& a = emitted(lo);
@@ -353,8 +363,14 @@ void DiffusionReconstructor::build_window(std::int64_t t_ns, const HeadNow& head
     features::Frame frame(obs_.data() + static_cast<size_t>(w) * features::kDim, features::kDim);
     float* m = mask_.data() + static_cast<size_t>(w) * features::kDim;
     std::array<bool, 2> contact{};
-    if (w < W_ - 1 && emitted_at(tw, scratch_global_, contact)) {
-      features::encode_pose(scratch_global_, contact, canon, frame);
+    const Emitted* exact = nullptr;
+    if (w < W_ - 1 && emitted_at(tw, scratch_global_, contact, &exact)) {
+      // An emitted frame's world entries were kept when it was emitted: only this window's
+      // rotation is applied (a 64-frame window spent a third of its frame encoding poses).
+      if (exact != nullptr)
+        features::encode_world_entries(exact->world, contact, canon, frame);
+      else
+        features::encode_pose(scratch_global_, contact, canon, frame);
       std::fill(m, m + features::kDim, 1.0f);
     }
     for (Role role : kRoles) {
@@ -545,6 +561,7 @@ void DiffusionReconstructor::remember_emitted(std::int64_t t_ns, const std::arra
     e.global.positions[j] = out_global_.positions[j];
     e.global.rotations[j] = out_global_.rotations[j];
   }
+  features::world_entries(e.global, e.world);
   e.contact = contact;
 }
 

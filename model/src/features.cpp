@@ -64,6 +64,34 @@ void encode_pose(const GlobalPose& g, const std::array<bool, 2>& contact, const 
   out[kContactOffset + 1] = contact[1] ? 1.0f : 0.0f;
 }
 
+void world_entries(const GlobalPose& g, WorldEntries& out) {
+  for (int j = 1; j <= kBodyJoints; ++j) {
+    const auto i = static_cast<size_t>(j - 1) * 3;
+    const Mat3 R = g.rotations[static_cast<size_t>(j)].normalized().toRotationMatrix();
+    out.v[i] = g.positions[static_cast<size_t>(j)];
+    out.v[i + 1] = R.col(0);
+    out.v[i + 2] = R.col(1);
+  }
+}
+
+void encode_world_entries(const WorldEntries& w, const std::array<bool, 2>& contact, const Canonical& c, Frame out) {
+  // encode_joint's R_canon_world * (p - origin) and rot6d(R_canon_world * q), the latter as the
+  // rotated columns of q's matrix.
+  const Mat3 M = c.R_canon_world.toRotationMatrix();
+  for (int j = 1; j <= kBodyJoints; ++j) {
+    const auto i = static_cast<size_t>(j - 1) * 3;
+    float* o = out.data() + joint_offset(j);
+    const Vec3 p = M * (w.v[i] - c.origin_m), c0 = M * w.v[i + 1], c1 = M * w.v[i + 2];
+    for (int k = 0; k < 3; ++k) {
+      o[k] = static_cast<float>(p[k]);
+      o[3 + k] = static_cast<float>(c0[k]);
+      o[6 + k] = static_cast<float>(c1[k]);
+    }
+  }
+  out[kContactOffset] = contact[0] ? 1.0f : 0.0f;
+  out[kContactOffset + 1] = contact[1] ? 1.0f : 0.0f;
+}
+
 void decode_joint(int j, ConstFrame in, const Canonical& c, Vec3& out_p, Quat& out_q) {
   const float* o = in.data() + joint_offset(j);
   Vec6 r;

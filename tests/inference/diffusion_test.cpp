@@ -619,3 +619,33 @@ TEST(Diffusion, ABadSampleMidStreamNeverPoisonsLaterPoses) {
     }
   EXPECT_GE(compared, 1000);
 }
+
+// The online loop keeps each emitted frame's world entries and rotates them into every later
+// window's canonical frame (features::encode_world_entries) instead of encoding the pose again:
+// the same features as encode_pose, for every frame of a walk in the frames of heads that face
+// elsewhere and stand elsewhere, contacts included.
+TEST(Features, WorldEntriesGiveWhatEncodePoseGives) {
+  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
+  const auto head = static_cast<size_t>(features::kHead);
+  std::vector<float> a(features::kDim), b(features::kDim);
+  features::WorldEntries world;
+  int compared = 0;
+  for (size_t f = 0; f < clip.frames.size(); f += 7) {
+    const GlobalPose g = forward_kinematics(clip.skeleton, clip.frames[f]);
+    features::world_entries(g, world);
+    for (size_t h = 0; h < clip.frames.size(); h += 13) {
+      const GlobalPose gh = forward_kinematics(clip.skeleton, clip.frames[h]);
+      for (double turn : {0.0, 2.0, -2.9}) {
+        const Quat q = Quat(Eigen::AngleAxisd(turn, Vec3::UnitY())) * gh.rotations[head];
+        const features::Canonical c = features::canonical_from_head(gh.positions[head] + Vec3(0.4 * turn, 0, -1), q);
+        const std::array<bool, 2> contact{f % 2 == 0, f % 3 == 0};
+        features::encode_pose(g, contact, c, features::Frame(a.data(), a.size()));
+        features::encode_world_entries(world, contact, c, features::Frame(b.data(), b.size()));
+        for (int k = 0; k < features::kDim; ++k)
+          ASSERT_NEAR(a[static_cast<size_t>(k)], b[static_cast<size_t>(k)], 1e-6) << "frame " << f << " entry " << k;
+        ++compared;
+      }
+    }
+  }
+  EXPECT_GT(compared, 20);
+}

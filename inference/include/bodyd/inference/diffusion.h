@@ -84,6 +84,7 @@ class DiffusionReconstructor final : public Reconstructor {
   struct Emitted {
     std::int64_t t_ns = 0;
     GlobalPose global;  // model scale, world
+    features::WorldEntries world;  // of `global`: what each later window rotates into its frame
     std::array<bool, 2> contact{};
   };
   // The head at the requested time (model scale): its tracker, or where the last valid head
@@ -130,7 +131,11 @@ class DiffusionReconstructor final : public Reconstructor {
                        const std::array<bool, kRoleCount>& tracker_valid, BodyPose& out) const;
 
   // The emitted pose at t_ns (interpolated between emitted frames), or false if not covered.
-  bool emitted_at(std::int64_t t_ns, GlobalPose& out, std::array<bool, 2>& contact) const;
+  // With `exact` given: where t_ns is one emitted frame (or the padding before the first), *exact
+  // points to it and `out` is not written; between two emitted frames `out` holds the
+  // interpolation and *exact is null.
+  bool emitted_at(std::int64_t t_ns, GlobalPose& out, std::array<bool, 2>& contact,
+                  const Emitted** exact = nullptr) const;
   // The tracker pose of `role` at t_ns in model scale; pads with the first sample before it.
   bool tracker_at(Role role, std::int64_t t_ns, std::int64_t now_ns, Vec3& p, Quat& q) const;
   const Emitted& emitted(int i) const {

@@ -70,6 +70,17 @@ struct Canonical {
 void encode_joint(int skeleton_joint, const Vec3& position_m, const Quat& rotation, const Canonical& c, Frame out);
 // Encodes a whole frame from world-space global joint transforms (skeleton of kJointNames).
 void encode_pose(const GlobalPose& global, const std::array<bool, 2>& contact, const Canonical& c, Frame out);
+// One frame's joint entries before the canonical transform: for each body joint its world
+// position and the first two columns of its world rotation. A window's past frames stay the same
+// from one frame to the next while its canonical frame moves, so the online loop keeps these for
+// every frame it emits and turns them into each new window's frame (encode_world_entries) instead
+// of encoding the whole pose again: a rotation of three vectors per joint.
+struct WorldEntries {
+  std::array<Vec3, static_cast<size_t>(kBodyJoints) * 3> v;  // joint j (1..21): p, R.col(0), R.col(1)
+};
+void world_entries(const GlobalPose& global, WorldEntries& out);
+// encode_pose of the pose whose world entries these are (equal to it up to rounding).
+void encode_world_entries(const WorldEntries& world, const std::array<bool, 2>& contact, const Canonical& c, Frame out);
 // Reads one joint's position and rotation (world) back.
 void decode_joint(int skeleton_joint, ConstFrame in, const Canonical& c, Vec3& out_position_m, Quat& out_rotation);
 // Decodes a frame into a local pose on `skeleton`: joint rotations from the 6D global rotations,

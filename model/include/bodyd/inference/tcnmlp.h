@@ -101,6 +101,7 @@ class TcnMlp final : public detail::EigenDenoiser<TcnMlpConfig, TcnMlp, TcnMlpSc
   using LayerNorm = detail::LayerNorm;
 
   detail::SplitLinear cenc_;  // cenc.weight's columns for m_w * x_w and for m_w
+  Eigen::VectorXf cenc_ones_;  // cenc's m_w columns summed, plus its bias: its pre-activation part for a whole-observed frame
   detail::CausalStack cstack_;  // cblocks.*
   LayerNorm cnorm_;
   Linear cdec1_, cdec2_;
