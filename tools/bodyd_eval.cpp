@@ -130,7 +130,7 @@ int main(int argc, char** argv) {
                  "diffusion: a planted foot stays planted while its predicted contact exceeds this (default 0.4)")
       ->check(finite)->check(CLI::Range(0.0, 1.0));
   app.add_option("--foot-unlock-distance-m", method_options.foot_unlock_distance_m,
-                 "diffusion: a planted foot further than this from its prediction re-plants there, m (default 0.40)")
+                 "diffusion: a planted foot further than this from its prediction re-plants there, m (default 0.60)")
       ->check(finite)->check(CLI::NonNegativeNumber);
   app.add_option("--foot-release-half-life-s", method_options.foot_release_half_life_s,
                  "diffusion: a lifted foot eases from its planted spot to the prediction with this half-life, s "

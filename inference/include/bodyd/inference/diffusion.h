@@ -43,7 +43,8 @@ struct DiffusionOptions {
   float contact_on = 0.4f, contact_off = 0.4f;  // contact hysteresis on the predicted contact value
   bool foot_lock = true;       // planted feet (predicted contact) do not slide (the leg swings about the hip)
   double foot_contact_speed_m_s = 0.0;    // a planted toe follows the prediction at most this fast
-  double foot_unlock_distance_m = 0.40;   // a planted foot further than this from its prediction re-plants
+  double foot_unlock_distance_m = 0.60;   // a planted foot further than this from its prediction re-plants
+                                          // (0.40 until the tcnmlp-v1 model: docs/models.md, "The context model at scale")
   double foot_release_half_life_s = 0.15; // a lifted foot eases from its planted spot to the prediction
   int emitted_capacity = 512;  // emitted frames kept for feedback (>= W * output rate / model fps)
   TrackerHistoryOptions history;
