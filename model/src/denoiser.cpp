@@ -47,7 +47,15 @@ TensorShapes expected_tensors(const Architecture& arch, const ModelConfig& confi
   return v;
 }
 
-std::shared_ptr<const Denoiser> make_denoiser(const Model& model) {
+std::string_view weights_name(Weights weights) { return weights == Weights::bf16 ? "bf16" : "f32"; }
+
+std::optional<Weights> parse_weights(std::string_view name) {
+  if (name == "f32") return Weights::f32;
+  if (name == "bf16") return Weights::bf16;
+  return std::nullopt;
+}
+
+std::shared_ptr<const Denoiser> make_denoiser(const Model& model, Weights weights) {
   const auto it = model.metadata.find("architecture");
   const std::string name = it == model.metadata.end() ? std::string() : it->second;
   const Architecture* arch = find_architecture(name);
@@ -55,7 +63,7 @@ std::shared_ptr<const Denoiser> make_denoiser(const Model& model) {
     throw ModelFileError(fmt::format("model file '{}': architecture \"{}\" is unknown (this build runs: {})", model.source,
                                      name, architecture_names()));
   }
-  return arch->make(model);
+  return arch->make(model, weights);
 }
 
 void Denoiser::forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,

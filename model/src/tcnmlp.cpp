@@ -57,7 +57,8 @@ const TcnMlpConfig& checked(const TcnMlpConfig& c, const Model& model) {
 }
 }  // namespace
 
-TcnMlp::TcnMlp(const Model& model) : EigenDenoiser(model), id_(next_tcnmlp_id.fetch_add(1)) {
+TcnMlp::TcnMlp(const Model& model, Weights weights)
+    : EigenDenoiser(model), id_(next_tcnmlp_id.fetch_add(1)), weights_(weights) {
   const TcnMlpConfig& c = checked(config_, model);
   cenc_ = load_split_linear(model, "cenc", c.D);
   cenc_ones_ = (cenc_.v.cast<double>().rowwise().sum() + cenc_.bias.cast<double>()).cast<float>();
@@ -78,6 +79,13 @@ TcnMlp::TcnMlp(const Model& model) : EigenDenoiser(model), id_(next_tcnmlp_id.fe
   // The time MLP depends on t alone: evaluated once per step here, with inp.bias and ctx.bias folded in.
   const Eigen::VectorXf biases = inp.bias + ctx.bias;
   time_table_ = time_table(load_linear(model, "time1"), load_linear(model, "time2"), c.TE, c.T, &biases);
+  if (weights_ == Weights::bf16) {
+    const Eigen::Index past = static_cast<Eigen::Index>(c.N - 1) * c.E;
+    if (past > 0) inp_past_bf16_ = detail::Bf16Matrix(inp_.leftCols(past));
+    inp_newest_bf16_ = detail::Bf16Matrix(inp_.rightCols(c.E));
+    for (const detail::ResidualBlock& b : blocks_)
+      blocks_bf16_.push_back({detail::Bf16Matrix(b.fc1.weight), detail::Bf16Matrix(b.fc2.weight)});
+  }
 }
 
 TcnMlpScratch::TcnMlpScratch(const TcnMlp& network, int max_batch)
@@ -231,7 +239,11 @@ void TcnMlp::forward_newest(std::span<const float> x, std::span<const float> m, 
     if (past > 0) {
       split_linear_silu(enc_, X.middleCols(W - N, past), M.middleCols(W - N, past), s.e_past_);
       const Eigen::Map<const Eigen::VectorXf> e_cat(s.e_past_.data(), past * c.E);
-      s.h_past_.noalias() += inp_.leftCols(past * c.E) * e_cat;
+      if (weights_ == Weights::bf16) {
+        inp_past_bf16_.multiply(e_cat.data(), s.h_past_.data(), true);
+      } else {
+        s.h_past_.noalias() += inp_.leftCols(past * c.E) * e_cat;
+      }
     }
     s.owner_ = id_;
   }
@@ -242,8 +254,22 @@ void TcnMlp::forward_newest(std::span<const float> x, std::span<const float> m, 
   auto n = s.n_.col(0);
   auto a = s.a_.col(0);
   h = s.h_past_ + time_table_.col(t);
-  h.noalias() += inp_.rightCols(c.E) * e;
-  residual_blocks(blocks_, h, n, a);
+  if (weights_ == Weights::bf16) {
+    // residual_blocks' arithmetic with the bfloat16 copies (h, n, a: one contiguous column each).
+    inp_newest_bf16_.multiply(e.data(), h.data(), true);
+    for (std::size_t b = 0; b < blocks_.size(); ++b) {
+      const detail::ResidualBlock& blk = blocks_[b];
+      layer_norm(h, blk.norm.weight, blk.norm.bias, n);
+      blocks_bf16_[b][0].multiply(n.data(), a.data(), false);
+      a += blk.fc1.bias;
+      silu_inplace(a);
+      blocks_bf16_[b][1].multiply(a.data(), h.data(), true);
+      h += blk.fc2.bias;
+    }
+  } else {
+    h.noalias() += inp_.rightCols(c.E) * e;
+    residual_blocks(blocks_, h, n, a);
+  }
   layer_norm(h, out_norm_.weight, out_norm_.bias, n);
   silu_inplace(n);
   // Only the newest frame's rows of out.

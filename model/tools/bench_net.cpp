@@ -57,6 +57,11 @@ int main(int argc, char** argv) {
   app.add_option("--steps", steps, "DDIM steps K")->check(CLI::PositiveNumber);
   app.add_option("--guidance", guidance, "classifier-free guidance scale (1 = one pass per step)");
   app.add_option("--runs", runs, "timed runs (median reported)")->check(CLI::Range(1, 1000000));
+  std::string weights_text = "bf16";
+  app.add_option("--weights", weights_text,
+                 "the online pass's weights, f32 or bf16 (the reconstructor's default: bf16; docs/model.md, \"Weights in bf16\")")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"f32", "bf16"}));
   CLI11_PARSE(app, argc, argv);
 
   using namespace bodyd::inference;
@@ -70,7 +75,7 @@ int main(int argc, char** argv) {
   }
   std::shared_ptr<const Denoiser> net;
   try {
-    net = make_denoiser(*model);
+    net = make_denoiser(*model, *parse_weights(weights_text));
   } catch (const ModelFileError& e) {
     std::fprintf(stderr, "bodyd-bench-net: %s\n", e.what());
     return 1;
@@ -87,7 +92,8 @@ int main(int argc, char** argv) {
     m[i] = (i % dim) < 27 ? 1.0f : 0.0f;
   }
 
-  fmt::print("model {}: {} {}\n", model_path, net->architecture(), model->config.to_string());
+  fmt::print("model {}: {} {}, online weights {}\n", model_path, net->architecture(), model->config.to_string(),
+             weights_name(net->weights()));
   const auto scratch = net->make_scratch(2);
   const Stats fwd = time_runs(runs, [&] { net->forward(x, m, t_mid, out, *scratch); });
   fmt::print("forward (batch 1):       median {:8.1f} us  p90 {:8.1f} us  min {:8.1f} us  ({} runs)\n", fwd.median_us,

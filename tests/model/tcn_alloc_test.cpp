@@ -46,34 +46,37 @@ TEST(TcnAllocation, ForwardNewestFrameSampleAndStreamDoNotAllocate) {
   EXPECT_EQ(allocations.count(), 0);
 }
 
-TEST(TcnMlpAllocation, ForwardNewestFrameAndSampleDoNotAllocate) {
+TEST(TcnMlpAllocation, ForwardNewestFrameAndSampleDoNotAllocateWithEitherWeights) {
   if (!AllocationCounter::counts_malloc()) GTEST_SKIP() << "sanitizer build: malloc is not ours to count";
   const auto tiny = inference::load_model(fixtures() / "tiny_tcnmlp.safetensors");
   // train.py --arch tcnmlp-v1's defaults on 64-frame windows.
   const auto model =
       random_model(inference::TcnMlpConfig{64, 191, 20, 64, 512, 2, 64, 3, 5, 5, 64, 100}.to_model_config(), 1, *tiny);
-  const auto net = std::make_shared<const inference::TcnMlp>(model);
-  const std::size_t n = static_cast<std::size_t>(net->window_size()), D = 191;
-  std::vector<float> x(2 * n, 0.3f), m(2 * n, 0.0f), out(2 * n), frame_out(D);
-  for (std::size_t i = 0; i < m.size(); i += 4) m[i] = 1.0f;
-  inference::TcnMlpScratch scratch(*net, 2);
-  inference::Sampler sampler(net, inference::SamplerOptions{2, 1.0f, 0.0f}, 1);
-  const std::span<const float> x1(x.data(), n), m1(m.data(), n);
-  const std::span<float> out1(out.data(), n);
-  std::vector<float> online(n, 1.0f);
-  for (std::size_t d = 0; d < D; d += 3) online[n - D + d] = 0.0f;
+  for (const inference::Weights weights : {inference::Weights::f32, inference::Weights::bf16}) {
+    SCOPED_TRACE(std::string(inference::weights_name(weights)));
+    const auto net = std::make_shared<const inference::TcnMlp>(model, weights);
+    const std::size_t n = static_cast<std::size_t>(net->window_size()), D = 191;
+    std::vector<float> x(2 * n, 0.3f), m(2 * n, 0.0f), out(2 * n), frame_out(D);
+    for (std::size_t i = 0; i < m.size(); i += 4) m[i] = 1.0f;
+    inference::TcnMlpScratch scratch(*net, 2);
+    inference::Sampler sampler(net, inference::SamplerOptions{2, 1.0f, 0.0f}, 1);
+    const std::span<const float> x1(x.data(), n), m1(m.data(), n);
+    const std::span<float> out1(out.data(), n);
+    std::vector<float> online(n, 1.0f);
+    for (std::size_t d = 0; d < D; d += 3) online[n - D + d] = 0.0f;
 
-  AllocationCounter allocations;
-  for (int i = 0; i < 2; ++i) {
-    net->forward(x1, m1, 50, out1, scratch);
-    net->forward(x, m, 99, out, scratch);
-    sampler.sample(x1, m1, out1);
-    net->forward_newest(x1, m1, 50, frame_out, scratch);  // computes the past
-    net->forward_newest(x1, m1, 20, frame_out, scratch);  // reuses it
-    sampler.sample(x1, online, out1);
-    x[0] += 1.0f;  // the next frame's past
+    AllocationCounter allocations;
+    for (int i = 0; i < 2; ++i) {
+      net->forward(x1, m1, 50, out1, scratch);
+      net->forward(x, m, 99, out, scratch);
+      sampler.sample(x1, m1, out1);
+      net->forward_newest(x1, m1, 50, frame_out, scratch);  // computes the past
+      net->forward_newest(x1, m1, 20, frame_out, scratch);  // reuses it
+      sampler.sample(x1, online, out1);
+      x[0] += 1.0f;  // the next frame's past
+    }
+    EXPECT_EQ(allocations.count(), 0);
   }
-  EXPECT_EQ(allocations.count(), 0);
 }
 
 }  // namespace

@@ -14,6 +14,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <string_view>
@@ -21,6 +22,14 @@
 #include <vector>
 
 namespace bodyd::inference {
+
+// How a denoiser holds the weights its online pass (forward_newest) streams per frame: float32,
+// or bfloat16 for the largest matrices (half the memory traffic, products still accumulated in
+// float; docs/model.md, "Weights in bf16"). An architecture without a bf16 path runs float32
+// whatever is asked (Denoiser::weights() says which). forward() always computes in float32.
+enum class Weights { f32, bf16 };
+[[nodiscard]] std::string_view weights_name(Weights weights);  // "f32", "bf16"
+[[nodiscard]] std::optional<Weights> parse_weights(std::string_view name);
 
 // One session's buffers for Denoiser::forward. Made by the denoiser it belongs to.
 class DenoiserScratch {
@@ -48,6 +57,8 @@ class Denoiser {
 
   // The architecture name as written in model files (e.g. "mlpwin-v1").
   [[nodiscard]] virtual std::string_view architecture() const = 0;
+  // The weights forward_newest() multiplies by (make_denoiser's request where the architecture has that path).
+  [[nodiscard]] virtual Weights weights() const { return Weights::f32; }
   // Frames per window W (the newest last), features per frame D, diffusion steps T: the config's
   // W, D and T (kConfigFrames, kConfigFeatures, kConfigSteps), which every architecture has.
   [[nodiscard]] virtual int frames() const = 0;
@@ -106,8 +117,9 @@ struct Architecture {
   // The loader requires exactly these plus norm.mean, norm.std and diffusion.alpha_bar
   // (expected_tensors below), all finite.
   TensorShapes (*tensors)(const ModelConfig& config);
-  // Builds the denoiser from a model that parse_model() has checked against this row.
-  std::shared_ptr<const Denoiser> (*make)(const Model& model);
+  // Builds the denoiser from a model that parse_model() has checked against this row, holding the
+  // online pass's weights as `weights` asks if it has that path (float32 otherwise).
+  std::shared_ptr<const Denoiser> (*make)(const Model& model, Weights weights);
 };
 
 // Every architecture this build runs, in the order they were added.
@@ -121,6 +133,7 @@ struct Architecture {
 [[nodiscard]] TensorShapes expected_tensors(const Architecture& arch, const ModelConfig& config);
 // The denoiser of a loaded model, by its architecture field. Throws ModelFileError naming the
 // model's source if the architecture is unknown (parse_model already refuses such files).
-[[nodiscard]] std::shared_ptr<const Denoiser> make_denoiser(const Model& model);
+// `weights`: how its online pass holds its weights (Weights above).
+[[nodiscard]] std::shared_ptr<const Denoiser> make_denoiser(const Model& model, Weights weights = Weights::f32);
 
 }  // namespace bodyd::inference

@@ -12,6 +12,7 @@
 
 #include <memory>
 #include <span>
+#include <type_traits>
 #include <vector>
 
 namespace bodyd::inference::detail {
@@ -64,9 +65,15 @@ class EigenScratch : public DenoiserScratch {
 template <typename Config, typename Net, typename Scratch>
 class EigenDenoiser : public Denoiser {
  public:
-  // The architecture row's factory (denoiser.h).
-  [[nodiscard]] static std::shared_ptr<const Denoiser> make(const Model& model) {
-    return std::make_shared<const Net>(model);
+  // The architecture row's factory (denoiser.h). A network with a bf16 path takes `weights` in its
+  // constructor; the others run float32 and ignore it.
+  [[nodiscard]] static std::shared_ptr<const Denoiser> make(const Model& model, Weights weights) {
+    if constexpr (std::is_constructible_v<Net, const Model&, Weights>) {
+      return std::make_shared<const Net>(model, weights);
+    } else {
+      (void)weights;
+      return std::make_shared<const Net>(model);
+    }
   }
 
   [[nodiscard]] const Config& config() const { return config_; }

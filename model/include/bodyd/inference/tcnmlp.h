@@ -13,6 +13,7 @@
 // lives in a TcnMlpScratch owned by one session. forward() and forward_newest() do not allocate.
 #pragma once
 
+#include "bodyd/inference/bf16_matrix.h"
 #include "bodyd/inference/causal_stack.h"
 #include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/eigen_denoiser.h"
@@ -73,10 +74,13 @@ class TcnMlp final : public detail::EigenDenoiser<TcnMlpConfig, TcnMlp, TcnMlpSc
   [[nodiscard]] static TensorShapes tensors(const ModelConfig& config);
   static constexpr const char* kWrongScratch = "TcnMlp::forward needs a TcnMlpScratch (made by TcnMlp::make_scratch)";
 
-  // Throws ModelFileError naming the model's source if N > W.
-  explicit TcnMlp(const Model& model);
+  // Throws ModelFileError naming the model's source if N > W. With Weights::bf16, forward_newest()
+  // multiplies by bfloat16 copies of the trunk's largest matrices (inp and the residual blocks'
+  // fc1, fc2: about nine tenths of the weights it reads per frame); forward() stays float32.
+  explicit TcnMlp(const Model& model, Weights weights = Weights::f32);
 
   [[nodiscard]] std::string_view architecture() const override { return kArchitectureTcnMlp; }
+  [[nodiscard]] Weights weights() const override { return weights_; }
   using EigenDenoiser::forward;
   // As Network::forward: `batch` windows at step t, frame-major, out the same size. Requirements
   // (a bug if broken: abort): whole windows, 1 <= batch <= scratch.max_batch(), 0 <= t < T, out
@@ -86,7 +90,8 @@ class TcnMlp final : public detail::EigenDenoiser<TcnMlpConfig, TcnMlp, TcnMlpSc
   [[nodiscard]] bool computes_newest_alone() const override { return true; }
   void forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                       DenoiserScratch& scratch) const override;
-  // One window's newest output frame, equal to forward()'s last frame. What does not depend on the
+  // One window's newest output frame, equal to forward()'s last frame (with bf16 weights: up to
+  // their rounding). What does not depend on the
   // newest frame's noisy entries (the context at the newest frame, the trunk's encoding of the
   // N - 1 earlier frames and their part of inp) is kept in the scratch and reused while a call's
   // observations and past frames equal the last call's, as in the steps of one online sample; the
@@ -116,6 +121,11 @@ class TcnMlp final : public detail::EigenDenoiser<TcnMlpConfig, TcnMlp, TcnMlpSc
   detail::SplitLinear dec1_;  // dec1.weight's columns for z_w and for e_w
   Linear dec2_;
   std::uint64_t id_;  // this network's, unique in the process: whose cached past a scratch holds
+  // Weights::bf16: forward_newest()'s copies of inp (its columns for the N - 1 earlier frames and
+  // for the newest) and of each residual block's fc1 and fc2.
+  Weights weights_;
+  detail::Bf16Matrix inp_past_bf16_, inp_newest_bf16_;
+  std::vector<std::array<detail::Bf16Matrix, 2>> blocks_bf16_;
 };
 
 // Per-session buffers for TcnMlp, for up to max_batch windows per forward() call.
