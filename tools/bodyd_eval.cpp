@@ -6,6 +6,7 @@
 //              [--body-scale S] [--out-dir DIR] [--methods diffusion,ik] [--split FILE.txt] [FILE.bvh...]
 //              [--no-body-filter | --body-filter-min-cutoff-hz F --body-filter-beta B ...] [--contact-on V] ...
 #include "bodyd/base/random.h"
+#include "bodyd/inference/diffusion.h"
 #include "bodyd/inference/evaluation.h"
 #include "bodyd/motion/split_file.h"
 #include "bodyd/simulators/sim_flags.h"
@@ -67,6 +68,11 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::Range(1, 1000));
   app.add_option("--guidance", method_options.guidance, "diffusion: classifier-free guidance scale (1 = off)")
       ->capture_default_str()->check(CLI::Range(0.0, 20.0));
+  std::string weights_text;
+  app.add_option("--weights", weights_text,
+                 fmt::format("diffusion: the network's online weights, f32 or bf16 (default {}; docs/model.md, \"Weights in bf16\")",
+                             bodyd::inference::weights_name(bodyd::DiffusionOptions{}.weights)))
+      ->check(CLI::IsMember({"f32", "bf16"}));
   bool no_filter = false;
   app.add_flag("--no-filter", no_filter, "diffusion: no One Euro tracker filter (the daemon's \"filter\": {\"enabled\": false})");
   app.add_option("--filter-min-cutoff-hz", method_options.filter.min_cutoff_hz,
@@ -189,6 +195,7 @@ int main(int argc, char** argv) {
       method_options.body_filter.min_cutoff_hz = method_options.body_filter.rot_min_cutoff_hz = *body_min_cutoff_hz;
     if (body_rot_min_cutoff_hz) method_options.body_filter.rot_min_cutoff_hz = *body_rot_min_cutoff_hz;
     if (const std::string e = bodyd::validate(method_options.body_filter); !e.empty()) throw std::runtime_error(e);
+    if (!weights_text.empty()) method_options.weights = bodyd::inference::parse_weights(weights_text);
     options.reconstructor = method_options;
     if (!out_dir.empty()) options.out_dir = out_dir;
     if (body_scale) {

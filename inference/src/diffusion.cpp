@@ -60,7 +60,7 @@ std::string validate_foot_lock(const DiffusionOptions& o) {
 DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::Model> model,
                                                const DiffusionOptions& options)
     : model_(std::move(model)),
-      network_(inference::make_denoiser(*model_)),
+      network_(inference::make_denoiser(*model_, options.weights)),
       options_(options),
       sampler_(network_, inference::SamplerOptions{options.steps, options.guidance, 0.0f}, options.seed),
       skeleton_(model_->skeleton),

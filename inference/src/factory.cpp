@@ -37,6 +37,7 @@ std::unique_ptr<Reconstructor> make_reconstructor(std::string_view method, const
     DiffusionOptions d;
     d.steps = options.diffusion_steps;
     d.guidance = options.guidance;
+    if (options.weights) d.weights = *options.weights;
     d.seed = options.seed;
     d.filter = options.filter;
     d.body_filter = options.body_filter;

@@ -12,6 +12,7 @@
 // buffers are allocated in the constructor; reconstruct() does not allocate.
 #pragma once
 
+#include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/features.h"
 #include "bodyd/inference/model_file.h"
 #include "bodyd/inference/reconstructor.h"
@@ -31,6 +32,9 @@ namespace bodyd {
 struct DiffusionOptions {
   int steps = 2;               // DDIM steps K (2: chosen on held-out training clips, docs/models.md)
   float guidance = 1.0f;       // classifier-free guidance scale (1 = off, one network pass per step)
+  // The network's online weights (denoiser.h): bf16 halves the memory a frame streams; chosen on
+  // the style-held-out clips (docs/models.md, "Weights in bf16").
+  inference::Weights weights = inference::Weights::bf16;
   std::uint64_t seed = 1;      // initial noise; the same noise is used for every frame (see fixed_noise)
   bool fixed_noise = true;     // reuse one noise draw for every frame: identical inputs give identical
                                // outputs and frame-to-frame jitter from sampling disappears

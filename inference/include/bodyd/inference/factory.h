@@ -2,6 +2,7 @@
 // tools turn "ik" or "diffusion" into an object.
 #pragma once
 
+#include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/one_euro.h"
 #include "bodyd/inference/reconstructor.h"
 
@@ -30,6 +31,7 @@ class ReconstructorError : public std::runtime_error {
 struct ReconstructorOptions {
   int diffusion_steps = 2;      // DDIM steps K (docs/models.md)
   float guidance = 1.0f;        // classifier-free guidance scale (1 = off)
+  std::optional<inference::Weights> weights;  // the network's online weights (unset: DiffusionOptions' default)
   std::uint64_t seed = 1;       // the diffusion's noise
   OneEuroOptions filter;        // the diffusion's tracker filter (one_euro.h; the daemon's "filter" keys)
   BodyFilterOptions body_filter;  // the diffusion's body filter (one_euro.h; the daemon's "body_filter" keys)
