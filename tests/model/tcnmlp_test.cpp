@@ -168,11 +168,7 @@ TEST(TcnMlp, TheSamplerWithAnObservedPastComputesTheNewestFrameAloneToTheSameRes
   const auto D = static_cast<std::size_t>(net->dim()), W = static_cast<std::size_t>(net->frames());
   const std::size_t n = W * D;
   std::mt19937 rng(21);
-  const auto obs = random_window(rng, n, false);
-  const auto noise = random_window(rng, n, false);
-  std::vector<float> mask(n, 1.0f);
-  const auto newest_mask = random_window(rng, D, true);
-  std::copy(newest_mask.begin(), newest_mask.end(), mask.begin() + static_cast<std::ptrdiff_t>((W - 1) * D));
+  const auto [obs, noise, mask] = random_online_case(rng, W, D);
   inference::Sampler sampler(net, inference::SamplerOptions{4, 1.0f, 0.0f}, 1);
   std::vector<float> out(n);
   sampler.sample_from_noise(obs, mask, noise, out);

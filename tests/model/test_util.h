@@ -80,6 +80,21 @@ inline inference::Model random_model(const inference::ModelConfig& config, std::
   return m;
 }
 
+// The online case of one W x D window: observations and a noise draw (in that order from rng),
+// and a mask with every frame but the newest observed, the newest one in part (its trackers).
+struct OnlineCase {
+  std::vector<float> obs, noise, mask;
+};
+inline OnlineCase random_online_case(std::mt19937& rng, std::size_t W, std::size_t D) {
+  OnlineCase c;
+  c.obs = random_window(rng, W * D, false);
+  c.noise = random_window(rng, W * D, false);
+  c.mask.assign(W * D, 1.0f);
+  const auto newest_mask = random_window(rng, D, true);
+  std::copy(newest_mask.begin(), newest_mask.end(), c.mask.begin() + static_cast<std::ptrdiff_t>((W - 1) * D));
+  return c;
+}
+
 // The parity fixture of a temporal network (training/export_fixture.py's write_temporal): its
 // forward cases and its DDIM run, each within `tolerance` of PyTorch's outputs; and, so that the
 // check can fail, another step's output far off.
