@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cctype>
 #include <fstream>
 #include <sstream>
 #include <regex>
@@ -105,11 +106,14 @@ TEST_F(InstallTree, CExampleBuildsWithPkgConfigAndReceivesPoses) {
                               {.env = {{"PKG_CONFIG_PATH", pc_dir.string()}}, .output_dir = scratch_->path, .name = "pc"});
   if (flags.exit_code != 0 && !fs::exists("/usr/bin/pkg-config")) GTEST_SKIP() << "pkg-config is not installed";
   ASSERT_EQ(flags.exit_code, 0) << flags.err;
+  // pkg-config ends its output with a newline, which would end the shell command before kSanitizeFlags.
+  std::string pc_flags = flags.out;
+  while (!pc_flags.empty() && std::isspace(static_cast<unsigned char>(pc_flags.back()))) pc_flags.pop_back();
   TempDir dir("bodyd-cexample");
   // Split the flags on spaces (no path here holds one: mkdtemp under the temp directory).
   std::vector<std::string> cc{"/bin/sh", "-c",
                               "cc -std=c11 -o " + (dir.path / "sub").string() + " " +
-                                  (prefix_ / "share/doc/bodyd/examples/c/bodyd_sub_c.c").string() + " " + flags.out +
+                                  (prefix_ / "share/doc/bodyd/examples/c/bodyd_sub_c.c").string() + " " + pc_flags +
                                   kSanitizeFlags};
   const RunResult built = run(cc, {.output_dir = dir.path, .name = "cc"});
   ASSERT_EQ(built.exit_code, 0) << built.out << built.err;
