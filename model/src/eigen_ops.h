@@ -91,20 +91,39 @@ inline std::vector<ResidualBlock> load_residual_blocks(const Model& model, int L
 }
 
 // h += fc2(SiLU(fc1(LayerNorm(h)))) for each block, on h's columns (one per window); n and a are
-// buffers of h's size. One matrix-vector product per column: with batch <= 2 that streams each
-// weight matrix from cache twice, which measured faster than Eigen's matrix-matrix path (and that
-// path would need heap workspace for these sizes).
+// buffers of h's size. `product(b, layer, x, y, accumulate)` computes y = W x (or y += W x) with
+// block b's fc1 (layer 0) or fc2 (layer 1) weights, so a caller can multiply by other copies of
+// them (tcnmlp-v1's bfloat16 ones, bf16_matrix.h); the biases come from `blocks`.
+template <typename H, typename N, typename A, typename Product>
+void residual_blocks_by(const std::vector<ResidualBlock>& blocks, Eigen::MatrixBase<H>& h, Eigen::MatrixBase<N>& n,
+                        Eigen::MatrixBase<A>& a, const Product& product) {
+  for (std::size_t b = 0; b < blocks.size(); ++b) {
+    const ResidualBlock& blk = blocks[b];
+    layer_norm(h, blk.norm.weight, blk.norm.bias, n);
+    product(b, 0, n.derived(), a.derived(), false);
+    a.colwise() += blk.fc1.bias;
+    silu_inplace(a);
+    product(b, 1, a.derived(), h.derived(), true);
+    h.colwise() += blk.fc2.bias;
+  }
+}
+
+// residual_blocks_by with the float32 weights. One matrix-vector product per column: with batch
+// <= 2 that streams each weight matrix from cache twice, which measured faster than Eigen's
+// matrix-matrix path (and that path would need heap workspace for these sizes).
 template <typename H, typename N, typename A>
 void residual_blocks(const std::vector<ResidualBlock>& blocks, Eigen::MatrixBase<H>& h, Eigen::MatrixBase<N>& n,
                      Eigen::MatrixBase<A>& a) {
-  for (const ResidualBlock& blk : blocks) {
-    layer_norm(h, blk.norm.weight, blk.norm.bias, n);
-    for (Eigen::Index b = 0; b < h.cols(); ++b) a.col(b).noalias() = blk.fc1.weight * n.col(b);
-    a.colwise() += blk.fc1.bias;
-    silu_inplace(a);
-    for (Eigen::Index b = 0; b < h.cols(); ++b) h.col(b).noalias() += blk.fc2.weight * a.col(b);
-    h.colwise() += blk.fc2.bias;
-  }
+  residual_blocks_by(blocks, h, n, a, [&blocks](std::size_t b, int layer, const auto& x, auto& y, bool accumulate) {
+    const auto& w = layer == 0 ? blocks[b].fc1.weight : blocks[b].fc2.weight;
+    for (Eigen::Index c = 0; c < x.cols(); ++c) {
+      if (accumulate) {
+        y.col(c).noalias() += w * x.col(c);
+      } else {
+        y.col(c).noalias() = w * x.col(c);
+      }
+    }
+  });
 }
 
 // mlpwin-v1's tensors over a window of W frames (tcnmlp-v1's trunk: W = N), in PyTorch's order.

@@ -255,17 +255,11 @@ void TcnMlp::forward_newest(std::span<const float> x, std::span<const float> m, 
   auto a = s.a_.col(0);
   h = s.h_past_ + time_table_.col(t);
   if (weights_ == Weights::bf16) {
-    // residual_blocks' arithmetic with the bfloat16 copies (h, n, a: one contiguous column each).
+    // h, n, a: one contiguous column each.
     inp_newest_bf16_.multiply(e.data(), h.data(), true);
-    for (std::size_t b = 0; b < blocks_.size(); ++b) {
-      const detail::ResidualBlock& blk = blocks_[b];
-      layer_norm(h, blk.norm.weight, blk.norm.bias, n);
-      blocks_bf16_[b][0].multiply(n.data(), a.data(), false);
-      a += blk.fc1.bias;
-      silu_inplace(a);
-      blocks_bf16_[b][1].multiply(a.data(), h.data(), true);
-      h += blk.fc2.bias;
-    }
+    residual_blocks_by(blocks_, h, n, a, [this](std::size_t b, int layer, const auto& x, auto& y, bool accumulate) {
+      blocks_bf16_[b][static_cast<std::size_t>(layer)].multiply(x.data(), y.data(), accumulate);
+    });
   } else {
     h.noalias() += inp_.rightCols(c.E) * e;
     residual_blocks(blocks_, h, n, a);
