@@ -9,11 +9,34 @@
 
 namespace bodyd {
 
+namespace {
+constexpr const char* kNeedsModel =
+    "method 'diffusion' needs a model file (--model; the default is models/bodyd-default.safetensors)";
+}  // namespace
+
 std::vector<std::string> known_methods() { return {"diffusion", "ik"}; }
+
+std::shared_ptr<const inference::Model> load_reconstructor_model(const std::filesystem::path& model_path) {
+  if (model_path.empty()) throw ReconstructorError(kNeedsModel);
+  try {
+    return inference::load_model(model_path);
+  } catch (const inference::ModelFileError& e) {
+    // No advice here: the caller (the daemon, a tool) adds the one hint that fits it.
+    throw ReconstructorError(fmt::format("cannot load the model: {}", e.what()));
+  }
+}
 
 std::unique_ptr<Reconstructor> make_reconstructor(std::string_view method, const std::filesystem::path& model_path,
                                                   const Skeleton* skeleton_hint,
                                                   const ReconstructorOptions& options) {
+  return make_reconstructor_of(method, method == "diffusion" ? load_reconstructor_model(model_path) : nullptr,
+                               skeleton_hint, options);
+}
+
+std::unique_ptr<Reconstructor> make_reconstructor_of(std::string_view method,
+                                                     std::shared_ptr<const inference::Model> model,
+                                                     const Skeleton* skeleton_hint,
+                                                     const ReconstructorOptions& options) {
   if (method == "ik") {
     if (skeleton_hint == nullptr)
       throw ReconstructorError("method 'ik' needs a skeleton: pass the skeleton of the motion data (a BVH file)");
@@ -24,16 +47,7 @@ std::unique_ptr<Reconstructor> make_reconstructor(std::string_view method, const
     }
   }
   if (method == "diffusion") {
-    if (model_path.empty())
-      throw ReconstructorError("method 'diffusion' needs a model file (--model; the default is "
-                               "models/bodyd-default.safetensors)");
-    std::shared_ptr<const inference::Model> model;
-    try {
-      model = inference::load_model(model_path);
-    } catch (const inference::ModelFileError& e) {
-      // No advice here: the caller (the daemon, a tool) adds the one hint that fits it.
-      throw ReconstructorError(fmt::format("cannot load the model: {}", e.what()));
-    }
+    if (model == nullptr) throw ReconstructorError(kNeedsModel);
     DiffusionOptions d;
     d.steps = options.diffusion_steps;
     d.guidance = options.guidance;

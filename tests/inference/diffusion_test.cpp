@@ -4,6 +4,7 @@
 // model (models/) for the ones that do.
 #include "bodyd/inference/diffusion.h"
 #include "bodyd/inference/evaluation.h"
+#include "bodyd/inference/factory.h"
 #include "bodyd/inference/features.h"
 #include "bodyd/simulators/tracker_sim.h"
 
@@ -12,7 +13,10 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
+#include <functional>
+#include <memory>
 #include <optional>
 
 using namespace bodyd;
@@ -82,6 +86,53 @@ TEST(Diffusion, DeterministicForASeed) {
   for (size_t f = 0; f < ra.poses.size(); ++f)
     diff += (ra.poses[f].global.positions[1] - rd.poses[f].global.positions[1]).norm();
   EXPECT_GT(diff, 0.0);
+}
+
+// bodyd-eval loads the model file once and makes every clip's reconstructor from it: two
+// reconstructors sharing one loaded model, run frame by frame in turn, give what a reconstructor
+// that loaded the file itself gives (no state lives in the shared model).
+TEST(Factory, ReconstructorsSharingOneLoadedModelMatchOneThatLoadsTheFile) {
+  const std::filesystem::path path = test::fixtures() / "tiny_model.safetensors";
+  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
+  const auto samples = trackers(clip);
+  const auto times = frame_times(clip);
+  const auto own = make_reconstructor("diffusion", path, nullptr);
+  const Outputs reference = feed_and_reconstruct(*own, samples, times);
+
+  const std::shared_ptr<const inference::Model> model = load_reconstructor_model(path);
+  std::array<std::unique_ptr<Reconstructor>, 2> shared = {make_reconstructor_of("diffusion", model, nullptr),
+                                                           make_reconstructor_of("diffusion", model, nullptr)};
+  size_t next = 0;
+  for (size_t f = 0; f < times.size(); ++f) {
+    for (; next < samples.size() && samples[next].t_ns <= times[f]; ++next)
+      for (auto& r : shared) r->push(samples[next]);
+    for (auto& r : shared) {
+      BodyPose pose;
+      ASSERT_TRUE(r->reconstruct(times[f], pose));
+      for (size_t j = 0; j < pose.global.positions.size(); ++j)
+        ASSERT_EQ(pose.global.positions[j], reference.poses[f].global.positions[j]) << "frame " << f << " joint " << j;
+    }
+  }
+}
+
+TEST(Factory, ADiffusionReconstructorWithoutAModelSaysWhatToPass) {
+  for (const auto& make : std::vector<std::function<std::unique_ptr<Reconstructor>()>>{
+           [] { return make_reconstructor("diffusion", std::filesystem::path{}, nullptr); },
+           [] { return make_reconstructor_of("diffusion", nullptr, nullptr); }}) {
+    try {
+      (void)make();
+      FAIL() << "no error";
+    } catch (const ReconstructorError& e) {
+      EXPECT_NE(std::string(e.what()).find("needs a model file (--model"), std::string::npos) << e.what();
+    }
+  }
+  try {
+    (void)load_reconstructor_model(test::fixtures() / "no_such_model.safetensors");
+    FAIL() << "no error";
+  } catch (const ReconstructorError& e) {
+    EXPECT_NE(std::string(e.what()).find("cannot load the model"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("no_such_model.safetensors"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Diffusion, CausalChangingFutureSamplesNeverChangesPastOutputs) {

@@ -50,4 +50,16 @@ struct ReconstructorOptions {
                                                                  const Skeleton* skeleton_hint,
                                                                  const ReconstructorOptions& options = {});
 
+// The same with the model file already loaded (load_reconstructor_model), for a caller that
+// makes many reconstructors of one model (bodyd-eval: one per clip). `model` may be null for
+// methods that need none.
+[[nodiscard]] std::unique_ptr<Reconstructor> make_reconstructor_of(std::string_view method,
+                                                                    std::shared_ptr<const inference::Model> model,
+                                                                    const Skeleton* skeleton_hint,
+                                                                    const ReconstructorOptions& options = {});
+
+// Reads and verifies a model file (inference::load_model); throws ReconstructorError saying
+// what is wrong with it.
+[[nodiscard]] std::shared_ptr<const inference::Model> load_reconstructor_model(const std::filesystem::path& model_path);
+
 }  // namespace bodyd
