@@ -10,8 +10,27 @@
 
 #include <gtest/gtest.h>
 
+#include <span>
+#include <vector>
+
 namespace bodyd::test {
 namespace {
+
+// A batch of two windows of n values (D a frame) with every fourth value observed, their first
+// window's spans, and the online mask (the past observed, the newest frame partly), so that the
+// sampler takes forward_newest().
+struct AllocCase {
+  AllocCase(std::size_t n, std::size_t D) : x(2 * n, 0.3f), m(2 * n, 0.0f), out(2 * n), frame_out(D), online(n, 1.0f) {
+    for (std::size_t i = 0; i < m.size(); i += 4) m[i] = 1.0f;
+    for (std::size_t d = 0; d < D; d += 3) online[n - D + d] = 0.0f;
+    x1 = std::span<const float>(x.data(), n);
+    m1 = std::span<const float>(m.data(), n);
+    out1 = std::span<float>(out.data(), n);
+  }
+  std::vector<float> x, m, out, frame_out, online;
+  std::span<const float> x1, m1;
+  std::span<float> out1;
+};
 
 TEST(TcnAllocation, ForwardNewestFrameSampleAndStreamDoNotAllocate) {
   if (!AllocationCounter::counts_malloc()) GTEST_SKIP() << "sanitizer build: malloc is not ours to count";
@@ -20,28 +39,21 @@ TEST(TcnAllocation, ForwardNewestFrameSampleAndStreamDoNotAllocate) {
   // the product paths of a real model.
   const auto model = random_model(inference::TcnConfig{64, 191, 128, 3, 5, 5, 64, 100}.to_model_config(), 1, *tiny);
   const auto net = std::make_shared<const inference::Tcn>(model);
-  const std::size_t n = static_cast<std::size_t>(net->window_size()), D = 191;
-  std::vector<float> x(2 * n, 0.3f), m(2 * n, 0.0f), out(2 * n);
-  for (std::size_t i = 0; i < m.size(); i += 4) m[i] = 1.0f;
+  const std::size_t D = 191;
+  AllocCase c(static_cast<std::size_t>(net->window_size()), D);
   inference::TcnScratch scratch(*net, 2);
   inference::Sampler sampler(net, inference::SamplerOptions{2, 1.0f, 0.0f}, 1);
   const auto stream = net->make_stream(99);
-  const std::span<const float> x1(x.data(), n), m1(m.data(), n);
-  const std::span<float> out1(out.data(), n);
-  std::vector<float> frame_out(D);
-  // The online case: the past observed, so the sampler takes forward_newest().
-  std::vector<float> online(n, 1.0f);
-  for (std::size_t d = 0; d < D; d += 3) online[n - D + d] = 0.0f;
 
   AllocationCounter allocations;
   for (int i = 0; i < 2; ++i) {
-    net->forward(x1, m1, 50, out1, scratch);
-    net->forward(x, m, 99, out, scratch);
-    sampler.sample(x1, m1, out1);
-    net->forward_newest(x1, m1, 50, frame_out, scratch);
-    sampler.sample(x1, online, out1);
+    net->forward(c.x1, c.m1, 50, c.out1, scratch);
+    net->forward(c.x, c.m, 99, c.out, scratch);
+    sampler.sample(c.x1, c.m1, c.out1);
+    net->forward_newest(c.x1, c.m1, 50, c.frame_out, scratch);
+    sampler.sample(c.x1, c.online, c.out1);
     for (std::size_t f = 0; f < 70; ++f)
-      stream->push(std::span(x).subspan((f % 64) * D, D), std::span(m).subspan((f % 64) * D, D), frame_out);
+      stream->push(std::span(c.x).subspan((f % 64) * D, D), std::span(c.m).subspan((f % 64) * D, D), c.frame_out);
   }
   EXPECT_EQ(allocations.count(), 0);
 }
@@ -55,25 +67,19 @@ TEST(TcnMlpAllocation, ForwardNewestFrameAndSampleDoNotAllocateWithEitherWeights
   for (const inference::Weights weights : {inference::Weights::f32, inference::Weights::bf16}) {
     SCOPED_TRACE(std::string(inference::weights_name(weights)));
     const auto net = std::make_shared<const inference::TcnMlp>(model, weights);
-    const std::size_t n = static_cast<std::size_t>(net->window_size()), D = 191;
-    std::vector<float> x(2 * n, 0.3f), m(2 * n, 0.0f), out(2 * n), frame_out(D);
-    for (std::size_t i = 0; i < m.size(); i += 4) m[i] = 1.0f;
+    AllocCase c(static_cast<std::size_t>(net->window_size()), 191);
     inference::TcnMlpScratch scratch(*net, 2);
     inference::Sampler sampler(net, inference::SamplerOptions{2, 1.0f, 0.0f}, 1);
-    const std::span<const float> x1(x.data(), n), m1(m.data(), n);
-    const std::span<float> out1(out.data(), n);
-    std::vector<float> online(n, 1.0f);
-    for (std::size_t d = 0; d < D; d += 3) online[n - D + d] = 0.0f;
 
     AllocationCounter allocations;
     for (int i = 0; i < 2; ++i) {
-      net->forward(x1, m1, 50, out1, scratch);
-      net->forward(x, m, 99, out, scratch);
-      sampler.sample(x1, m1, out1);
-      net->forward_newest(x1, m1, 50, frame_out, scratch);  // computes the past
-      net->forward_newest(x1, m1, 20, frame_out, scratch);  // reuses it
-      sampler.sample(x1, online, out1);
-      x[0] += 1.0f;  // the next frame's past
+      net->forward(c.x1, c.m1, 50, c.out1, scratch);
+      net->forward(c.x, c.m, 99, c.out, scratch);
+      sampler.sample(c.x1, c.m1, c.out1);
+      net->forward_newest(c.x1, c.m1, 50, c.frame_out, scratch);  // computes the past
+      net->forward_newest(c.x1, c.m1, 20, c.frame_out, scratch);  // reuses it
+      sampler.sample(c.x1, c.online, c.out1);
+      c.x[0] += 1.0f;  // the next frame's past
     }
     EXPECT_EQ(allocations.count(), 0);
   }
