@@ -163,18 +163,7 @@ TEST(Tcn, NewestFrameAloneEqualsTheWindowsLastFrame) {
       EXPECT_GT(relative_error(again, newest), 1e-4);
     }
   }
-  // The scratch keeps the encoded past for the network that made it: another network of the same
-  // shape with other weights, given the same window in the same scratch, encodes it anew.
-  const auto a = default_shape_tcn(3), b = default_shape_tcn(4);
-  TcnScratch shared(*a);
-  const auto D = static_cast<std::size_t>(a->dim()), n = static_cast<std::size_t>(a->window_size());
-  const auto x = random_window(rng, n, false), m = random_window(rng, n, true);
-  std::vector<float> ya(D), yb(D), full(n);
-  a->forward_newest(x, m, 10, ya, shared);
-  b->forward_newest(x, m, 10, yb, shared);
-  b->forward(x, m, 10, full, shared);
-  EXPECT_LE(relative_error(yb, std::span(full).last(D)), 1e-5);
-  EXPECT_GT(relative_error(ya, yb), 1e-3);
+  expect_a_shared_scratch_keeps_each_networks_past<TcnScratch>(*default_shape_tcn(3), *default_shape_tcn(4), rng);
 }
 
 TEST(Tcn, TheSamplerWithAnObservedPastComputesTheNewestFrameAloneToTheSameResult) {

@@ -151,16 +151,7 @@ TEST(TcnMlp, NewestFrameAloneEqualsTheWindowsLastFrameWhatTheCacheHolds) {
     EXPECT_LE(relative_error(via_base, newest), 1e-6);
   }
   // Two networks of one shape sharing a scratch: each computes its own past.
-  const auto a = default_shape(3), b = default_shape(4);
-  TcnMlpScratch shared(*a);
-  const auto D = static_cast<std::size_t>(a->dim()), n = static_cast<std::size_t>(a->window_size());
-  const auto x = random_window(rng, n, false), m = random_window(rng, n, true);
-  std::vector<float> ya(D), yb(D), full(n);
-  a->forward_newest(x, m, 10, ya, shared);
-  b->forward_newest(x, m, 10, yb, shared);
-  b->forward(x, m, 10, full, shared);
-  EXPECT_LE(relative_error(yb, std::span(full).last(D)), 1e-5);
-  EXPECT_GT(relative_error(ya, yb), 1e-3);
+  expect_a_shared_scratch_keeps_each_networks_past<TcnMlpScratch>(*default_shape(3), *default_shape(4), rng);
 }
 
 TEST(TcnMlp, TheSamplerWithAnObservedPastComputesTheNewestFrameAloneToTheSameResult) {

@@ -150,4 +150,21 @@ inline std::vector<float> ddim_by_full_windows(const inference::Denoiser& net, s
   return x0;
 }
 
+
+// A temporal network's scratch keeps the encoded past for the network that made it: `b`, of `a`'s
+// shape with other weights, given the same window in the same scratch (a `Scratch`, the
+// networks' own kind), encodes it anew, and so its newest frame is its whole-window pass's.
+template <class Scratch, class Net>
+void expect_a_shared_scratch_keeps_each_networks_past(const Net& a, const Net& b, std::mt19937& rng) {
+  Scratch shared(a);
+  const auto D = static_cast<std::size_t>(a.dim()), n = static_cast<std::size_t>(a.window_size());
+  const auto x = random_window(rng, n, false), m = random_window(rng, n, true);
+  std::vector<float> ya(D), yb(D), full(n);
+  a.forward_newest(x, m, 10, ya, shared);
+  b.forward_newest(x, m, 10, yb, shared);
+  b.forward(x, m, 10, full, shared);
+  EXPECT_LE(relative_error(yb, std::span(full).last(D)), 1e-5);
+  EXPECT_GT(relative_error(ya, yb), 1e-3);
+}
+
 }  // namespace bodyd::test
