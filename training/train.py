@@ -62,6 +62,11 @@ def parse_args():
     p.add_argument("--out", required=True, help="model file to write at the end")
     p.add_argument("--steps", type=int, default=60000)
     p.add_argument("--minutes", type=float, default=0, help="stop (and export) after this wall time, 0 = no limit")
+    p.add_argument("--session-minutes", type=float, default=0,
+                   help="this invocation's wall-time budget, 0 = no limit: when it runs out the trainer saves its "
+                        "checkpoint and exits with status 3 without writing --out, and the same command given again "
+                        "continues the run; unlike --minutes it leaves the learning-rate schedule alone, so a run "
+                        "split over several sessions takes the same steps as one that ran through")
     p.add_argument("--batch", type=int, default=256)
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--weight-decay", type=float, default=1e-4)
@@ -500,6 +505,14 @@ def main():
             return ((real_out[:, idx] - real_x0[:, idx]).norm(dim=-1)).mean().item() * 100
         return err(pos_idx), err(lower_idx)
 
+    def save_checkpoint():
+        tmp = ckpt_path + ".tmp"
+        torch.save({"net": net.state_dict(), "ema": ema.state_dict(), "opt": opt.state_dict(),
+                    "gen": gen.get_state(), "torch_rng": torch.get_rng_state(), "step": step,
+                    "wall_s": time.time() - t0 + wall_before, "args": vars(a),
+                    "norm_mean": mean, "norm_std": std}, tmp)
+        os.replace(tmp, ckpt_path)
+
     log = open(os.path.join(a.run_dir, "log.txt"), "a")
     last_print, seen = t0, 0
     hold_gen = torch.Generator(device=dev)
@@ -553,12 +566,16 @@ def main():
             log.write(msg + "\n")
             log.flush()
         if step % a.ckpt_every == 0 or step == a.steps:
-            tmp = ckpt_path + ".tmp"
-            torch.save({"net": net.state_dict(), "ema": ema.state_dict(), "opt": opt.state_dict(),
-                        "gen": gen.get_state(), "torch_rng": torch.get_rng_state(), "step": step,
-                        "wall_s": time.time() - t0 + wall_before, "args": vars(a),
-                        "norm_mean": mean, "norm_std": std}, tmp)
-            os.replace(tmp, ckpt_path)
+            save_checkpoint()
+        if a.session_minutes and step < a.steps and (time.time() - t0) / 60.0 >= a.session_minutes:
+            if step % a.ckpt_every:
+                save_checkpoint()
+            msg = (f"session budget of {a.session_minutes:g} min reached at step {step} of {a.steps}; "
+                   f"checkpoint {ckpt_path} saved, {a.out} not written; give the same command again to continue")
+            print("\n" + msg, flush=True)
+            log.write(msg + "\n")
+            log.close()
+            sys.exit(3)
 
     wall_s = time.time() - t0 + wall_before
     hw = torch.cuda.get_device_name(0) if dev.type == "cuda" else f"CPU ({platform.processor() or platform.machine()}, {torch.get_num_threads()} threads)"
