@@ -126,6 +126,18 @@ void residual_blocks(const std::vector<ResidualBlock>& blocks, Eigen::MatrixBase
   });
 }
 
+// The trunk's tail on h's columns (one per window), after its residual blocks:
+// z = out(SiLU(LayerNorm_out(h))), one matrix-vector product per column as residual_blocks; n is a
+// buffer of h's size.
+template <typename H, typename N, typename Z>
+void trunk_out(const LayerNorm& norm, const Linear& out, const Eigen::MatrixBase<H>& h, Eigen::MatrixBase<N>& n,
+               Eigen::MatrixBase<Z>& z) {
+  layer_norm(h, norm.weight, norm.bias, n);
+  silu_inplace(n);
+  for (Eigen::Index c = 0; c < h.cols(); ++c) z.col(c).noalias() = out.weight * n.col(c);
+  z.colwise() += out.bias;
+}
+
 // mlpwin-v1's tensors over a window of W frames (tcnmlp-v1's trunk: W = N), in PyTorch's order.
 inline void add_mlpwin_tensors(TensorShapes& v, std::int64_t W, std::int64_t D, std::int64_t E, std::int64_t H, int L,
                                std::int64_t TE) {

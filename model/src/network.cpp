@@ -127,11 +127,8 @@ void Network::forward(std::span<const float> x, std::span<const float> m, int t,
   residual_blocks(blocks_, h, n, a);
 
   // 5. z = out(SiLU(LayerNorm_out(h))).
-  layer_norm(h, out_norm_.weight, out_norm_.bias, n);
-  silu_inplace(n);
   auto z = s.z_.leftCols(batch);
-  for (Eigen::Index b = 0; b < batch; ++b) z.col(b).noalias() = out_.weight * n.col(b);
-  z.colwise() += out_.bias;
+  trunk_out(out_norm_, out_, h, n, z);
 
   // 6. y_w = dec2(SiLU(dec1 [z_w; e_w])); z viewed as E x (W * batch), frame-major like e.
   Eigen::Map<const Eigen::MatrixXf> Z(s.z_.data(), c.E, frames);

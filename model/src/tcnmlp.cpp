@@ -162,11 +162,8 @@ void TcnMlp::forward(std::span<const float> x, std::span<const float> m, int t, 
   }
   h.colwise() += time_table_.col(t);
   residual_blocks(blocks_, h, n, a);
-  layer_norm(h, out_norm_.weight, out_norm_.bias, n);
-  silu_inplace(n);
   auto z = s.z_.leftCols(batch);
-  for (Eigen::Index b = 0; b < batch; ++b) z.col(b).noalias() = out_.weight * n.col(b);
-  z.colwise() += out_.bias;
+  trunk_out(out_norm_, out_, h, n, z);
 
   // y_w = dec2(SiLU(dec1 [z_w; e_w])) for the newest N frames.
   const Eigen::Map<const Eigen::MatrixXf> Z(s.z_.data(), c.E, N * batch);
