@@ -127,6 +127,9 @@ def parse_args():
     a = p.parse_args()
     if not 0.0 <= a.observed_weight <= 1.0:
         p.error(f"--observed-weight must be in [0, 1], got {a.observed_weight}")
+    for flag, v in (("--minutes", a.minutes), ("--session-minutes", a.session_minutes)):
+        if not (math.isfinite(v) and v >= 0):
+            p.error(f"{flag} takes minutes, a finite number >= 0 (0 = no limit), got {v}")
     return a
 
 
