@@ -130,10 +130,10 @@ int main(int argc, char** argv) {
       },
       "FINITE");
   app.add_option("--contact-on", method_options.contact_on,
-                 "diffusion: a free foot plants when its predicted contact exceeds this (default 0.4)")
+                 "diffusion: a free foot plants when its predicted contact exceeds this (default 0.35)")
       ->check(finite)->check(CLI::Range(0.0, 1.0));
   app.add_option("--contact-off", method_options.contact_off,
-                 "diffusion: a planted foot stays planted while its predicted contact exceeds this (default 0.4)")
+                 "diffusion: a planted foot stays planted while its predicted contact exceeds this (default 0.35)")
       ->check(finite)->check(CLI::Range(0.0, 1.0));
   app.add_option("--foot-unlock-distance-m", method_options.foot_unlock_distance_m,
                  "diffusion: a planted foot further than this from its prediction re-plants there, m (default 0.60)")

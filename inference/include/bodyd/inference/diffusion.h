@@ -44,7 +44,8 @@ struct DiffusionOptions {
   double hand_blend_max_speed_m_s = 0.6;  // ... and those eases move the hand at most this much faster
   // The foot lock's defaults and body_filter's were chosen on the style-held-out clips
   // (docs/models.md, "Post-processing chosen on unseen styles").
-  float contact_on = 0.4f, contact_off = 0.4f;  // contact hysteresis on the predicted contact value
+  float contact_on = 0.35f, contact_off = 0.35f;  // contact hysteresis on the predicted contact value
+                                                 // (0.4 until the CPU-trained twin: docs/models.md, "The twin trained on the CPU")
   bool foot_lock = true;       // planted feet (predicted contact) do not slide (the leg swings about the hip)
   double foot_contact_speed_m_s = 0.0;    // a planted toe follows the prediction at most this fast
   double foot_unlock_distance_m = 0.60;   // a planted foot further than this from its prediction re-plants
