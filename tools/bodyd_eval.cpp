@@ -129,21 +129,30 @@ int main(int argc, char** argv) {
         return CLI::detail::lexical_cast(text, v) && std::isfinite(v) ? std::string{} : "must be a finite number";
       },
       "FINITE");
+  // The help shows DiffusionOptions' own defaults, so a re-chosen default cannot leave it behind.
+  const bodyd::DiffusionOptions defaults;
   app.add_option("--contact-on", method_options.contact_on,
-                 "diffusion: a free foot plants when its predicted contact exceeds this (default 0.35)")
+                 fmt::format("diffusion: a free foot plants when its predicted contact exceeds this (default {})",
+                             defaults.contact_on))
       ->check(finite)->check(CLI::Range(0.0, 1.0));
   app.add_option("--contact-off", method_options.contact_off,
-                 "diffusion: a planted foot stays planted while its predicted contact exceeds this (default 0.35)")
+                 fmt::format("diffusion: a planted foot stays planted while its predicted contact exceeds this "
+                             "(default {})",
+                             defaults.contact_off))
       ->check(finite)->check(CLI::Range(0.0, 1.0));
   app.add_option("--foot-unlock-distance-m", method_options.foot_unlock_distance_m,
-                 "diffusion: a planted foot further than this from its prediction re-plants there, m (default 0.60)")
+                 fmt::format("diffusion: a planted foot further than this from its prediction re-plants there, m "
+                             "(default {})",
+                             defaults.foot_unlock_distance_m))
       ->check(finite)->check(CLI::NonNegativeNumber);
   app.add_option("--foot-release-half-life-s", method_options.foot_release_half_life_s,
-                 "diffusion: a lifted foot eases from its planted spot to the prediction with this half-life, s "
-                 "(default 0.15)")
+                 fmt::format("diffusion: a lifted foot eases from its planted spot to the prediction with this "
+                             "half-life, s (default {})",
+                             defaults.foot_release_half_life_s))
       ->check(finite)->check(CLI::PositiveNumber);
   app.add_option("--foot-contact-speed-m-s", method_options.foot_contact_speed_m_s,
-                 "diffusion: a planted toe follows the prediction at most this fast, m/s (default 0)")
+                 fmt::format("diffusion: a planted toe follows the prediction at most this fast, m/s (default {})",
+                             defaults.foot_contact_speed_m_s))
       ->check(finite)->check(CLI::NonNegativeNumber);
   std::string device_frames = "joint", calibration_pose = "first-still", reference_path;
   bool method_pose_eye = false;
