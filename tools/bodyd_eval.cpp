@@ -154,6 +154,11 @@ int main(int argc, char** argv) {
                  fmt::format("diffusion: a planted toe follows the prediction at most this fast, m/s (default {})",
                              defaults.foot_contact_speed_m_s))
       ->check(finite)->check(CLI::NonNegativeNumber);
+  app.add_option("--elbow-pole-bias-m", method_options.elbow_pole_bias_m,
+                 fmt::format("diffusion: the arms' elbow pole is the predicted elbow pushed this far outward, down "
+                             "and back, m (default {})",
+                             defaults.elbow_pole_bias_m))
+      ->check(finite)->check(CLI::Range(0.0, 10.0));
   std::string device_frames = "joint", calibration_pose = "first-still", reference_path;
   bool method_pose_eye = false;
   bodyd::add_device_frames_flag(app, device_frames,

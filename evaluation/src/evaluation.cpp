@@ -482,6 +482,8 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
     if (!metrics.empty()) {
       r.metrics = metrics[m].result();
       r.jitter_by_joint_m_s3 = metrics[m].jitter_by_joint();
+      r.pe_by_joint_cm = metrics[m].pe_by_joint();
+      r.height_error_by_joint_cm = metrics[m].height_error_by_joint();
     }
     // Nearest rank (bodyd/base/percentile.h); NaN, written as null, for a method that never ran.
     r.ms_per_frame_p50 = percentile(times[m], 0.5).value_or(std::numeric_limits<double>::quiet_NaN());
@@ -562,6 +564,8 @@ std::string report_json(const EvalReport& report) {
     o["ms_per_frame_p50"] = number(m.ms_per_frame_p50);
     o["ms_per_frame_p99"] = number(m.ms_per_frame_p99);
     o["jitter_by_joint_m_s3"] = by_joint(m.jitter_by_joint_m_s3);
+    o["pe_by_joint_cm"] = by_joint(m.pe_by_joint_cm);
+    o["height_error_by_joint_cm"] = by_joint(m.height_error_by_joint_cm);
     methods[m.name] = o;
   }
   doc["methods"] = methods;

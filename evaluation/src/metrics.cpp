@@ -73,15 +73,15 @@ MetricsAccumulator::MetricsAccumulator(const Skeleton& skeleton) : sets_(joint_s
   }
   lag_true_.resize(sets_.all.size() * (kMaxLagFrames + 1));
   for (int j : sets_.all) joint_names_.push_back(skeleton.names[static_cast<size_t>(j)]);
-  joint_jitter_.resize(sets_.all.size());
-  truth_joint_jitter_.resize(sets_.all.size());
+  for (auto* terms : {&joint_jitter_, &truth_joint_jitter_, &joint_pe_, &joint_height_error_})
+    terms->resize(sets_.all.size());
 }
 
 void MetricsAccumulator::begin_clip(double fps) {
   if (!(fps > 0.0) || !std::isfinite(fps))
     throw std::invalid_argument("metrics: fps must be positive, got " + std::to_string(fps));
   fps_ = fps;
-  for (auto* terms : {&joint_jitter_, &truth_joint_jitter_})
+  for (auto* terms : {&joint_jitter_, &truth_joint_jitter_, &joint_pe_, &joint_height_error_})
     for (Term& t : *terms) {
       t.clip_sum = 0.0;
       t.clip_count = 0;
@@ -120,6 +120,11 @@ void MetricsAccumulator::add_frame(const GlobalPose& predicted, const GlobalPose
   for (int j : sets_.hands) terms_[kHands].add(dist_cm(j));
   for (int j : sets_.root) terms_[kRoot].add(dist_cm(j));
   terms_[kHead].add(dist_cm(sets_.head));
+  for (size_t k = 0; k < n; ++k) {
+    const auto j = static_cast<size_t>(sets_.all[k]);
+    joint_pe_[k].add(dist_cm(sets_.all[k]));
+    joint_height_error_[k].add(100.0 * (predicted.positions[j].y() - truth.positions[j].y()));
+  }
   // A pair (f-1, f) is "around a gap" when the hand was invalid in f-1 or f or within the last
   // second; the jerk after a gap is taken at valid frames within a second of the last invalid one.
   const int second = static_cast<int>(std::lround(fps_));
@@ -245,7 +250,7 @@ AccuracyMetrics MetricsAccumulator::end_clip() {
   m.mpjre_deg = terms_[kRot].finish(clip_frames_);
   m.mpjve_cm_s = terms_[kVel].finish(clip_frames_);
   m.jitter_m_s3 = terms_[kJitter].finish(clip_frames_);
-  for (auto* terms : {&joint_jitter_, &truth_joint_jitter_})
+  for (auto* terms : {&joint_jitter_, &truth_joint_jitter_, &joint_pe_, &joint_height_error_})
     for (Term& t : *terms) (void)t.finish(clip_frames_);
   m.foot_skate_ratio = terms_[kSkate].finish(clip_frames_);
   last_truth_.jitter_m_s3 = terms_[kTruthJitter].finish(clip_frames_);
@@ -301,6 +306,12 @@ std::vector<std::pair<std::string, double>> MetricsAccumulator::jitter_by_joint(
 
 std::vector<std::pair<std::string, double>> MetricsAccumulator::truth_jitter_by_joint() const {
   return named_means(truth_joint_jitter_);
+}
+
+std::vector<std::pair<std::string, double>> MetricsAccumulator::pe_by_joint() const { return named_means(joint_pe_); }
+
+std::vector<std::pair<std::string, double>> MetricsAccumulator::height_error_by_joint() const {
+  return named_means(joint_height_error_);
 }
 
 }  // namespace bodyd

@@ -72,6 +72,9 @@ DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::
   if (std::string err = validate(options.filter); !err.empty()) throw std::invalid_argument(err);
   if (std::string err = validate(options.body_filter); !err.empty()) throw std::invalid_argument(err);
   if (std::string err = validate_foot_lock(options); !err.empty()) throw std::invalid_argument(err);
+  if (!(std::isfinite(options.elbow_pole_bias_m) && options.elbow_pole_bias_m >= 0.0 && options.elbow_pole_bias_m <= 10.0))
+    throw std::invalid_argument(
+        fmt::format("elbow_pole_bias_m must be in [0, 10] m, not {}", options.elbow_pole_bias_m));
   if (std::string err = features::check_skeleton(skeleton_); !err.empty())
     throw std::invalid_argument(fmt::format("{}: model skeleton: {}", model_->source, err));
   if (network_->dim() != features::kDim)

@@ -236,6 +236,15 @@ TEST(Evaluation, JsonHasExactlyTheDocumentedKeys) {
     EXPECT_EQ(by_joint.begin().key(), "Spine");
     EXPECT_TRUE(by_joint["Toes_R"].is_number());
   }
+  // pe_by_joint_cm and height_error_by_joint_cm: the method's only.
+  for (const char* key : {"pe_by_joint_cm", "height_error_by_joint_cm"}) {
+    const auto& by_joint = j["methods"]["ik"][key];
+    ASSERT_TRUE(by_joint.is_object()) << key;
+    EXPECT_EQ(by_joint.size(), 21u) << key;
+    EXPECT_EQ(by_joint.begin().key(), "Spine") << key;
+    EXPECT_TRUE(by_joint["Toes_R"].is_number()) << key;
+    EXPECT_FALSE(j["ground_truth"].contains(key)) << key;
+  }
   EXPECT_EQ(j["timing"].size(), 2u);
   EXPECT_TRUE(j["timing"]["ms_per_frame_p50"].is_number());
   EXPECT_TRUE(j["timing"]["ms_per_frame_p99"].is_number());

@@ -292,6 +292,38 @@ TEST(Metrics, TrackedLagIsTheHeadAndHandsAlone) {
   EXPECT_NEAR(acc.result().tracked_lag_ms, m.tracked_lag_ms, 1e-9);
 }
 
+// pe_by_joint and height_error_by_joint: one knee 3 cm forward and 4 cm low in one clip, the
+// other clip exact; each clip counts by its frames (as mpjpe_cm), every other joint is 0, and
+// the joints' mean of pe_by_joint is mpjpe_cm.
+TEST(Metrics, PositionErrorByJointFindsTheMovedJointAndItsHeight) {
+  MetricsAccumulator acc(walk().skeleton);
+  const int knee = walk().skeleton.find("LowerLeg_R");
+  const int moved_frames = walk().frame_count(), exact_frames = 20;
+  for (const int frames : {moved_frames, exact_frames}) {
+    acc.begin_clip(30.0);
+    for (int f = 0; f < frames; ++f) {
+      const GlobalPose truth = frame(f);
+      GlobalPose pred = truth;
+      if (frames == moved_frames) pred.positions[static_cast<size_t>(knee)] += Vec3(0.0, -0.04, 0.03);
+      acc.add_frame(pred, truth);
+    }
+    (void)acc.end_clip();
+  }
+  const double share = static_cast<double>(moved_frames) / (moved_frames + exact_frames);
+  const auto pe = acc.pe_by_joint(), height = acc.height_error_by_joint();
+  ASSERT_EQ(pe.size(), 21u);
+  ASSERT_EQ(height.size(), 21u);
+  double mean = 0.0;
+  for (size_t k = 0; k < pe.size(); ++k) {
+    mean += pe[k].second / 21.0;
+    EXPECT_EQ(pe[k].first, height[k].first);
+    const bool moved = pe[k].first == "LowerLeg_R";
+    EXPECT_NEAR(pe[k].second, moved ? 5.0 * share : 0.0, 1e-9) << pe[k].first;
+    EXPECT_NEAR(height[k].second, moved ? -4.0 * share : 0.0, 1e-9) << pe[k].first;
+  }
+  EXPECT_NEAR(mean, acc.result().mpjpe_cm, 1e-9);
+}
+
 // jitter_by_joint: one elbow shaken by +-1 cm alternately (third difference 8 cm, jerk 8 cm x
 // 30^3 = 2160 m/s^3 at every quadruple) shows up at that joint alone; the joints' mean is
 // jitter_m_s3, over two clips of different lengths too; the truth's by joint is its own.

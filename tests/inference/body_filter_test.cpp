@@ -205,6 +205,12 @@ TEST(Diffusion, BodyFilterIsOnByDefaultAndRefusesBadOptions) {
   lock = {};
   lock.foot_release_half_life_s = 0.0;
   EXPECT_NE(validate_foot_lock(lock).find("foot_release_half_life_s"), std::string::npos);
+  // So is the arms' elbow pole bias.
+  for (const double bias : {std::numeric_limits<double>::quiet_NaN(), -0.1, 11.0}) {
+    DiffusionOptions arms;
+    arms.elbow_pole_bias_m = bias;
+    EXPECT_THROW(DiffusionReconstructor(tiny_model(), arms), std::invalid_argument) << bias;
+  }
 }
 
 TEST(Diffusion, BodyFilterDoesNotAllocateAndResetStartsItOver) {

@@ -109,6 +109,10 @@ struct MethodReport {
   std::int64_t unanswered_frames = 0;
   // jitter_m_s3 joint by joint (MetricsAccumulator::jitter_by_joint; whole report only, empty in groups).
   std::vector<std::pair<std::string, double>> jitter_by_joint_m_s3;
+  // The position error and its signed height component joint by joint, cm
+  // (MetricsAccumulator::pe_by_joint, height_error_by_joint; whole report only, empty in groups).
+  std::vector<std::pair<std::string, double>> pe_by_joint_cm;
+  std::vector<std::pair<std::string, double>> height_error_by_joint_cm;
 };
 
 // The results of the clips of one group (docs/evaluation.md, "Groups").

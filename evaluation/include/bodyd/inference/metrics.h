@@ -143,6 +143,11 @@ class MetricsAccumulator {
   // their mean is jitter_m_s3), of the reconstruction and of the truth: where the jitter is.
   [[nodiscard]] std::vector<std::pair<std::string, double>> jitter_by_joint() const;
   [[nodiscard]] std::vector<std::pair<std::string, double>> truth_jitter_by_joint() const;
+  // The position error joint by joint (cm, the 21 body joints by name as jitter_by_joint; the
+  // mean over joints is mpjpe_cm), and its signed height component (cm, the prediction's height
+  // minus the truth's, averaged): where the error is, and whether a joint sits too high or too low.
+  [[nodiscard]] std::vector<std::pair<std::string, double>> pe_by_joint() const;
+  [[nodiscard]] std::vector<std::pair<std::string, double>> height_error_by_joint() const;
   [[nodiscard]] int clips() const { return clips_; }
   [[nodiscard]] std::int64_t frames() const { return frames_; }
 
@@ -194,6 +199,7 @@ class MetricsAccumulator {
   // jitter_by_joint(): the names of sets_.all and a term per joint (reconstruction, truth).
   std::vector<std::string> joint_names_;
   std::vector<Term> joint_jitter_, truth_joint_jitter_;
+  std::vector<Term> joint_pe_, joint_height_error_;  // pe_by_joint(), height_error_by_joint()
   [[nodiscard]] std::vector<std::pair<std::string, double>> named_means(const std::vector<Term>& terms) const;
 };
 
