@@ -479,6 +479,18 @@ TEST(ViewerBridge, IdleConnectionsDoNotBlockThePage) {
   int closed = 0;
   for (auto& s : slow) closed += closed_by_server(s->fd(), 8000) ? 1 : 0;
   EXPECT_EQ(closed, 20);
+  // The cap counts a WebSocket from its handshake until its connection is gone: with the 16
+  // closed, their slots come back and a new page is accepted.
+  sockets.clear();
+  std::string head;
+  for (int i = 0; i < 50; ++i) {
+    Socket again(stack.http_port);
+    ASSERT_TRUE(again.ok());
+    head = ws_handshake(again, stack.http_port);
+    if (head.rfind("HTTP/1.1 101", 0) == 0) break;
+    std::this_thread::sleep_for(100ms);
+  }
+  EXPECT_EQ(head.rfind("HTTP/1.1 101", 0), 0u) << head;
 }
 
 // Issue 20 item 7: a ping from the page is answered with a pong carrying its payload (RFC 6455

@@ -221,8 +221,8 @@ class Bridge {
     }
     const char* upgrade = mg_get_header(conn, "Upgrade");
     if (upgrade && mg_strcasecmp(upgrade, "websocket") == 0) {
-      std::lock_guard lock(clients_mutex_);
-      if (clients_.size() >= kMaxWebSockets) {
+      std::lock_guard lock(ws_slots_mutex_);
+      if (ws_slots_.size() >= kMaxWebSockets) {
         return reply(conn, 503, "text/plain", fmt::format("already {} viewers connected (the most)\n", kMaxWebSockets));
       }
     }
@@ -233,6 +233,11 @@ class Bridge {
   // request per connection: keep-alive is off). The address rides along as the connection's
   // user data until CivetWeb closes it (the request info is gone by then for some connections).
   void on_connection_close(const mg_connection* conn) {
+    {
+      // A WebSocket's slot is free once its connection is gone, however its handshake ended.
+      std::lock_guard lock(ws_slots_mutex_);
+      std::erase(ws_slots_, conn);
+    }
     auto* address = static_cast<std::string*>(mg_get_user_connection_data(conn));
     if (!address) return;
     {
@@ -294,10 +299,15 @@ class Bridge {
     return reply(conn, 200, content_type(*file), *body, method == "HEAD");
   }
 
-  int on_ws_connect(const mg_connection*) {
-    // on_begin_request refuses the handshake with a 503 when full; two at once can both pass it.
-    std::lock_guard lock(clients_mutex_);
-    return clients_.size() >= kMaxWebSockets ? 1 : 0;  // non-zero refuses
+  int on_ws_connect(const mg_connection* conn) {
+    // on_begin_request refuses the handshake with a 503 when full; two at once can both pass it,
+    // so the slot is taken here, where the check and the taking are one step. It is taken before
+    // the handshake is answered (clients_ has the connection only after, in on_ws_ready), so a
+    // client that has its 101 holds its slot.
+    std::lock_guard lock(ws_slots_mutex_);
+    if (ws_slots_.size() >= kMaxWebSockets) return 1;  // non-zero refuses
+    ws_slots_.push_back(conn);
+    return 0;
   }
 
   void on_ws_ready(mg_connection* conn) {
@@ -562,6 +572,11 @@ class Bridge {
   Shared shared_;
   std::mutex clients_mutex_;
   std::vector<WsClient> clients_;
+  // The WebSockets accepted (on_ws_connect) and not yet closed (on_connection_close): the cap
+  // counts these. A mutex of its own, never held while calling CivetWeb: on_connection_close
+  // runs with the connection's lock held.
+  std::mutex ws_slots_mutex_;
+  std::vector<const mg_connection*> ws_slots_;
   std::mutex daemon_mutex_;
   DaemonView daemon_;
   bool hold_load_ = false;
