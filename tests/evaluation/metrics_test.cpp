@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
 
 using namespace bodyd;
 
@@ -295,20 +296,31 @@ TEST(Metrics, TrackedLagIsTheHeadAndHandsAlone) {
 // pe_by_joint and height_error_by_joint: one knee 3 cm forward and 4 cm low in one clip, the
 // other clip exact; each clip counts by its frames (as mpjpe_cm), every other joint is 0, and
 // the joints' mean of pe_by_joint is mpjpe_cm.
-TEST(Metrics, PositionErrorByJointFindsTheMovedJointAndItsHeight) {
-  MetricsAccumulator acc(walk().skeleton);
-  const int knee = walk().skeleton.find("LowerLeg_R");
-  const int moved_frames = walk().frame_count(), exact_frames = 20;
-  for (const int frames : {moved_frames, exact_frames}) {
+namespace {
+// Two clips, the walk's frames then its first 20, each frame the truth changed by `change(clip,
+// frame, pose)` as the reconstruction.
+void two_clips(MetricsAccumulator& acc, const std::function<void(int, int, GlobalPose&)>& change) {
+  const int lengths[2] = {walk().frame_count(), 20};
+  for (int clip = 0; clip < 2; ++clip) {
     acc.begin_clip(30.0);
-    for (int f = 0; f < frames; ++f) {
+    for (int f = 0; f < lengths[clip]; ++f) {
       const GlobalPose truth = frame(f);
       GlobalPose pred = truth;
-      if (frames == moved_frames) pred.positions[static_cast<size_t>(knee)] += Vec3(0.0, -0.04, 0.03);
+      change(clip, f, pred);
       acc.add_frame(pred, truth);
     }
     (void)acc.end_clip();
   }
+}
+}  // namespace
+
+TEST(Metrics, PositionErrorByJointFindsTheMovedJointAndItsHeight) {
+  MetricsAccumulator acc(walk().skeleton);
+  const auto knee = static_cast<size_t>(walk().skeleton.find("LowerLeg_R"));
+  const int moved_frames = walk().frame_count(), exact_frames = 20;
+  two_clips(acc, [&](int clip, int, GlobalPose& pred) {
+    if (clip == 0) pred.positions[knee] += Vec3(0.0, -0.04, 0.03);
+  });
   const double share = static_cast<double>(moved_frames) / (moved_frames + exact_frames);
   const auto pe = acc.pe_by_joint(), height = acc.height_error_by_joint();
   ASSERT_EQ(pe.size(), 21u);
@@ -329,17 +341,8 @@ TEST(Metrics, PositionErrorByJointFindsTheMovedJointAndItsHeight) {
 // jitter_m_s3, over two clips of different lengths too; the truth's by joint is its own.
 TEST(Metrics, JitterByJointFindsTheShakenJoint) {
   MetricsAccumulator acc(walk().skeleton);
-  const int elbow = walk().skeleton.find("LowerArm_L");
-  for (const int frames : {walk().frame_count(), 20}) {
-    acc.begin_clip(30.0);
-    for (int f = 0; f < frames; ++f) {
-      const GlobalPose truth = frame(f);
-      GlobalPose pred = truth;
-      pred.positions[static_cast<size_t>(elbow)].y() += (f % 2 == 0 ? 0.01 : -0.01);
-      acc.add_frame(pred, truth);
-    }
-    (void)acc.end_clip();
-  }
+  const auto elbow = static_cast<size_t>(walk().skeleton.find("LowerArm_L"));
+  two_clips(acc, [&](int, int f, GlobalPose& pred) { pred.positions[elbow].y() += (f % 2 == 0 ? 0.01 : -0.01); });
   const auto pred = acc.jitter_by_joint(), truth = acc.truth_jitter_by_joint();
   ASSERT_EQ(pred.size(), 21u);
   ASSERT_EQ(truth.size(), 21u);
