@@ -154,6 +154,11 @@ int main(int argc, char** argv) {
                  fmt::format("diffusion: a planted toe follows the prediction at most this fast, m/s (default {})",
                              defaults.foot_contact_speed_m_s))
       ->check(finite)->check(CLI::NonNegativeNumber);
+  app.add_option("--leg-position-blend", method_options.leg_position_blend,
+                 fmt::format("diffusion: each leg is bent so its ankle moves this fraction of the way from where the "
+                             "joint rotations put it to the ankle position the network predicts (0-1, default {})",
+                             defaults.leg_position_blend))
+      ->check(finite)->check(CLI::Range(0.0, 1.0));
   app.add_option("--elbow-pole-bias-m", method_options.elbow_pole_bias_m,
                  fmt::format("diffusion: the arms' elbow pole is the predicted elbow pushed this far outward, down "
                              "and back, m (default {})",

@@ -54,7 +54,30 @@ std::string validate_foot_lock(const DiffusionOptions& o) {
   if (!(std::isfinite(o.foot_release_half_life_s) && o.foot_release_half_life_s > 0.0 &&
         o.foot_release_half_life_s <= 100.0))
     return fmt::format("foot lock foot_release_half_life_s must be in (0, 100] s, not {}", o.foot_release_half_life_s);
+  if (!in(o.leg_position_blend, 0.0, 1.0))
+    return fmt::format("leg_position_blend must be in [0, 1], not {}", o.leg_position_blend);
   return {};
+}
+
+void bend_legs_toward_predicted_ankles(const Skeleton& skeleton, const std::array<std::optional<TwoBoneChain>, 2>& legs,
+                                       features::ConstFrame frame, const features::Canonical& canon, double blend,
+                                       Pose& pose, GlobalPose& global) {
+  // The network predicts every joint's position beside its rotation; decoding uses the rotations
+  // (and the Hips position), so an ankle sits where three rotations about the hip, knee and ankle
+  // put it. Its predicted position is a second estimate (docs/models.md, "The legs toward the
+  // predicted ankles").
+  if (!(blend > 0.0)) return;
+  for (const auto& leg : legs) {
+    if (!leg) continue;
+    Vec3 ankle;
+    Quat unused;
+    features::decode_joint(leg->end, frame, canon, ankle, unused);
+    const auto end = static_cast<size_t>(leg->end);
+    TwoBoneTarget target;
+    target.position_m = global.positions[end] + blend * (ankle - global.positions[end]);
+    target.rotation = global.rotations[end];
+    (void)solve_two_bone_ik(skeleton, *leg, target, pose, global);
+  }
 }
 
 DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::Model> model,
@@ -414,6 +437,8 @@ void DiffusionReconstructor::sample_newest_frame(const features::Canonical& cano
     newest[k] = newest[k] * stdv[static_cast<size_t>(k)] + mean[static_cast<size_t>(k)];
   features::decode_pose(skeleton_, features::ConstFrame(newest, features::kDim), canon, scratch_pose_, contact);
   forward_kinematics(skeleton_, scratch_pose_, out_global_);
+  bend_legs_toward_predicted_ankles(skeleton_, legs_, features::ConstFrame(newest, features::kDim), canon,
+                                    options_.leg_position_blend, scratch_pose_, out_global_);
   // Contact with hysteresis, so a value near 0.5 does not flicker between planted and free.
   for (size_t s = 0; s < 2; ++s) {
     const float v = newest[features::kContactOffset + static_cast<int>(s)];

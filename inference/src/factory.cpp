@@ -61,6 +61,7 @@ std::unique_ptr<Reconstructor> make_reconstructor_of(std::string_view method,
     if (options.foot_unlock_distance_m) d.foot_unlock_distance_m = *options.foot_unlock_distance_m;
     if (options.foot_release_half_life_s) d.foot_release_half_life_s = *options.foot_release_half_life_s;
     if (options.elbow_pole_bias_m) d.elbow_pole_bias_m = *options.elbow_pole_bias_m;
+    if (options.leg_position_blend) d.leg_position_blend = *options.leg_position_blend;
     try {
       return std::make_unique<DiffusionReconstructor>(std::move(model), d);
     } catch (const std::invalid_argument& e) {

@@ -16,6 +16,7 @@
 #include <array>
 #include <cmath>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <optional>
 
@@ -699,4 +700,49 @@ TEST(Features, WorldEntriesGiveWhatEncodePoseGives) {
     }
   }
   EXPECT_GT(compared, 20);
+}
+
+// DiffusionOptions::leg_position_blend: a frame whose ankle positions sit a few centimetres from
+// where its rotations put them (nearer the hips, so the target is reachable): blend 1 puts each
+// ankle on its predicted position, 0.5 halfway, 0 leaves the pose alone; the feet keep their
+// rotations and nothing but the legs moves.
+TEST(Diffusion, LegsBendTowardThePredictedAnkles) {
+  const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
+  const Skeleton& sk = clip.skeleton;
+  ASSERT_EQ(features::check_skeleton(sk), "");
+  GlobalPose truth;
+  forward_kinematics(sk, clip.frames[10], truth);
+  const auto head = static_cast<size_t>(features::kHead);
+  const features::Canonical canon = features::canonical_from_head(truth.positions[head], truth.rotations[head]);
+  std::array<float, features::kDim> frame{};
+  features::encode_pose(truth, {false, false}, canon, frame);
+  const std::array<std::optional<TwoBoneChain>, 2> legs = {
+      find_two_bone_chain(sk, "UpperLeg_L", "LowerLeg_L", "Foot_L"),
+      find_two_bone_chain(sk, "UpperLeg_R", "LowerLeg_R", "Foot_R")};
+  ASSERT_TRUE(legs[0] && legs[1]);
+  const Vec3 offsets[2] = {Vec3(0.03, 0.05, 0.02), Vec3(-0.02, 0.04, -0.03)};
+  for (size_t s = 0; s < 2; ++s) {
+    const auto end = static_cast<size_t>(legs[s]->end);
+    features::encode_joint(legs[s]->end, truth.positions[end] + offsets[s], truth.rotations[end], canon, frame);
+  }
+  for (const double blend : {0.0, 0.5, 1.0}) {
+    Pose pose = clip.frames[10];
+    GlobalPose global = truth;
+    bend_legs_toward_predicted_ankles(sk, legs, frame, canon, blend, pose, global);
+    for (size_t s = 0; s < 2; ++s) {
+      const auto end = static_cast<size_t>(legs[s]->end);
+      EXPECT_LT((global.positions[end] - (truth.positions[end] + blend * offsets[s])).norm(), 1e-5) << blend;
+      EXPECT_LT(global.rotations[end].angularDistance(truth.rotations[end]), 1e-5) << blend;
+    }
+    for (const char* joint : {"Hips", "Head", "Hand_L", "Hand_R", "UpperLeg_L", "UpperLeg_R"}) {
+      const auto j = static_cast<size_t>(sk.find(joint));
+      EXPECT_LT((global.positions[j] - truth.positions[j]).norm(), 1e-9) << joint << " " << blend;
+    }
+  }
+  // The option is checked with the foot lock's.
+  DiffusionOptions bad;
+  for (const double blend : {std::numeric_limits<double>::quiet_NaN(), -0.1, 1.5}) {
+    bad.leg_position_blend = blend;
+    EXPECT_NE(validate_foot_lock(bad).find("leg_position_blend"), std::string::npos) << blend;
+  }
 }

@@ -44,13 +44,19 @@ struct DiffusionOptions {
   double hand_blend_max_speed_m_s = 0.6;  // ... and those eases move the hand at most this much faster
   // The foot lock's defaults and body_filter's were chosen on the style-held-out clips
   // (docs/models.md, "Post-processing chosen on unseen styles").
-  float contact_on = 0.35f, contact_off = 0.35f;  // contact hysteresis on the predicted contact value
-                                                 // (0.4 until the CPU-trained twin: docs/models.md, "The twin trained on the CPU")
+  float contact_on = 0.45f, contact_off = 0.45f;  // contact hysteresis on the predicted contact value
+                                                 // (0.4, then 0.35 with the CPU-trained twin, then 0.45 with the
+                                                 // legs' blend: docs/models.md, "The legs toward the predicted ankles")
   bool foot_lock = true;       // planted feet (predicted contact) do not slide (the leg swings about the hip)
   double foot_contact_speed_m_s = 0.0;    // a planted toe follows the prediction at most this fast
   double foot_unlock_distance_m = 0.60;   // a planted foot further than this from its prediction re-plants
                                           // (0.40 until the tcnmlp-v1 model: docs/models.md, "The context model at scale")
   double foot_release_half_life_s = 0.15; // a lifted foot eases from its planted spot to the prediction
+  // The legs: each is bent (two-bone IK, the foot keeping its rotation) so that its ankle moves
+  // this fraction of the way from where the decoded joint rotations put it to the ankle position
+  // the network predicts beside them (0: the rotations alone). Chosen on the style-held-out clips
+  // (docs/models.md, "The legs toward the predicted ankles").
+  double leg_position_blend = 0.75;
   int emitted_capacity = 512;  // emitted frames kept for feedback (>= W * output rate / model fps)
   TrackerHistoryOptions history;
   OneEuroOptions filter;       // tracker samples (network and tracked joints); clean ones pass unchanged
@@ -61,9 +67,19 @@ struct DiffusionOptions {
   BodySolverOptions body;
 };
 
-// Empty when the foot lock's options are usable (finite, contacts in [0, 1], distances, speed
-// and half-life in range), otherwise what is wrong; the constructor throws std::invalid_argument.
+// Empty when the foot lock's and the legs' options are usable (finite, contacts and
+// leg_position_blend in [0, 1], distances, speed and half-life in range), otherwise what is
+// wrong; the constructor throws std::invalid_argument.
 [[nodiscard]] std::string validate_foot_lock(const DiffusionOptions& options);
+
+// DiffusionOptions::leg_position_blend on a decoded frame: each leg of `legs` (UpperLeg, LowerLeg,
+// Foot) is bent by two-bone IK, the knee toward where it is and the foot keeping its global
+// rotation, so that its ankle moves `blend` (in [0, 1]) of the way from where `global` has it to
+// the ankle position in `frame` (features, denormalised; canonical frame `canon`). `global` must
+// hold forward kinematics of `pose`; both are updated. Does not allocate.
+void bend_legs_toward_predicted_ankles(const Skeleton& skeleton, const std::array<std::optional<TwoBoneChain>, 2>& legs,
+                                       features::ConstFrame frame, const features::Canonical& canon, double blend,
+                                       Pose& pose, GlobalPose& global);
 
 class DiffusionReconstructor final : public Reconstructor {
  public:
@@ -168,7 +184,7 @@ class DiffusionReconstructor final : public Reconstructor {
   OneEuroFilter anchor_filter_;
   std::optional<UpperBody> upper_body_;
   std::optional<TwoBoneChain> arms_[2];
-  std::optional<TwoBoneChain> legs_[2];
+  std::array<std::optional<TwoBoneChain>, 2> legs_;
  // UpperLeg, LowerLeg, Foot
   void lock_feet(const std::array<bool, 2>& contact, double dt_s);
 

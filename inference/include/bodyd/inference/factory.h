@@ -40,6 +40,7 @@ struct ReconstructorOptions {
   std::optional<float> contact_on, contact_off;
   std::optional<double> foot_contact_speed_m_s, foot_unlock_distance_m, foot_release_half_life_s;
   std::optional<double> elbow_pole_bias_m;  // the arms' elbow pole (DiffusionOptions; bodyd-eval's --elbow-pole-bias-m)
+  std::optional<double> leg_position_blend;  // the legs (DiffusionOptions; bodyd-eval's --leg-position-blend)
 };
 
 // method "ik": the fixed-rule baseline (ik.h) on `skeleton_hint` (required; model_path unused).
