@@ -56,6 +56,8 @@ std::string validate_foot_lock(const DiffusionOptions& o) {
     return fmt::format("foot lock foot_release_half_life_s must be in (0, 100] s, not {}", o.foot_release_half_life_s);
   if (!in(o.leg_position_blend, 0.0, 1.0))
     return fmt::format("leg_position_blend must be in [0, 1], not {}", o.leg_position_blend);
+  if (!in(o.elbow_pole_bias_m, 0.0, 10.0))
+    return fmt::format("elbow_pole_bias_m must be in [0, 10] m, not {}", o.elbow_pole_bias_m);
   return {};
 }
 
@@ -95,9 +97,6 @@ DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::
   if (std::string err = validate(options.filter); !err.empty()) throw std::invalid_argument(err);
   if (std::string err = validate(options.body_filter); !err.empty()) throw std::invalid_argument(err);
   if (std::string err = validate_foot_lock(options); !err.empty()) throw std::invalid_argument(err);
-  if (!(std::isfinite(options.elbow_pole_bias_m) && options.elbow_pole_bias_m >= 0.0 && options.elbow_pole_bias_m <= 10.0))
-    throw std::invalid_argument(
-        fmt::format("elbow_pole_bias_m must be in [0, 10] m, not {}", options.elbow_pole_bias_m));
   if (std::string err = features::check_skeleton(skeleton_); !err.empty())
     throw std::invalid_argument(fmt::format("{}: model skeleton: {}", model_->source, err));
   if (network_->dim() != features::kDim)

@@ -209,6 +209,7 @@ TEST(Diffusion, BodyFilterIsOnByDefaultAndRefusesBadOptions) {
   for (const double bias : {std::numeric_limits<double>::quiet_NaN(), -0.1, 11.0}) {
     DiffusionOptions arms;
     arms.elbow_pole_bias_m = bias;
+    EXPECT_NE(validate_foot_lock(arms).find("elbow_pole_bias_m"), std::string::npos) << bias;
     EXPECT_THROW(DiffusionReconstructor(tiny_model(), arms), std::invalid_argument) << bias;
   }
 }

@@ -67,9 +67,9 @@ struct DiffusionOptions {
   BodySolverOptions body;
 };
 
-// Empty when the foot lock's and the legs' options are usable (finite, contacts and
-// leg_position_blend in [0, 1], distances, speed and half-life in range), otherwise what is
-// wrong; the constructor throws std::invalid_argument.
+// Empty when the foot lock's, the legs' and the arms' options are usable (finite, contacts and
+// leg_position_blend in [0, 1], distances, speed, half-life and elbow_pole_bias_m in range),
+// otherwise what is wrong; the constructor throws std::invalid_argument.
 [[nodiscard]] std::string validate_foot_lock(const DiffusionOptions& options);
 
 // DiffusionOptions::leg_position_blend on a decoded frame: each leg of `legs` (UpperLeg, LowerLeg,
