@@ -5,6 +5,7 @@
 
 #include "../test_paths.h"
 #include "bodyd/test/files.h"
+#include "bodyd/test/process.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -23,12 +24,6 @@ namespace {
 
 using bodyd::test::read_file;
 
-std::string shell_quote(const std::string& s) {
-  std::string out = "'";
-  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return out + "'";
-}
-
 struct ProcessResult {
   int exit_code = -1;
   std::string out, err;
@@ -45,17 +40,18 @@ class ToolsTest : public ::testing::Test {
     std::error_code ec;
     fs::remove_all(dir_, ec);
   }
-  // Runs bin/<tool> with the arguments; captures exit code, stdout and stderr.
+  // Runs bin/<tool> with the arguments as its own argv (posix_spawn, no shell: a single shell
+  // string holding every data-set path would pass Linux's 128 KiB limit on one argument);
+  // captures exit code, stdout and stderr.
   ProcessResult run(const std::string& tool, const std::vector<std::string>& args) {
-    std::string cmd = shell_quote((test::bin_dir() / tool).string());
-    for (const auto& a : args) cmd += " " + shell_quote(a);
-    const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
-    cmd += " >" + shell_quote(out.string()) + " 2>" + shell_quote(err.string());
-    const int status = std::system(cmd.c_str());
+    std::vector<std::string> argv{(test::bin_dir() / tool).string()};
+    argv.insert(argv.end(), args.begin(), args.end());
+    const test::RunResult rr =
+        test::run(argv, {.stdout_path = dir_ / "stdout.txt", .stderr_path = dir_ / "stderr.txt"}, 300000);
     ProcessResult r;
-    r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    r.out = read_file(out);
-    r.err = read_file(err);
+    r.exit_code = rr.exit_code;
+    r.out = rr.out;
+    r.err = rr.err;
     return r;
   }
   fs::path dir_;
