@@ -67,7 +67,9 @@ class SteamvrOutput final : public Output {
       poses_[n].rotation = (undo * g.rotations[k]).normalized();
       ++n;
     }
-    return server_->publish(poses_.data(), n, out_error);
+    // A pose whose headset is lost (rotation only, occluded, gone) is a guess: the trackers are
+    // reported OCCLUDED until the headset is tracked again (docs/outputs.md "steamvr").
+    return server_->publish(poses_.data(), n, frame.head_as_received.valid, out_error);
   }
 
   nlohmann::json status() const override {
@@ -81,7 +83,9 @@ class SteamvrOutput final : public Output {
             {"dropped", b.dropped},
             {"rejected", b.rejected},
             {"rejected_by_reason", b.rejected_by_reason},
-            {"devices_in", b.roles_in}};
+            {"devices_in", b.roles_in},
+            {"trackers_status", b.trackers_tracked ? "ok" : "occluded"},
+            {"statuses_sent", b.statuses_out}};
   }
 
   void close() override {
@@ -104,9 +108,10 @@ class SteamvrOutput final : public Output {
 }  // namespace
 
 std::unique_ptr<Output> make_steamvr_output(const OutputSpec& spec, const OutputEnv&, std::string& error) {
-  // SOCKET, default $XDG_RUNTIME_DIR/SlimeVRDriver.
+  // SOCKET, default $XDG_DATA_HOME/dev.slimevr.SlimeVR/SlimeVRDriver (where the driver finds it
+  // from inside SteamVR's container).
   const SocketOfTarget driver_socket = [](const std::string& target, std::string& e) {
-    return sv::socket_path(target, sv::kDriverSocketName, e);
+    return sv::socket_path(target, sv::kDriverSocketName, e, sv::default_driver_socket_dir);
   };
   PlaceMask mask = 0;
   std::string path;

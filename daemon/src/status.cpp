@@ -29,7 +29,7 @@ json skeleton_reply(const protocol::SkeletonMessage& skeleton, double head_heigh
 }
 
 json source_status_json(const drivers::SourceStatus& st) {
-  return {{"name", st.name},
+  json j{{"name", st.name},
           {"connected", st.connected},
           {"finished", st.finished},
           {"samples", st.samples},
@@ -38,6 +38,8 @@ json source_status_json(const drivers::SourceStatus& st) {
           {"rejected", st.rejected},
           {"rejected_by_reason", st.rejected_by_reason},
           {"counters", st.counters}};
+  if (!st.devices.empty()) j["devices"] = st.devices;
+  return j;
 }
 
 json mounting_status_json(const Mounting& mounting, const Mounting& defaults, const MountingOrigins& origins,

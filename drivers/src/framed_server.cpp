@@ -155,6 +155,7 @@ void FramedServer::close_dropped() {
 
 void FramedServer::run() {
   std::vector<pollfd> fds;
+  int wait_ms = 0;
   while (!stop_.load()) {
     fds.clear();
     {
@@ -164,7 +165,7 @@ void FramedServer::run() {
       for (const auto& c : connections_)
         fds.push_back({c->fd, static_cast<short>(POLLIN | (c->out.empty() ? 0 : POLLOUT)), 0});
     }
-    if (::poll(fds.data(), fds.size(), 100) < 0 && errno != EINTR) break;
+    if (::poll(fds.data(), fds.size(), wait_ms) < 0 && errno != EINTR) break;
     std::lock_guard lock(mutex_);
     if (fds[1].revents & POLLIN) {
       std::uint64_t v;
@@ -181,6 +182,11 @@ void FramedServer::run() {
       }
     }
     if (fds[0].revents & POLLIN) accept_all();
+    close_dropped();
+    wait_ms = std::clamp(handler_.tick(monotonic_ns()), 0, 100);
+    // What the tick appended (a paced update, a status) goes out now.
+    for (auto& c : connections_)
+      if (!c->drop && !c->out.empty()) flush(*c);
     close_dropped();
   }
 }

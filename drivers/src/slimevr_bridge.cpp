@@ -6,6 +6,7 @@
 #include "bodyd/paths/private_dir.h"
 
 #include "bodyd/motion/limits.h"
+#include "bodyd/motion/printable.h"
 
 #include <spdlog/spdlog.h>
 
@@ -15,6 +16,7 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <array>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -54,31 +56,52 @@ std::string prepare_dir(const std::filesystem::path& dir) {
 
 std::int64_t now_ns() { return monotonic_ns(); }
 
-// Which of bodyd's roles a SlimeVR role feeds (the headset and the two controllers).
+// Which of bodyd's roles a SlimeVR role feeds: the headset, and the controllers, which the
+// driver announces as LEFT_HAND / RIGHT_HAND (11 / 12, from Prop_ControllerRoleHint_Int32:
+// VRDriver.cpp, GetRoleForDevice) and other clients as LEFT_CONTROLLER / RIGHT_CONTROLLER.
 std::optional<Role> bodyd_role(std::int32_t r) {
   if (r == role::kHmd) return Role::Head;
-  if (r == role::kLeftController) return Role::LeftHand;
-  if (r == role::kRightController) return Role::RightHand;
+  if (r == role::kLeftHand || r == role::kLeftController) return Role::LeftHand;
+  if (r == role::kRightHand || r == role::kRightController) return Role::RightHand;
   return std::nullopt;
 }
+
+// SlimeVR's role names (the driver's TrackerRole.hpp), for status and logs.
+std::string role_label(std::int32_t r) {
+  static constexpr std::array<std::string_view, role::kMax + 1> kNames{
+      "none",       "waist",         "left_foot",      "right_foot", "chest",          "left_knee",
+      "right_knee", "left_elbow",    "right_elbow",    "left_shoulder", "right_shoulder", "left_hand",
+      "right_hand", "left_controller", "right_controller", "head",   "neck",           "camera",
+      "keyboard",   "hmd",           "beacon",         "generic_controller"};
+  return r >= 0 && r <= role::kMax ? std::string(kNames[static_cast<std::size_t>(r)]) : std::to_string(r);
+}
+
+constexpr std::int64_t kForwardIntervalNs = static_cast<std::int64_t>(1e9 / kMaxForwardHz);
 
 // Logs the 1st, 2nd, 4th, 8th... occurrence of each reason.
 bool log_now(std::uint64_t count) { return count != 0 && (count & (count - 1)) == 0; }
 
 }  // namespace
 
-std::string default_socket_dir(std::string& error) {
-  if (std::string d = env("XDG_RUNTIME_DIR"); !d.empty()) return d;
+std::string default_driver_socket_dir(std::string& error) {
   if (std::string d = env("XDG_DATA_HOME"); !d.empty()) return d + "/dev.slimevr.SlimeVR";
   if (std::string h = env("HOME"); !h.empty()) return h + "/.local/share/dev.slimevr.SlimeVR";
+  error = "neither XDG_DATA_HOME nor HOME is set: name the socket path in the spec";
+  return {};
+}
+
+std::string default_socket_dir(std::string& error) {
+  if (std::string d = env("XDG_RUNTIME_DIR"); !d.empty()) return d;
+  if (std::string d = default_driver_socket_dir(error); !d.empty()) return d;
   error = "neither XDG_RUNTIME_DIR, XDG_DATA_HOME nor HOME is set: name the socket path in the spec";
   return {};
 }
 
-std::string socket_path(std::string_view argument, std::string_view name, std::string& error) {
+std::string socket_path(std::string_view argument, std::string_view name, std::string& error,
+                        std::string (*default_dir)(std::string&)) {
   std::string path(argument);
   if (path.empty()) {
-    const std::string dir = default_socket_dir(error);
+    const std::string dir = default_dir(error);
     if (dir.empty()) return {};
     path = dir + "/" + std::string(name);
   } else if (path.rfind("~/", 0) == 0) {
@@ -149,12 +172,18 @@ void limit_send_buffer(int fd, int bytes) { (void)::setsockopt(fd, SOL_SOCKET, S
 // The socket loop is FramedServer's (framed_server.h); what the bridge does with each event is here.
 struct BridgeServer::Impl final : FramedHandler {
   struct Device {           // a tracker a client announced
-    std::string serial;
+    std::string serial;     // the stats' key ("" when not listed)
     std::int32_t role = 0;
     std::optional<Role> bodyd;
+    bool status_ok = true;      // its last TrackerStatus was OK (none yet counts as OK)
+    bool imu_only = false;      // its last Position had data_source IMU
+    bool last_valid = false;    // the last sample forwarded (or held) was valid
+    std::int64_t last_forward_ns = INT64_MIN;
+    std::optional<SourceSample> held;  // the newest sample waiting for its turn
   };
   struct Connection final : FramedConnection {
     std::map<std::int32_t, Device> devices;  // by tracker_id
+    std::size_t listed = 0;                  // devices in the stats and the log (kMaxDevicesListed)
   };
 
   explicit Impl(std::string p) : path(std::move(p)), server(path, FramedServerLimits{}, *this) { stats.path = path; }
@@ -168,6 +197,9 @@ struct BridgeServer::Impl final : FramedHandler {
   std::vector<AnnouncedTracker> trackers;
   Encoder encoder;
   BridgeStats stats;
+  RateMeter rate;  // samples forwarded to the sink
+  std::int64_t last_tracked_publish_ns = INT64_MIN;  // the last publish() with a tracked headset
+  std::int64_t last_status_ns = 0;                   // the virtual trackers' status last sent
 
   std::mutex& mutex() const { return server.mutex(); }
 
@@ -179,12 +211,23 @@ struct BridgeServer::Impl final : FramedHandler {
       spdlog::warn("bridge {}: {} ({}; {} so far, logged at the 1st, 2nd, 4th, 8th...)", path, detail, reason, n);
   }
 
+  // The virtual trackers' status (OK while they have a body, else OCCLUDED) to one connection.
+  void send_status(FramedConnection& c) {
+    const std::int32_t st = stats.trackers_tracked ? status::kOk : status::kOccluded;
+    for (const AnnouncedTracker& t : trackers) encoder.tracker_status(c.out, t.id, st);
+    stats.statuses_out += trackers.size();
+  }
+  void send_status_to_all(std::int64_t now) {
+    for (const auto& c : server.connections())
+      if (!c->drop) send_status(*c);
+    last_status_ns = now;
+  }
+
+  // TrackerAdded for each virtual tracker, then its status. No Version: the driver sends its
+  // own and this server answers it.
   void announce(FramedConnection& c) {
-    encoder.version(c.out, kProtocolVersion);
-    for (const AnnouncedTracker& t : trackers) {
-      encoder.tracker_added(c.out, t.id, t.serial, t.name, t.role, "bodyd");
-      encoder.tracker_status(c.out, t.id, status::kOk);
-    }
+    for (const AnnouncedTracker& t : trackers) encoder.tracker_added(c.out, t.id, t.serial, t.name, t.role, "bodyd");
+    send_status(c);
   }
 
   void push_invalid(const Connection& c) {
@@ -199,6 +242,43 @@ struct BridgeServer::Impl final : FramedHandler {
       s.arrival_ns = s.sample.t_ns;
       s.source_index = source_index;
       sink->push(s);
+    }
+  }
+
+  // A device's sample toward the reconstruction: at once when its turn has come (or when it
+  // changes between valid and lost, which must be seen at once), else held as the newest.
+  void forward(Device& d, const SourceSample& s) {
+    if (sink == nullptr) return;
+    const bool change = s.sample.valid != d.last_valid;
+    d.last_valid = s.sample.valid;
+    if (change || d.last_forward_ns == INT64_MIN || s.arrival_ns - d.last_forward_ns >= kForwardIntervalNs) {
+      if (d.held) ++stats.coalesced;
+      d.held.reset();
+      d.last_forward_ns = s.arrival_ns;
+      sink->push(s);
+      ++stats.samples;
+      rate.count(s.arrival_ns);
+      return;
+    }
+    if (d.held) ++stats.coalesced;
+    d.held = s;
+  }
+
+  SourceSample sample_of(const Device& d, std::int64_t arrival_ns) const {
+    SourceSample s;
+    s.sample.t_ns = arrival_ns;
+    s.sample.role = *d.bodyd;
+    s.sample.frame = PoseFrame::Device;
+    s.arrival_ns = arrival_ns;
+    s.source_index = source_index;
+    return s;
+  }
+
+  void forget_devices(Connection& c) {
+    for (const auto& [id, d] : c.devices) {
+      if (d.serial.empty()) continue;
+      stats.roles_in.erase(d.serial);
+      stats.roles_use.erase(d.serial);
     }
   }
 
@@ -226,7 +306,7 @@ struct BridgeServer::Impl final : FramedHandler {
         return;
       case FramedDrop::Flood:
         reject("flood", "client " + std::to_string(c->number) + " sent more than " + std::to_string(kMaxFramesPerSecond) +
-                            " frames in a second: the connection is dropped");
+                            " frames in a second (a driver with 8 devices sends about 4,100): the connection is dropped");
         ++stats.dropped;
         return;
       case FramedDrop::SlowReader:
@@ -242,7 +322,9 @@ struct BridgeServer::Impl final : FramedHandler {
   }
 
   void closing(FramedConnection& c, std::size_t remaining, bool stopping) override {
-    push_invalid(static_cast<Connection&>(c));
+    auto& conn = static_cast<Connection&>(c);
+    push_invalid(conn);
+    forget_devices(conn);
     if (!stopping) spdlog::info("bridge {}: client {} left ({} now)", path, c.number, remaining);
   }
 
@@ -256,78 +338,122 @@ struct BridgeServer::Impl final : FramedHandler {
     handle(static_cast<Connection&>(c), m, arrival_ns);
   }
 
+  int tick(std::int64_t now) override {
+    std::int64_t wait_ns = 100'000'000;
+    for (const auto& cp : server.connections()) {
+      auto& c = static_cast<Connection&>(*cp);
+      for (auto& [id, d] : c.devices) {
+        if (!d.held) continue;
+        const std::int64_t due = d.last_forward_ns + kForwardIntervalNs;
+        if (now >= due) {
+          d.last_forward_ns = now;
+          if (sink != nullptr) {
+            sink->push(*d.held);
+            ++stats.samples;
+            rate.count(now);
+          }
+          d.held.reset();
+        } else {
+          wait_ns = std::min(wait_ns, due - now);
+        }
+      }
+    }
+    if (!trackers.empty()) {
+      if (stats.trackers_tracked && now - last_tracked_publish_ns > kTrackersLostAfterNs) {
+        stats.trackers_tracked = false;
+        send_status_to_all(now);
+      } else if (now - last_status_ns >= kStatusRepeatNs) {
+        send_status_to_all(now);
+      }
+      if (stats.trackers_tracked) wait_ns = std::min(wait_ns, last_tracked_publish_ns + kTrackersLostAfterNs + 1 - now);
+      wait_ns = std::min(wait_ns, last_status_ns + kStatusRepeatNs - now);
+    }
+    return static_cast<int>(std::clamp<std::int64_t>((wait_ns + 999'999) / 1'000'000, 0, 100));
+  }
+
+  void tracker_added(Connection& c, const Message& m) {
+    if (m.role < 0 || m.role > role::kMax) {
+      reject("unknown_role", "TrackerAdded " + std::to_string(m.tracker_id) + " \"" + printable(m.serial) +
+                                 "\" has role " + std::to_string(m.role) + " (SlimeVR's roles are 0-21)");
+      return;
+    }
+    Device& d = c.devices[m.tracker_id];
+    d.role = m.role;
+    d.bodyd = bodyd_role(m.role);
+    if (!d.bodyd) ++stats.ignored;
+    const std::string use = d.bodyd ? std::string(role_name(*d.bodyd)) : std::string("not used");
+    if (d.serial.empty() && c.listed >= kMaxDevicesListed) {
+      ++stats.devices_not_listed;
+      return;
+    }
+    if (d.serial.empty()) {
+      ++c.listed;
+      d.serial = m.serial.empty() ? "#" + std::to_string(c.number) + "." + std::to_string(m.tracker_id)
+                                  : printable(m.serial, 64);
+    }
+    stats.roles_in[d.serial] = m.role;
+    stats.roles_use[d.serial] = use;
+    spdlog::info("bridge {}: device {} \"{}\" ({}), role {} ({}) -> {}", path, m.tracker_id, d.serial,
+                 printable(m.name), m.role, role_label(m.role), use);
+  }
+
+  void position(Connection& c, const Message& m, std::int64_t arrival_ns) {
+    const auto it = c.devices.find(m.tracker_id);
+    if (it == c.devices.end()) {
+      reject("unknown_tracker", "Position for tracker " + std::to_string(m.tracker_id) + ", which no TrackerAdded announced");
+      return;
+    }
+    Device& d = it->second;
+    if (!d.bodyd || sink == nullptr) {
+      ++stats.ignored;
+      return;
+    }
+    if (m.has_data_source) d.imu_only = m.data_source == data_source::kImu;
+    SourceSample s = sample_of(d, arrival_ns);
+    if (!m.has_position || d.imu_only || !d.status_ok) {
+      // Rotation only, or a status that says the position is not tracked: the reconstruction
+      // treats the position as lost (as a hand out of the cameras' view) until FULL / OK again.
+      ++stats.untrusted;
+      forward(d, s);
+      return;
+    }
+    const Vec3 p(m.x, m.y, m.z);
+    const Quat q(m.qw, m.qx, m.qy, m.qz);
+    const double norm = std::sqrt(q.coeffs().squaredNorm());
+    if (!limits::position_plausible(p.x()) || !limits::position_plausible(p.y()) ||
+        !limits::position_plausible(p.z()) || !std::isfinite(norm) ||
+        std::fabs(norm - 1.0) > limits::kQuatNormTolerance) {
+      reject("bad_pose", "Position of tracker " + std::to_string(m.tracker_id) + " is not a pose (position (" +
+                             std::to_string(m.x) + ", " + std::to_string(m.y) + ", " + std::to_string(m.z) +
+                             ") m, quaternion norm " + std::to_string(norm) + ")");
+      return;
+    }
+    s.sample.valid = true;
+    s.sample.position_m = p;
+    s.sample.rotation = q.normalized();
+    forward(d, s);
+  }
+
+  void tracker_status(Connection& c, const Message& m, std::int64_t arrival_ns) {
+    const auto it = c.devices.find(m.tracker_id);
+    if (it == c.devices.end() || !it->second.bodyd || sink == nullptr) {
+      ++stats.ignored;
+      return;
+    }
+    Device& d = it->second;
+    d.status_ok = m.status == status::kOk;
+    // Lost (disconnected, occluded, busy, in error): seen at once, not at the next Position.
+    if (!d.status_ok) forward(d, sample_of(d, arrival_ns));
+  }
+
   void handle(Connection& c, const Message& m, std::int64_t arrival_ns) {
     switch (m.kind) {
-      case Message::Kind::TrackerAdded: {
-        if (m.role < 0 || m.role > role::kMax) {
-          reject("unknown_role", "TrackerAdded " + std::to_string(m.tracker_id) + " \"" + m.serial + "\" has role " +
-                                     std::to_string(m.role) + " (SlimeVR's roles are 0-21)");
-          return;
-        }
-        Device& d = c.devices[m.tracker_id];
-        d.serial = m.serial;
-        d.role = m.role;
-        d.bodyd = bodyd_role(m.role);
-        stats.roles_in[m.serial.empty() ? std::to_string(m.tracker_id) : m.serial] = m.role;
-        if (!d.bodyd) ++stats.ignored;
-        spdlog::info("bridge {}: device {} \"{}\" ({}), role {}{}", path, m.tracker_id, m.serial, m.name, m.role,
-                     d.bodyd ? std::string(" -> ") + std::string(role_name(*d.bodyd)) : std::string(" (not used)"));
-        return;
-      }
-      case Message::Kind::Position: {
-        const auto it = c.devices.find(m.tracker_id);
-        if (it == c.devices.end()) {
-          reject("unknown_tracker", "Position for tracker " + std::to_string(m.tracker_id) + ", which no TrackerAdded announced");
-          return;
-        }
-        if (!it->second.bodyd || sink == nullptr) {
-          ++stats.ignored;
-          return;
-        }
-        if (!m.has_position) {
-          ++stats.ignored;  // rotation only (IMU): the reconstruction needs positions
-          return;
-        }
-        const Vec3 p(m.x, m.y, m.z);
-        const Quat q(m.qw, m.qx, m.qy, m.qz);
-        const double norm = std::sqrt(q.coeffs().squaredNorm());
-        if (!limits::position_plausible(p.x()) || !limits::position_plausible(p.y()) ||
-            !limits::position_plausible(p.z()) || !std::isfinite(norm) ||
-            std::fabs(norm - 1.0) > limits::kQuatNormTolerance) {
-          reject("bad_pose", "Position of tracker " + std::to_string(m.tracker_id) + " is not a pose (position (" +
-                                 std::to_string(m.x) + ", " + std::to_string(m.y) + ", " + std::to_string(m.z) +
-                                 ") m, quaternion norm " + std::to_string(norm) + ")");
-          return;
-        }
-        SourceSample s;
-        s.sample.t_ns = arrival_ns;
-        s.sample.role = *it->second.bodyd;
-        s.sample.valid = true;
-        s.sample.position_m = p;
-        s.sample.rotation = q.normalized();
-        s.sample.frame = PoseFrame::Device;
-        s.arrival_ns = arrival_ns;
-        s.source_index = source_index;
-        sink->push(s);
-        ++stats.samples;
-        return;
-      }
-      case Message::Kind::TrackerStatus: {
-        const auto it = c.devices.find(m.tracker_id);
-        if (it != c.devices.end() && it->second.bodyd && sink != nullptr && m.status == status::kDisconnected) {
-          SourceSample s;
-          s.sample.t_ns = arrival_ns;
-          s.sample.role = *it->second.bodyd;
-          s.sample.frame = PoseFrame::Device;
-          s.arrival_ns = arrival_ns;
-          s.source_index = source_index;
-          sink->push(s);
-        } else {
-          ++stats.ignored;
-        }
-        return;
-      }
+      case Message::Kind::TrackerAdded: tracker_added(c, m); return;
+      case Message::Kind::Position: position(c, m, arrival_ns); return;
+      case Message::Kind::TrackerStatus: tracker_status(c, m, arrival_ns); return;
       case Message::Kind::Version:
+        encoder.version(c.out, kProtocolVersion);  // flushed at the end of the round
+        return;
       case Message::Kind::UserAction:
       case Message::Kind::Battery:
       case Message::Kind::Empty: ++stats.ignored; return;
@@ -378,29 +504,42 @@ void BridgeServer::set_trackers(std::vector<AnnouncedTracker> trackers) {
   std::lock_guard lock(impl_->mutex());
   impl_->trackers = std::move(trackers);
   for (const auto& c : impl_->server.connections()) {
-    for (const AnnouncedTracker& t : impl_->trackers) {
-      impl_->encoder.tracker_added(c->out, t.id, t.serial, t.name, t.role, "bodyd");
-      impl_->encoder.tracker_status(c->out, t.id, status::kOk);
-    }
+    impl_->announce(*c);
     impl_->server.flush(*c);
   }
   impl_->server.wake();
 }
 
-bool BridgeServer::publish(const TrackerPoseOut* poses, std::size_t count, std::string& out_error) {
+bool BridgeServer::publish(const TrackerPoseOut* poses, std::size_t count, bool tracked, std::string& out_error) {
   std::lock_guard lock(impl_->mutex());
-  ++impl_->stats.publishes;
+  Impl& im = *impl_;
+  ++im.stats.publishes;
+  const std::int64_t now = now_ns();
+  bool status_change = false;
+  if (tracked) {
+    im.last_tracked_publish_ns = now;
+    status_change = !im.stats.trackers_tracked;
+    im.stats.trackers_tracked = true;
+  } else if (im.stats.trackers_tracked) {
+    status_change = true;
+    im.stats.trackers_tracked = false;
+  }
+  if (status_change) im.last_status_ns = now;
   bool dropped = false, any = false;
-  for (const auto& c : impl_->server.connections()) {
+  for (const auto& c : im.server.connections()) {
     if (c->drop) continue;
     any = true;
-    for (std::size_t i = 0; i < count; ++i) impl_->encoder.position(c->out, poses[i].id, poses[i].position_m, poses[i].rotation);
-    impl_->stats.frames_out += count;
-    impl_->server.flush(*c);
+    if (status_change) im.send_status(*c);
+    if (tracked) {
+      for (std::size_t i = 0; i < count; ++i) im.encoder.position(c->out, poses[i].id, poses[i].position_m, poses[i].rotation);
+      im.stats.frames_out += count;
+    }
+    im.server.flush(*c);
     dropped |= c->drop;
   }
-  if (dropped) impl_->server.wake();
-  if (!any) ++impl_->stats.publishes_without_client;
+  if (status_change) im.server.wake();  // the thread's tick keeps the repeat's clock
+  if (dropped) im.server.wake();
+  if (!any) ++im.stats.publishes_without_client;
   if (dropped) {
     out_error = "a client that does not read was dropped";
     return false;
@@ -413,6 +552,7 @@ BridgeStats BridgeServer::stats() const {
   BridgeStats s = impl_->stats;
   s.clients = impl_->server.connections().size();
   s.frames_in = impl_->server.frames_in();
+  s.rate_hz = impl_->rate.rate_hz();
   return s;
 }
 
@@ -463,12 +603,19 @@ class BridgeSource final : public TrackerSource {
     s.name = name_;
     s.connected = b.clients > 0;
     s.samples = b.samples;
+    s.rate_hz = s.connected ? b.rate_hz : 0.0;  // forwarded to the reconstruction (coalesced)
     s.rejected = b.rejected;
     s.rejected_by_reason = b.rejected_by_reason;
     s.last_error = b.last_error;
-    s.counters = {{"clients", b.clients},         {"connections", b.connections}, {"disconnects", b.disconnects},
-                  {"dropped", b.dropped},         {"frames_in", b.frames_in},     {"ignored", b.ignored},
-                  {"refused", b.refused}};
+    s.counters = {{"clients", b.clients},     {"connections", b.connections}, {"disconnects", b.disconnects},
+                  {"dropped", b.dropped},     {"frames_in", b.frames_in},     {"ignored", b.ignored},
+                  {"refused", b.refused},     {"coalesced", b.coalesced},     {"untrusted", b.untrusted},
+                  {"devices_not_listed", b.devices_not_listed}};
+    for (const auto& [serial, r] : b.roles_in) {
+      const auto use = b.roles_use.find(serial);
+      s.devices[serial] = "role " + std::to_string(r) + " (" + role_label(r) + ") -> " +
+                          (use == b.roles_use.end() ? std::string("not used") : use->second);
+    }
     return s;
   }
 
@@ -482,7 +629,7 @@ class BridgeSource final : public TrackerSource {
 
 std::unique_ptr<TrackerSource> open_steamvr_source(std::string_view spec, std::string_view argument, std::string& error) {
   std::string e;
-  const std::string path = socket_path(argument, kDriverSocketName, e);
+  const std::string path = socket_path(argument, kDriverSocketName, e, default_driver_socket_dir);
   if (path.empty()) {
     error = "--source " + std::string(spec) + ": " + e;
     return nullptr;

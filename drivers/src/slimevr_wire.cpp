@@ -68,6 +68,8 @@ bool decode_message(const std::uint8_t* payload, std::size_t size, Message& out,
       out.has_position = p.has_x() && p.has_y() && p.has_z();
       out.x = p.x(), out.y = p.y(), out.z = p.z();
       out.qx = p.qx(), out.qy = p.qy(), out.qz = p.qz(), out.qw = p.qw();
+      out.has_data_source = p.has_data_source();
+      out.data_source = static_cast<std::int32_t>(p.data_source());
       break;
     }
     case bodyd_slimevr::ProtobufMessage::kUserAction: out.kind = Message::Kind::UserAction; break;

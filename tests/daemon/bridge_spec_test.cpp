@@ -20,12 +20,22 @@ std::unique_ptr<daemon::Output> make(const std::string& text, std::string& error
   return daemon::make_output(spec, daemon::OutputEnv{config}, error);
 }
 
-TEST(BridgeSpecs, DefaultsAreTheRuntimeDirectory) {
+// SteamVR's driver runs in the pressure-vessel container, whose XDG_RUNTIME_DIR is not the
+// user's: its socket goes where the driver looks next, $XDG_DATA_HOME/dev.slimevr.SlimeVR
+// (or ~/.local/share/...). Monado's sockets stay in the runtime directory.
+TEST(BridgeSpecs, DefaultsAreWhereEachDriverLooks) {
   ::setenv("XDG_RUNTIME_DIR", "/run/user/4242", 1);
+  ::setenv("XDG_DATA_HOME", "/home/u/.data", 1);
   std::string error;
   auto sv = make("steamvr", error);
   ASSERT_TRUE(sv) << error;
-  EXPECT_EQ(sv->name(), "steamvr:/run/user/4242/SlimeVRDriver");
+  EXPECT_EQ(sv->name(), "steamvr:/home/u/.data/dev.slimevr.SlimeVR/SlimeVRDriver");
+  {
+    auto src = drivers::open_source("steamvr", drivers::SourceOptions{}, error);
+    ASSERT_TRUE(src) << error;
+    EXPECT_EQ(src->name(), "steamvr:/home/u/.data/dev.slimevr.SlimeVR/SlimeVRDriver");
+  }
+  ::unsetenv("XDG_DATA_HOME");
   auto mo = make("monado?trackers=waist,feet,knees&rate=60", error);
   ASSERT_TRUE(mo) << error;
   EXPECT_EQ(mo->name(), "monado:/run/user/4242/SlimeVRRpc");
@@ -42,6 +52,11 @@ TEST(BridgeSpecs, DefaultsAreTheRuntimeDirectory) {
   EXPECT_EQ(drivers::slimevr::socket_path("", drivers::slimevr::kDriverSocketName, e),
             "/data/dev.slimevr.SlimeVR/SlimeVRDriver");
   ::unsetenv("XDG_DATA_HOME");
+  ::setenv("HOME", "/home/someone", 1);
+  EXPECT_EQ(drivers::slimevr::socket_path("", drivers::slimevr::kDriverSocketName, e,
+                                          drivers::slimevr::default_driver_socket_dir),
+            "/home/someone/.local/share/dev.slimevr.SlimeVR/SlimeVRDriver");
+  if (home_was) ::setenv("HOME", saved_home.c_str(), 1);
 }
 
 TEST(BridgeSpecs, BadSpecsSayWhatIsWrong) {

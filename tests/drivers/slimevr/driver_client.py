@@ -6,13 +6,27 @@ upstream schema), with Debian's python3-protobuf and the test's own .proto
 (tests/drivers/slimevr/driver_messages.proto, compiled by protoc into PB_DIR at build time).
 
   driver_client.py PB_DIR play SOCKET POSES OUT [--rate HZ] [--reconnect-after N] [--no-hands]
-      Connects (waiting up to 20 s for the socket), sends Version, TrackerAdded for the
-      headset (role 19) and the controllers (13, 14) and TrackerStatus OK, then one Position per
+      Connects (waiting up to 20 s for the socket), sends Version 2, TrackerAdded for the
+      headset (role 19) and the controllers (11, 12: LEFT_HAND / RIGHT_HAND, what the driver
+      announces from Prop_ControllerRoleHint_Int32; 13, 14 with --controller-roles, what Monado's
+      feeder announces) and TrackerStatus OK, then one Position per
       device per frame of POSES (lines "t_ns role x y z qx qy qz qw", role head/left_hand/
       right_hand; a frame starts at each head line) at HZ frames per second (the file
       REPEAT times with --repeat REPEAT). Everything the
       server sends is written to OUT, one JSON object per line. With --reconnect-after N the
       connection is closed after N frames and opened again (a driver that restarts).
+  driver_client.py PB_DIR driver SOCKET POSES OUT [--seconds S] [--generic N]
+                   [--imu-head T0 T1] [--lost-head T0 T1]
+      Behaves as SlimeVR's OpenVR driver (dcc0f56, VRDriver.cpp) does inside SteamVR: Version 2
+      once connected, TrackerAdded per device (headset 19, controllers 11 / 12, N generic
+      trackers: waist 1, left_foot 2, right_foot 3, chest 4), then on every turn of a 2 ms loop
+      a Position per device (the newest pose of POSES at that time, looped; data_source FULL)
+      and a Battery per device every 100 ms; TrackerStatus when a device's status changes.
+      From T0 to T1 seconds the headset is tracked by rotation only (--imu-head: status
+      OCCLUDED, Positions with data_source IMU) or lost (--lost-head: status OCCLUDED, no
+      Position). When the connection fails it connects again after a second. Every message
+      from bodyd is written to OUT with its time ("t", seconds since the start) and the run's
+      counts at the end ({"kind": "summary", ...}).
   driver_client.py PB_DIR bad SOCKET KIND OUT
       Sends one kind of bad input and writes to OUT whether bodyd closed the connection and
       whether a fresh connection is served afterwards (it gets the TrackerAdded announcements).
@@ -28,7 +42,14 @@ import time
 sys.path.insert(0, sys.argv[1])
 import driver_messages_pb2 as pb  # noqa: E402
 
-ROLES = {"head": (0, 19, "test-hmd"), "left_hand": (1, 13, "test-left"), "right_hand": (2, 14, "test-right")}
+# role -> (tracker id, SlimeVR role, serial). The driver announces controllers as LEFT_HAND /
+# RIGHT_HAND (11 / 12); CONTROLLER_ROLES are Monado's feeder's (13 / 14).
+ROLES = {"head": (0, 19, "test-hmd"), "left_hand": (1, 11, "test-left"), "right_hand": (2, 12, "test-right"),
+         "waist": (3, 1, "test-waist"), "left_foot": (4, 2, "test-left-foot"), "right_foot": (5, 3, "test-right-foot"),
+         "chest": (6, 4, "test-chest")}
+CONTROLLER_ROLES = {"left_hand": 13, "right_hand": 14}
+GENERIC = ["waist", "left_foot", "right_foot", "chest"]
+VERSION = 2  # the driver's PROTOCOL_VERSION (src/bridge/BridgeClient.hpp)
 
 
 def frame(msg):
@@ -58,6 +79,7 @@ class Reader:
         self.out = out
         self.closed = False
         self.count = 0
+        self.t0 = None  # when set, records carry "t" (seconds since t0)
 
     def poll(self, s, wait_s=0.0):
         while True:
@@ -94,17 +116,21 @@ class Reader:
             rec.update(id=m.tracker_status.tracker_id, status=m.tracker_status.status)
         elif kind == "version":
             rec.update(version=m.version.protocol_version)
+        if self.t0 is not None:
+            rec["t"] = round(time.monotonic() - self.t0, 4)
         self.count += 1
         if self.out:
             self.out.write(json.dumps(rec) + "\n")
 
 
-def announce(s, roles):
+def announce(s, roles, controller_roles=False):
     v = pb.ProtobufMessage()
-    v.version.protocol_version = 5
+    v.version.protocol_version = VERSION
     s.sendall(frame(v))
     for role in roles:
         tid, r, serial = ROLES[role]
+        if controller_roles:
+            r = CONTROLLER_ROLES.get(role, r)
         a = pb.ProtobufMessage()
         a.tracker_added.tracker_id = tid
         a.tracker_added.tracker_serial = serial
@@ -117,12 +143,27 @@ def announce(s, roles):
         s.sendall(frame(a) + frame(st))
 
 
-def position(role, x, y, z, qx, qy, qz, qw):
+def position(role, x, y, z, qx, qy, qz, qw, data_source=3):
     m = pb.ProtobufMessage()
     m.position.tracker_id = ROLES[role][0]
     m.position.x, m.position.y, m.position.z = x, y, z
     m.position.qx, m.position.qy, m.position.qz, m.position.qw = qx, qy, qz, qw
-    m.position.data_source = 3
+    m.position.data_source = data_source
+    return frame(m)
+
+
+def status(role, st):
+    m = pb.ProtobufMessage()
+    m.tracker_status.tracker_id = ROLES[role][0]
+    m.tracker_status.status = st
+    return frame(m)
+
+
+def battery(role):
+    m = pb.ProtobufMessage()
+    m.battery.tracker_id = ROLES[role][0]
+    m.battery.battery_level = 80.0
+    m.battery.is_charging = False
     return frame(m)
 
 
@@ -193,6 +234,119 @@ def play(args):
         s.close()
 
 
+def read_timed(path):
+    """POSES as [(t_s, {role: vals})], t from the first line, one entry per head line."""
+    out = []
+    t_first = None
+    with open(path) as f:
+        for line in f:
+            parts = line.split()
+            if len(parts) != 9:
+                continue
+            t = int(parts[0]) * 1e-9
+            if t_first is None:
+                t_first = t
+            if parts[1] == "head" or not out:
+                prev = dict(out[-1][1]) if out else {}
+                out.append((t - t_first, prev))
+            out[-1][1][parts[1]] = [float(v) for v in parts[2:]]
+    return out
+
+
+def driver(args):
+    path, poses, out_path = args[0], args[1], args[2]
+    seconds, generic = 10.0, 0
+    imu, lost = None, None
+    i = 3
+    while i < len(args):
+        if args[i] == "--seconds":
+            seconds = float(args[i + 1]); i += 2
+        elif args[i] == "--generic":
+            generic = int(args[i + 1]); i += 2
+        elif args[i] == "--imu-head":
+            imu = (float(args[i + 1]), float(args[i + 2])); i += 3
+        elif args[i] == "--lost-head":
+            lost = (float(args[i + 1]), float(args[i + 2])); i += 3
+        else:
+            raise SystemExit("unknown option " + args[i])
+    roles = ["head", "left_hand", "right_hand"] + GENERIC[:generic]
+    timed = read_timed(poses)
+    clip_s = timed[-1][0] + 1.0 / 90.0
+    counts = {"positions": 0, "batteries": 0, "connects": 0, "loops": 0}
+    with open(out_path, "w") as out:
+        t0 = time.monotonic()
+        s, reader = None, None
+        last_status, battery_at = {}, {}
+        k = 0
+        while True:
+            now = time.monotonic() - t0
+            if now >= seconds:
+                break
+            if s is None or reader.closed:
+                if s is not None:
+                    s.close()
+                    out.write(json.dumps({"kind": "closed", "t": round(now, 4)}) + "\n")
+                    time.sleep(1.0)  # the driver tries again a second later
+                s = connect(path)
+                counts["connects"] += 1
+                reader = Reader(out)
+                reader.t0 = t0
+                out.write(json.dumps({"kind": "connected", "t": round(time.monotonic() - t0, 4)}) + "\n")
+                announce(s, roles)
+                last_status, battery_at = {r: 1 for r in roles}, {}
+                continue
+            # The newest pose at this time (the clip looped).
+            tc = now % clip_s
+            while k + 1 < len(timed) and timed[k + 1][0] <= tc:
+                k += 1
+            if timed[k][0] > tc:
+                k = 0
+            pose = timed[k][1]
+            data = b""
+            for role in roles:
+                head = pose.get("head")
+                if role in pose:
+                    vals = pose[role]
+                elif head is not None:  # a generic tracker: somewhere below the head
+                    drop = {"waist": 0.75, "left_foot": 1.55, "right_foot": 1.55, "chest": 0.45}[role]
+                    side = {"left_foot": 0.1, "right_foot": -0.1}.get(role, 0.0)
+                    vals = [head[0] + side, head[1] - drop, head[2]] + head[3:]
+                else:
+                    continue
+                st, ds, send = 1, 3, True
+                if role == "head" and imu and imu[0] <= now < imu[1]:
+                    st, ds = 4, 1
+                if role == "head" and lost and lost[0] <= now < lost[1]:
+                    st, send = 4, False
+                if last_status.get(role) != st:
+                    data += status(role, st)
+                    last_status[role] = st
+                if send:
+                    data += position(role, *vals, data_source=ds)
+                    counts["positions"] += 1
+                if now - battery_at.get(role, -1.0) > 0.1:
+                    data += battery(role)
+                    battery_at[role] = now
+                    counts["batteries"] += 1
+            try:
+                s.sendall(data)
+            except OSError:
+                reader.closed = True
+                continue
+            counts["loops"] += 1
+            # The driver's loop sleeps 2 ms after each turn; read what bodyd sends meanwhile.
+            end = time.monotonic() + 0.002
+            while not reader.closed:
+                left = end - time.monotonic()
+                reader.poll(s, max(0.0, left))
+                if left <= 0:
+                    break
+        if s is not None:
+            s.close()
+        counts.update(kind="summary", seconds=round(time.monotonic() - t0, 3))
+        out.write(json.dumps(counts) + "\n")
+
+
 def bad(args):
     path, kind, out_path = args[0], args[1], args[2]
     s = connect(path)
@@ -216,9 +370,11 @@ def bad(args):
         s.sendall(frame(a))
         s.sendall(position("head", 0.0, 1.6, 0.0, 0.0, 0.0, 0.0, 1.0))  # id 0: never announced
     elif kind == "flood":
-        v = pb.ProtobufMessage()
-        v.version.protocol_version = 5
-        data = frame(v) * 3000
+        # More frames in a second than any driver sends (bodyd allows 20,000: 8 devices at the
+        # driver's 500 Hz with batteries are about 4,100).
+        b = pb.ProtobufMessage()
+        b.battery.tracker_id = 0
+        data = frame(b) * 30000
         try:
             s.sendall(data)
         except OSError:
@@ -254,7 +410,9 @@ if __name__ == "__main__":
     mode = sys.argv[2]
     if mode == "play":
         play(sys.argv[3:])
+    elif mode == "driver":
+        driver(sys.argv[3:])
     elif mode == "bad":
         bad(sys.argv[3:])
     else:
-        raise SystemExit("usage: driver_client.py PB_DIR play|bad ...")
+        raise SystemExit("usage: driver_client.py PB_DIR play|driver|bad ...")

@@ -73,6 +73,13 @@ class FramedHandler {
   virtual void closing(FramedConnection& c, std::size_t remaining, bool stopping) {
     (void)c, (void)remaining, (void)stopping;
   }
+  // Once a round of the server's thread (after what arrived was read), for work on the handler's
+  // own clock: samples held back, paced updates, repeated statuses. Returns how many
+  // milliseconds it may wait before the next call (the thread waits at most 100 ms anyway).
+  [[nodiscard]] virtual int tick(std::int64_t now_ns) {
+    (void)now_ns;
+    return 100;
+  }
 };
 
 class FramedServer : NonCopyable {

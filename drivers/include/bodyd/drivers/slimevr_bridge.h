@@ -56,6 +56,12 @@ namespace status {
 inline constexpr std::int32_t kDisconnected = 0, kOk = 1, kBusy = 2, kError = 3, kOccluded = 4;
 }
 
+// Position.data_source values. The driver sends IMU while SteamVR tracks a device by rotation
+// only (TrackingResult_Fallback_RotationOnly, with TrackerStatus OCCLUDED), FULL otherwise.
+namespace data_source {
+inline constexpr std::int32_t kNone = 0, kImu = 1, kPrecision = 2, kFull = 3;
+}
+
 enum class FrameResult : std::uint8_t {
   Frame,     // a whole frame is there: frame_bytes long, payload after the length
   NeedMore,  // not yet a whole frame (or not yet the 4 length bytes)
@@ -84,6 +90,8 @@ struct Message {
   bool has_position = false;
   float x = 0, y = 0, z = 0;
   float qx = 0, qy = 0, qz = 0, qw = 1;
+  bool has_data_source = false;  // Position.data_source (data_source:: values)
+  std::int32_t data_source = 0;
   // TrackerAdded
   std::string serial, name, manufacturer;
   std::int32_t role = 0;
@@ -124,14 +132,23 @@ inline constexpr std::string_view kDriverSocketName = "SlimeVRDriver";
 inline constexpr std::string_view kMonadoRpcSocketName = "SlimeVRRpc";
 inline constexpr std::string_view kMonadoInputSocketName = "SlimeVRInput";
 
-// Where the driver and Monado look first: $XDG_RUNTIME_DIR; without it $XDG_DATA_HOME/dev.slimevr.SlimeVR
-// (or ~/.local/share/dev.slimevr.SlimeVR), the driver's next place. Empty (and `error`) when
-// neither is set.
+// Where Monado's SolarXR driver looks first: $XDG_RUNTIME_DIR; without it
+// $XDG_DATA_HOME/dev.slimevr.SlimeVR (or ~/.local/share/dev.slimevr.SlimeVR). Empty (and
+// `error`) when neither is set.
 [[nodiscard]] std::string default_socket_dir(std::string& error);
 
+// Where SlimeVR's OpenVR driver finds bodyd from inside SteamVR's pressure-vessel container,
+// whose $XDG_RUNTIME_DIR is not the user's: $XDG_DATA_HOME/dev.slimevr.SlimeVR (or
+// ~/.local/share/dev.slimevr.SlimeVR). The driver (BridgeTransport.hpp, GetBridgePath) takes
+// the first of $XDG_RUNTIME_DIR/SlimeVRDriver, $XDG_DATA_HOME/dev.slimevr.SlimeVR/SlimeVRDriver,
+// ~/.local/share/dev.slimevr.SlimeVR/SlimeVRDriver that exists, so this place works both inside
+// the container and outside it. Empty (and `error`) when neither XDG_DATA_HOME nor HOME is set.
+[[nodiscard]] std::string default_driver_socket_dir(std::string& error);
+
 // A spec's socket path: `argument` (a path; "~/" is the home directory), or
-// default_socket_dir()/`name` when empty. Empty and `error` when it cannot be made.
-[[nodiscard]] std::string socket_path(std::string_view argument, std::string_view name, std::string& error);
+// `default_dir`/`name` when empty. Empty and `error` when it cannot be made.
+[[nodiscard]] std::string socket_path(std::string_view argument, std::string_view name, std::string& error,
+                                      std::string (*default_dir)(std::string&) = default_socket_dir);
 
 // Makes a listening, non-blocking Unix socket at `path`: its directory made (0700) or checked to
 // be private, a stale socket file of a process that is gone replaced, a live one refused, the
@@ -145,8 +162,25 @@ void limit_send_buffer(int fd, int bytes);
 inline constexpr std::size_t kMaxConnections = 4;
 inline constexpr std::size_t kMaxPendingOutBytes = 64 * 1024;  // a client that reads nothing is dropped past this
 inline constexpr int kSendBufferBytes = 16 * 1024;              // SO_SNDBUF of each connection
-inline constexpr std::uint32_t kMaxFramesPerSecond = 2000;     // a client sending more is dropped (flood)
-inline constexpr std::int32_t kProtocolVersion = 5;            // what the server answers a Version with
+// The driver sends a Position per device on every turn of its 2 ms loop (444-473 Hz measured)
+// and a Battery per device every 100 ms: 8 devices are about 4,100 frames a second. A client
+// sending more than 5 times that is no driver: dropped as a flood.
+inline constexpr std::uint32_t kMaxFramesPerSecond = 20000;
+// What the server answers a Version with: the driver's own PROTOCOL_VERSION
+// (src/bridge/BridgeClient.hpp at dcc0f56). The server never sends a Version unasked.
+inline constexpr std::int32_t kProtocolVersion = 2;
+// Samples of one device reach the reconstruction at most this often; the ones in between are
+// coalesced to the newest (forwarded when its turn comes): the driver's 470 Hz would otherwise
+// queue up behind the reconstruction (tens of milliseconds late) and cost a core.
+inline constexpr double kMaxForwardHz = 100.0;
+// The virtual trackers turn OCCLUDED when no pose with a tracked headset was published for this
+// long (the headset lost, or its samples stopped), and their status is sent again every
+// kStatusRepeatNs (the driver drops a status that arrives before SteamVR activated the tracker).
+inline constexpr std::int64_t kTrackersLostAfterNs = 60'000'000;
+inline constexpr std::int64_t kStatusRepeatNs = 1'000'000'000;
+// A connection's TrackerAdded lines in the log (and its devices in the statistics) stop here;
+// more are counted (`devices_not_listed`).
+inline constexpr std::size_t kMaxDevicesListed = 32;
 
 // A virtual tracker the server announces to each driver (steamvr output).
 struct AnnouncedTracker {
@@ -172,13 +206,22 @@ struct BridgeStats {
   std::uint64_t refused = 0;       // more than kMaxConnections at once
   std::uint64_t frames_in = 0;
   std::uint64_t samples = 0;       // pushed to the sink
+  double rate_hz = 0.0;            // samples pushed per second (the last full second)
+  std::uint64_t coalesced = 0;     // superseded by a newer sample of the same device before their turn
+  std::uint64_t untrusted = 0;     // positions not used: data_source IMU, or the device's status not OK
+  std::uint64_t devices_not_listed = 0;  // TrackerAdded beyond kMaxDevicesListed on one connection
+  std::uint64_t statuses_out = 0;  // TrackerStatus sent for the virtual trackers
+  bool trackers_tracked = false;   // the virtual trackers' status is OK (else OCCLUDED)
   std::uint64_t ignored = 0;       // well-formed and not used (other roles, battery, user actions, no sink)
   std::uint64_t frames_out = 0;
   std::uint64_t publishes = 0;
   std::uint64_t publishes_without_client = 0;  // nobody connected: nothing to send (not a failure)
   std::uint64_t rejected = 0;
   std::map<std::string, std::uint64_t> rejected_by_reason;
-  std::map<std::string, std::int32_t> roles_in;  // tracker serial -> role (the devices that announced themselves)
+  // tracker serial -> role of the devices that announced themselves on the open connections
+  // (at most kMaxDevicesListed per connection), and what bodyd does with each.
+  std::map<std::string, std::int32_t> roles_in;
+  std::map<std::string, std::string> roles_use;  // serial -> "head", "left_hand", ..., or "not used"
   std::string last_error;
 };
 
@@ -201,9 +244,11 @@ class BridgeServer : NonCopyable {
   // The output side: announced (TrackerAdded, TrackerStatus OK) to every connection now and to
   // each new one.
   void set_trackers(std::vector<AnnouncedTracker> trackers);
-  // One Position per pose to every connection. Never blocks. False (and `out_error`) when a
-  // connection had to be dropped; no client connected is not a failure (counted).
-  [[nodiscard]] bool publish(const TrackerPoseOut* poses, std::size_t count, std::string& out_error);
+  // One Position per pose to every connection when `tracked` (the pose's headset is tracked);
+  // otherwise the trackers are reported OCCLUDED and no Position is sent (the driver would mark
+  // them valid again). Never blocks. False (and `out_error`) when a connection had to be
+  // dropped; no client connected is not a failure (counted).
+  [[nodiscard]] bool publish(const TrackerPoseOut* poses, std::size_t count, bool tracked, std::string& out_error);
 
   [[nodiscard]] BridgeStats stats() const;
 
@@ -219,7 +264,8 @@ class BridgeServer : NonCopyable {
 
 // ---- the sources -------------------------------------------------------------------------------
 
-// steamvr:[SOCKET] (default $XDG_RUNTIME_DIR/SlimeVRDriver) and monado:[DIR] (DIR/SlimeVRInput).
+// steamvr:[SOCKET] (default default_driver_socket_dir()/SlimeVRDriver) and monado:[DIR]
+// (DIR/SlimeVRInput, DIR default_socket_dir()).
 [[nodiscard]] std::unique_ptr<TrackerSource> open_steamvr_source(std::string_view spec, std::string_view argument,
                                                                  std::string& error);
 [[nodiscard]] std::unique_ptr<TrackerSource> open_monado_source(std::string_view spec, std::string_view argument,

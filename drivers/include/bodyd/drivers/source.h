@@ -61,6 +61,9 @@ struct SourceStatus {
   std::uint64_t rejected = 0;
   std::map<std::string, std::uint64_t> rejected_by_reason;
   std::map<std::string, std::uint64_t> counters;  // other source-specific counts (network inputs: datagrams, ignored)
+  // Devices that announced themselves (bridge sources): serial -> "role N (name) -> what bodyd
+  // does with it" ("head", "left_hand", ... or "not used"). Shown only when not empty.
+  std::map<std::string, std::string> devices;
 };
 
 class TrackerSource {
