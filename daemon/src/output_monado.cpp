@@ -3,10 +3,14 @@
 // (bodyd/daemon/solarxr.h, docs/protocol-solarxr.md, docs/outputs.md "monado").
 //
 // One thread (drivers' FramedServer, bodyd/drivers/framed_server.h) accepts and reads the
-// clients' MessageBundles; this output answers each PollDataFeed at once with the latest pose
-// (Monado waits at most 4 s for the first, before any pose may exist) and each SettingsRequest
-// with the SteamVR tracker toggles; send() (the reconstruction thread) sends one DataFeedUpdate
-// per pose to the clients that sent a StartDataFeed, without blocking.
+// clients' MessageBundles; this output answers a bundle's PollDataFeeds at once with one update
+// of the latest pose (Monado waits at most 4 s for the first, before any pose may exist) and
+// each SettingsRequest with the SteamVR tracker toggles. After a StartDataFeed the same thread
+// sends DataFeedUpdates on bodyd's own clock, every minimum_time_since_last clamped to
+// [kMinUpdateIntervalMs, kMaxUpdateIntervalMs], with the newest pose (or without bones before
+// the first): Monado's feeder sends its headset and controllers only when an update arrives, so
+// bodyd must not wait for a pose to send one. send() (the reconstruction thread) only keeps the
+// newest pose.
 #include "bodyd/daemon/output.h"
 #include "bodyd/daemon/solarxr.h"
 #include "bodyd/drivers/framed_server.h"
@@ -16,6 +20,7 @@
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cstring>
 #include <map>
 #include <mutex>
@@ -31,6 +36,11 @@ constexpr std::size_t kMaxRpcFrameBytes = 16 * 1024;   // Monado's requests are 
 constexpr std::size_t kMaxPendingBytes = 256 * 1024;   // about a second of updates
 constexpr int kRpcSendBufferBytes = 64 * 1024;
 constexpr std::uint32_t kMaxFramesPerSecond = 2000;
+// The update interval bodyd keeps after a StartDataFeed: the request's minimum_time_since_last
+// clamped to this range (Monado asks for 1 ms unless SOLARXR_SYNC_PERIOD_MS says otherwise; 10
+// ms is bodyd's fastest pose rate through the bridge, drivers::slimevr::kMaxForwardHz).
+constexpr std::int64_t kMinUpdateIntervalMs = 10;
+constexpr std::int64_t kMaxUpdateIntervalMs = 1000;
 
 // SolarXR's body parts of kBodyTrackers (output_parts.h), in its order; tracker i is number i + 1.
 constexpr std::array<std::uint8_t, kBodyTrackers.size()> kBodyParts{sx::part::kHip,          sx::part::kLeftFoot,
@@ -59,6 +69,13 @@ class MonadoOutput final : public Output, sv::FramedHandler {
     toggles_.right_knee = mask_ & 32;
     toggles_.left_elbow = mask_ & 64;
     toggles_.right_elbow = mask_ & 128;
+    // Monado's driver enables a lower leg only with its knee and foot toggles, and a forearm
+    // only with its elbow and hand toggles (solarxr_device.c): knees bring their feet, elbows
+    // their hands (bodyd sends those bones in every update).
+    toggles_.left_foot = toggles_.left_foot || toggles_.left_knee;
+    toggles_.right_foot = toggles_.right_foot || toggles_.right_knee;
+    toggles_.left_hand = toggles_.left_elbow;
+    toggles_.right_hand = toggles_.right_elbow;
   }
   ~MonadoOutput() override { close(); }
 
@@ -80,6 +97,7 @@ class MonadoOutput final : public Output, sv::FramedHandler {
   }
 
   bool send(const OutputFrame& frame, std::string& out_error) override {
+    (void)out_error;
     const GlobalPose& g = frame.body.global;
     const Quat undo = frame.recentre_rotation.conjugate();
     const Vec3& t = frame.recentre_translation_m;
@@ -96,24 +114,9 @@ class MonadoOutput final : public Output, sv::FramedHandler {
     std::swap(latest_trackers_, work_trackers_);
     std::swap(latest_bones_, work_bones_);
     work_trackers_ = latest_trackers_;  // same size: no allocation
-    bool any = false, dropped = false;
-    std::pair<const std::uint8_t*, std::size_t> bytes{nullptr, 0};
-    for (const auto& c : server_.connections()) {
-      if (c->drop || !static_cast<Connection&>(*c).streaming) continue;
-      if (bytes.first == nullptr) bytes = send_encoder_.update(latest_trackers_, false, latest_bones_);
-      append_frame(*c, bytes);
-      ++updates_sent_;
-      any = true;
-      server_.flush(*c);
-      dropped |= c->drop;
-    }
-    if (!any) ++updates_without_client_;
-    if (dropped) {
-      server_.wake();
-      out_error = "a client that does not read was dropped";
-      return false;
-    }
-    return true;
+    ++poses_;
+    if (server_.connections().empty()) ++updates_without_client_;
+    return true;  // the server's thread sends it (tick)
   }
 
   nlohmann::json status() const override {
@@ -126,6 +129,8 @@ class MonadoOutput final : public Output, sv::FramedHandler {
             {"streaming", streaming},
             {"connections", connections_total_},
             {"updates_sent", updates_sent_},
+            {"updates_without_bones", updates_without_bones_},
+            {"update_interval_ms", last_interval_ms_},
             {"polls_answered", polls_answered_},
             {"settings_answered", settings_answered_},
             {"updates_without_client", updates_without_client_},
@@ -146,7 +151,15 @@ class MonadoOutput final : public Output, sv::FramedHandler {
 
   struct Connection final : sv::FramedConnection {
     bool streaming = false;
+    std::int64_t interval_ns = 0;  // of the paced updates
+    std::int64_t next_ns = 0;      // the next one is due
   };
+
+  // The newest pose's update (or one without bones before the first) to `c`.
+  void append_update(Connection& c, bool with_info) {
+    append_frame(c, thread_encoder_.update(latest_trackers_, with_info, latest_bones_));
+    if (latest_bones_.empty()) ++updates_without_bones_;
+  }
 
   void reject(const std::string& reason, const std::string& detail) {
     ++rejected_;
@@ -163,13 +176,20 @@ class MonadoOutput final : public Output, sv::FramedHandler {
     std::memcpy(c.out.data() + at + sv::kFrameHeaderBytes, bytes.first, bytes.second);
   }
 
-  void handle(Connection& c, const sx::Request& r) {
+  void handle(Connection& c, const sx::Request& r, std::int64_t arrival_ns) {
     if (r.stop_feed) c.streaming = false;
-    if (r.start_feed) c.streaming = true;
-    for (int i = 0; i < r.polls; ++i) {
-      // The first answer names the trackers (Monado makes its generic trackers from it).
-      append_frame(c, thread_encoder_.update(latest_trackers_, true, latest_bones_));
-      ++polls_answered_;
+    if (r.start_feed) {
+      const std::int64_t ms = std::clamp<std::int64_t>(r.min_interval_ms, kMinUpdateIntervalMs, kMaxUpdateIntervalMs);
+      if (!c.streaming) c.next_ns = arrival_ns;  // the first at once
+      c.streaming = true;
+      c.interval_ns = ms * 1'000'000;
+      last_interval_ms_ = ms;
+    }
+    if (r.polls > 0) {
+      // One answer per bundle, however many polls it holds: a request's work is bounded by its
+      // bytes. It names the trackers (Monado makes its generic trackers from it).
+      append_update(c, true);
+      polls_answered_ += static_cast<std::uint64_t>(r.polls);
     }
     for (std::uint32_t tx : r.settings_requests) {
       append_frame(c, thread_encoder_.settings_response(tx, toggles_));
@@ -187,7 +207,7 @@ class MonadoOutput final : public Output, sv::FramedHandler {
     spdlog::info("monado {}: a client connected", path_);
   }
 
-  void frame(sv::FramedConnection& c, const std::uint8_t* payload, std::size_t size, std::int64_t) override {
+  void frame(sv::FramedConnection& c, const std::uint8_t* payload, std::size_t size, std::int64_t arrival_ns) override {
     // FlatBuffers' verifier wants the buffer aligned: copy the payload to the start of one.
     scratch_.assign(payload, payload + size);
     sx::Request r;
@@ -196,7 +216,24 @@ class MonadoOutput final : public Output, sv::FramedHandler {
       reject("malformed", error);
       return;
     }
-    handle(static_cast<Connection&>(c), r);
+    handle(static_cast<Connection&>(c), r, arrival_ns);
+  }
+
+  int tick(std::int64_t now) override {
+    std::int64_t wait_ns = 100'000'000;
+    for (const auto& cp : server_.connections()) {
+      auto& c = static_cast<Connection&>(*cp);
+      if (c.drop || !c.streaming) continue;
+      if (now >= c.next_ns) {
+        append_update(c, false);
+        ++updates_sent_;
+        // On the request's clock; one that fell far behind (a stalled thread) starts again now.
+        c.next_ns += c.interval_ns;
+        if (c.next_ns <= now) c.next_ns = now + c.interval_ns;
+      }
+      wait_ns = std::min(wait_ns, c.next_ns - now);
+    }
+    return static_cast<int>((wait_ns + 999'999) / 1'000'000);
   }
 
   void dropping(sv::FramedConnection*, sv::FramedDrop why, std::size_t bytes) override {
@@ -241,6 +278,8 @@ class MonadoOutput final : public Output, sv::FramedHandler {
   std::vector<sx::Bone> latest_bones_;
   sx::Encoder thread_encoder_;
   std::vector<std::uint8_t> scratch_;
+  std::uint64_t poses_ = 0, updates_without_bones_ = 0;
+  std::int64_t last_interval_ms_ = 0;
   std::uint64_t updates_sent_ = 0, polls_answered_ = 0, settings_answered_ = 0, updates_without_client_ = 0,
                 dropped_ = 0, rejected_ = 0, connections_total_ = 0;
   std::map<std::string, std::uint64_t> rejected_by_reason_;

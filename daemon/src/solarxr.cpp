@@ -214,6 +214,8 @@ std::pair<const std::uint8_t*, std::size_t> Encoder::settings_response(std::uint
   sb.add_right_knee(t.right_knee);
   sb.add_left_elbow(t.left_elbow);
   sb.add_right_elbow(t.right_elbow);
+  sb.add_left_hand(t.left_hand);
+  sb.add_right_hand(t.right_hand);
   const auto steamvr = sb.Finish();
   sx::rpc::SettingsResponseBuilder rb(fbb);
   rb.add_steam_vr_trackers(steamvr);

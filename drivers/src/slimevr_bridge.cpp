@@ -184,6 +184,7 @@ struct BridgeServer::Impl final : FramedHandler {
   struct Connection final : FramedConnection {
     std::map<std::int32_t, Device> devices;  // by tracker_id
     std::size_t listed = 0;                  // devices in the stats and the log (kMaxDevicesListed)
+    bool version_answered = false;
   };
 
   explicit Impl(std::string p) : path(std::move(p)), server(path, FramedServerLimits{}, *this) { stats.path = path; }
@@ -452,7 +453,9 @@ struct BridgeServer::Impl final : FramedHandler {
       case Message::Kind::Position: position(c, m, arrival_ns); return;
       case Message::Kind::TrackerStatus: tracker_status(c, m, arrival_ns); return;
       case Message::Kind::Version:
-        encoder.version(c.out, kProtocolVersion);  // flushed at the end of the round
+        if (!c.version_answered) encoder.version(c.out, kProtocolVersion);  // flushed at the end of the round
+        else ++stats.ignored;
+        c.version_answered = true;
         return;
       case Message::Kind::UserAction:
       case Message::Kind::Battery:

@@ -6,7 +6,7 @@ schemas), with Debian's python3-flatbuffers and python3-protobuf, and the test's
 files (solarxr_test.fbs through flatc --python, driver_messages.proto through protoc, both
 generated into PB_DIR at build time).
 
-  solarxr_client.py PB_DIR DIR POSES OUT [--rate HZ]
+  solarxr_client.py PB_DIR DIR POSES OUT [--rate HZ | --wivrn SECONDS]
   solarxr_client.py PB_DIR bad DIR KIND OUT     (one kind of bad input: see bad())
 
 As Monado does at session start: connects to DIR/SlimeVRRpc, sends one MessageBundle with a
@@ -14,6 +14,15 @@ SettingsRequest and a PollDataFeed, and waits at most 4 s for exactly one DataFe
 fails otherwise, as Monado gives up); then sends StartDataFeed, and its feeder plays POSES'
 headset and controllers into DIR/SlimeVRInput (SlimeVR's driver protocol) at HZ. Every
 DataFeedUpdate and the SettingsResponse are written to OUT as JSON lines.
+
+With --wivrn SECONDS it behaves as Monado's solarxr driver does inside WiVRn (feeder.c,
+solarxr_device.c; wivrn_session.cpp's call order): StartDataFeed asks for
+minimum_time_since_last 1 ms (Monado's SOLARXR_SYNC_PERIOD_MS default), the feeder connects
+only after the first update was consumed (solarxr_device_create_xdevs, then
+solarxr_device_set_feeder_devices), announces the headset (19) and controllers (13, 14), and
+sends one Position per device for each received bundle with data-feed messages, never before
+one (the newest pose of POSES at that time, looped), for SECONDS. Updates carry "t" (seconds
+since the start) and the run ends with a {"kind": "summary"} line.
 """
 import json
 import select
@@ -52,6 +61,7 @@ def mask(b, info, pose):
 def config(b, info, pose):
     m = mask(b, info, pose)
     DFC.DataFeedConfigStart(b)
+    DFC.DataFeedConfigAddMinimumTimeSinceLast(b, 1)
     DFC.DataFeedConfigAddSyntheticTrackersMask(b, m)
     DFC.DataFeedConfigAddBoneMask(b, True)
     return DFC.DataFeedConfigEnd(b)
@@ -109,6 +119,8 @@ class Rpc:
     def __init__(self, s, out):
         self.s, self.out, self.buf, self.updates = s, out, b"", 0
         self.settings = None
+        self.bundles_with_feed = 0  # bundles holding data-feed messages (the feeder's trigger)
+        self.t0 = time.monotonic()
 
     def poll(self, wait_s):
         r, _, _ = select.select([self.s], [], [], wait_s)
@@ -136,15 +148,18 @@ class Rpc:
                 r.Init(h.Message().Bytes, h.Message().Pos)
                 t = r.SteamVrTrackers()
                 self.settings = {k: getattr(t, k)() for k in ("Waist", "Chest", "LeftFoot", "RightFoot", "LeftKnee",
-                                                              "RightKnee", "LeftElbow", "RightElbow")}
+                                                              "RightKnee", "LeftElbow", "RightElbow", "LeftHand",
+                                                              "RightHand")}
                 self.out.write(json.dumps({"kind": "settings", "tx": h.TxId().Id(), "steamvr": self.settings}) + "\n")
+        if m.DataFeedMsgsLength() > 0:
+            self.bundles_with_feed += 1
         for i in range(m.DataFeedMsgsLength()):
             h = m.DataFeedMsgs(i)
             if h.MessageType() != DataFeedMessage.DataFeedUpdate:
                 continue
             u = DFU.DataFeedUpdate()
             u.Init(h.Message().Bytes, h.Message().Pos)
-            rec = {"kind": "update", "t": time.monotonic(), "trackers": [], "bones": []}
+            rec = {"kind": "update", "t": round(time.monotonic() - self.t0, 4), "trackers": [], "bones": []}
             for k in range(u.SyntheticTrackersLength()):
                 t = u.SyntheticTrackers(k)
                 tr = {"num": t.TrackerId().TrackerNum(), "status": t.Status()}
@@ -170,6 +185,8 @@ def main():
     rate = 90.0
     if len(sys.argv) > 6 and sys.argv[5] == "--rate":
         rate = float(sys.argv[6])
+    if len(sys.argv) > 6 and sys.argv[5] == "--wivrn":
+        return wivrn(d, poses, out_path, float(sys.argv[6]))
     with open(out_path, "w") as out:
         s = feeder.connect(d + "/SlimeVRRpc")
         rpc = Rpc(s, out)
@@ -185,7 +202,7 @@ def main():
             rpc.poll(0.05)
         s.sendall(bundle(DataFeedMessage.StartDataFeed, start_msg, False))
         f = feeder.connect(d + "/SlimeVRInput")
-        feeder.announce(f, ["head", "left_hand", "right_hand"])
+        feeder.announce(f, ["head", "left_hand", "right_hand"], controller_roles=True)
         period = 1.0 / rate
         next_t = time.monotonic()
         for fr in feeder.read_frames(poses):
@@ -199,6 +216,51 @@ def main():
         end = time.monotonic() + 1.0
         while time.monotonic() < end:
             rpc.poll(0.05)
+        f.close()
+        s.close()
+
+
+def wivrn(d, poses, out_path, seconds):
+    roles = ["head", "left_hand", "right_hand"]
+    timed = feeder.read_timed(poses)
+    clip_s = timed[-1][0] + 1.0 / 90.0
+    with open(out_path, "w") as out:
+        s = feeder.connect(d + "/SlimeVRRpc")
+        rpc = Rpc(s, out)
+        t0 = rpc.t0
+        s.sendall(bundle(DataFeedMessage.PollDataFeed, poll_msg, True))
+        while rpc.updates == 0 and time.monotonic() - t0 < 4.0:
+            rpc.poll(0.05)
+        if rpc.updates != 1:
+            raise SystemExit("no DataFeedUpdate within the 4 s Monado waits")
+        # The answer to the poll is consumed here (solarxr_device_create_xdevs); StartDataFeed
+        # follows at once, and the feeder's devices come later (solarxr_device_set_feeder_devices).
+        s.sendall(bundle(DataFeedMessage.StartDataFeed, start_msg, False))
+        while rpc.settings is None and time.monotonic() - t0 < 4.0:
+            rpc.poll(0.05)
+        time.sleep(0.2)
+        f = feeder.connect(d + "/SlimeVRInput")
+        feeder.announce(f, roles, controller_roles=True)
+        devices_s = time.monotonic() - t0
+        out.write(json.dumps({"kind": "feeder_devices", "t": round(devices_s, 4)}) + "\n")
+        seen = rpc.bundles_with_feed
+        samples = 0
+        k = 0
+        while time.monotonic() - t0 < seconds:
+            rpc.poll(0.05)
+            if rpc.bundles_with_feed == seen:
+                continue
+            seen = rpc.bundles_with_feed  # one sample per device per bundle received
+            tc = (time.monotonic() - t0) % clip_s
+            while k + 1 < len(timed) and timed[k + 1][0] <= tc:
+                k += 1
+            if timed[k][0] > tc:
+                k = 0
+            pose = timed[k][1]
+            f.sendall(b"".join(feeder.position(r, *pose[r]) for r in roles if r in pose))
+            samples += 1
+        out.write(json.dumps({"kind": "summary", "updates": rpc.updates, "feeder_rounds": samples,
+                              "feeder_devices_s": round(devices_s, 4)}) + "\n")
         f.close()
         s.close()
 

@@ -106,7 +106,7 @@ struct SyntheticTracker {
 
 struct SteamvrToggles {
   bool waist = false, chest = false, left_foot = false, right_foot = false, left_knee = false, right_knee = false,
-       left_elbow = false, right_elbow = false;
+       left_elbow = false, right_elbow = false, left_hand = false, right_hand = false;
 };
 
 // Builds MessageBundles. Reuses its buffer: no allocation once warmed up. The returned span is
