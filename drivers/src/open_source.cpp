@@ -1,5 +1,7 @@
 #include "bodyd/drivers/open_source.h"
 
+#include "bodyd/motion/printable.h"
+
 namespace bodyd::drivers {
 
 std::optional<PoseFrame> declared_pose_frame(const SourceScheme& scheme) { return scheme.frame; }
@@ -24,7 +26,8 @@ bool take_frames_option(std::string& text, std::optional<PoseFrame>& frame, std:
   const std::string value = text.substr(at + 7);
   frame = pose_frame_from_name(value);
   if (!frame) {
-    error = "source \"" + text + "\": frames=" + value + " is not joint or device (docs/drivers.md, \"Device frames\")";
+    error = "source \"" + printable(text, 200) + "\": frames=" + printable(value) +
+            " is not joint or device (docs/drivers.md, \"Device frames\")";
     return false;
   }
   text.erase(at - 1);
@@ -86,29 +89,41 @@ std::optional<SourceSpec> parse_source_spec(std::string_view full_text, std::str
     spec.scheme = &row;
     spec.argument = std::string(text.substr(row.scheme.size() + 1));
     if (spec.argument.empty() && !row.required_argument.empty()) {
-      error = "source \"" + spec.text + "\": missing " + std::string(row.required_argument) + " after '" +
+      error = "source \"" + printable(spec.text, 200) + "\": missing " + std::string(row.required_argument) + " after '" +
               std::string(row.scheme) + ":'";
       return std::nullopt;
     }
     return spec;
   }
-  error = "source \"" + spec.text + "\": unknown kind; expected " + source_syntax_list(" or ");
+  error = "source \"" + printable(spec.text, 200) + "\": unknown kind; expected " + source_syntax_list(" or ");
   return std::nullopt;
 }
+
+namespace {
+
+// A spec's error quotes the spec, which may hold any byte (a config file, a pasted command line):
+// every byte that is not printable ASCII is escaped, whichever row's parser wrote the message.
+std::string escaped(std::string error) { return printable(error, error.size()); }
+
+}  // namespace
 
 std::string check_source_spec(std::string_view text) {
   std::string error;
   const std::optional<SourceSpec> spec = parse_source_spec(text, error);
-  if (!spec) return error;
-  return spec->scheme->check ? spec->scheme->check(*spec) : std::string();
+  if (!spec) return escaped(error);
+  return escaped(spec->scheme->check ? spec->scheme->check(*spec) : std::string());
 }
 
 std::unique_ptr<TrackerSource> open_source(std::string_view text, const SourceOptions& options, std::string& error) {
   const std::optional<SourceSpec> spec = parse_source_spec(text, error);
-  if (!spec) return nullptr;
+  if (!spec) {
+    error = escaped(error);
+    return nullptr;
+  }
   const std::optional<PoseFrame> frame = spec->frame ? spec->frame : declared_pose_frame(*spec->scheme);
   std::unique_ptr<TrackerSource> source = spec->scheme->open(*spec, options, error);
   if (!source && error.empty()) error = "source \"" + spec->text + "\": cannot open the source";
+  if (!source) error = escaped(error);
   if (!source || !frame) return source;
   return std::make_unique<FrameStampSource>(std::move(source), *frame);
 }

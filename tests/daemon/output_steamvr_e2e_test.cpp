@@ -271,6 +271,12 @@ TEST(SteamvrBridge, BadInputIsCountedAndDroppedWhileTheGoodDriverKeepsItsTracker
   // The log names each reason (rate-limited, not once per frame).
   const std::string log = loop.daemon->log();
   for (const Case& c : cases) EXPECT_NE(log.find(c.reason), std::string::npos) << c.reason;
+  // Serials and names are quoted escaped: no ESC, BEL or CR reaches the log, and no forged line.
+  EXPECT_EQ(log.find('\x1b'), std::string::npos);
+  EXPECT_EQ(log.find('\x07'), std::string::npos);
+  EXPECT_EQ(log.find('\r'), std::string::npos);
+  EXPECT_EQ(log.find("\n[info] forged line"), std::string::npos);
+  EXPECT_NE(log.find("weird\\x1b[2J\\x0d\\x0a[info] forged line"), std::string::npos) << log;
 }
 
 // The trackers stay in the driver's space after `reset` (bodyd-ctl reset re-centres bodyd's

@@ -162,6 +162,19 @@ TEST(SourceRegistry, CheckSourceSpec) {
   EXPECT_NE(check_source_spec("bogus:x").find("unknown kind"), std::string::npos);
 }
 
+// A spec comes from a config file or a command line a user pasted: an error quotes it escaped,
+// so an ESC, CR or LF in it cannot clear the terminal or forge a log line (issue 43 item 1).
+TEST(SourceRegistry, ErrorsQuoteTheSpecEscaped) {
+  for (const char* spec : {"\x1b[2Jbogus:x\r\nINFO forged", "replay:x?frames=\x1b[2J", "hid:\x1b[31m:1",
+                           "vmc:1?hips=\x1b]0;t\x07", "vrchat:\x1b[2J", "udp:\n9"}) {
+    const std::string error = check_source_spec(spec);
+    SCOPED_TRACE(error);
+    EXPECT_FALSE(error.empty());
+    for (char c : error) EXPECT_TRUE(c >= 0x20 && c < 0x7f) << "raw byte " << static_cast<int>(c);
+  }
+  EXPECT_NE(check_source_spec("\x1b[2Jbogus:x").find("\\x1b[2Jbogus:x"), std::string::npos);
+}
+
 // A network source's options follow the one spec rule of every spec (bodyd/base/spec_options.h,
 // the outputs' too): KEY=VALUE, a trailing '&' allowed, no key twice.
 TEST(SourceRegistry, NetworkOptionsFollowTheOneSpecRule) {

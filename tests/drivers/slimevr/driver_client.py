@@ -363,11 +363,15 @@ def bad(args):
         s.sendall(position("head", 0.0, 1e9, 0.0, 0.0, 0.0, 0.0, 1.0))
         s.sendall(position("head", 0.0, 1.6, 0.0, 0.0, 0.0, 0.0, 5.0))
     elif kind == "unknown_role":
-        a = pb.ProtobufMessage()
-        a.tracker_added.tracker_id = 7
-        a.tracker_added.tracker_serial = "weird"
-        a.tracker_added.tracker_role = 99
-        s.sendall(frame(a))
+        # Serials and names with terminal escapes, CR and LF (log injection): one with a known
+        # role (logged), one with an unknown one (rejected, quoted in the reason).
+        for tid, role in ((8, 1), (7, 99)):
+            a = pb.ProtobufMessage()
+            a.tracker_added.tracker_id = tid
+            a.tracker_added.tracker_serial = "weird\x1b[2J\r\n[info] forged line"
+            a.tracker_added.tracker_name = "name\x1b]0;owned\x07"
+            a.tracker_added.tracker_role = role
+            s.sendall(frame(a))
         s.sendall(position("head", 0.0, 1.6, 0.0, 0.0, 0.0, 0.0, 1.0))  # id 0: never announced
     elif kind == "flood":
         # More frames in a second than any driver sends (bodyd allows 20,000: 8 devices at the
