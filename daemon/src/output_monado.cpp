@@ -227,6 +227,7 @@ class MonadoOutput final : public Output, sv::FramedHandler {
       if (now >= c.next_ns) {
         append_update(c, false);
         ++updates_sent_;
+        c.last_frame_ns = now;  // a client that takes a data feed is not idle (one that stops reading is dropped)
         // On the request's clock; one that fell far behind (a stalled thread) starts again now.
         c.next_ns += c.interval_ns;
         if (c.next_ns <= now) c.next_ns = now + c.interval_ns;
@@ -254,7 +255,17 @@ class MonadoOutput final : public Output, sv::FramedHandler {
         ++dropped_;
         return;
       case sv::FramedDrop::TooManyClients:
-        reject("too_many_clients", "more than " + std::to_string(sv::kMaxConnections) + " clients at once: refused");
+        reject("too_many_clients", "more than " + std::to_string(sv::kMaxConnections) +
+                                       " clients at once, none idle for 2 s: refused");
+        return;
+      case sv::FramedDrop::IdleEvicted:
+        reject("idle_evicted", "a client that sent nothing for " + std::to_string(bytes) +
+                                   " s (and started no data feed) made room for a new one: dropped");
+        ++dropped_;
+        return;
+      case sv::FramedDrop::OutOfDescriptors:
+        reject("out_of_descriptors", std::string("cannot accept a client: ") + std::strerror(static_cast<int>(bytes)) +
+                                         " (ulimit -n): accepting pauses 100 ms; raise the limit if this is not an attack");
         return;
     }
   }

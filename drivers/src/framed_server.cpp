@@ -107,6 +107,7 @@ void FramedServer::read(FramedConnection& c) {
       }
       at += f.frame_bytes;
       ++frames_in_;
+      c.last_frame_ns = arrival_ns;
       if (arrival_ns - c.window_start_ns >= 1'000'000'000) {
         c.window_start_ns = arrival_ns;
         c.window_frames = 0;
@@ -125,17 +126,36 @@ void FramedServer::read(FramedConnection& c) {
 void FramedServer::accept_all() {
   for (;;) {
     const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
-    if (fd < 0) return;
+    if (fd < 0) {
+      if (errno == EMFILE || errno == ENFILE || errno == ENOBUFS || errno == ENOMEM) {
+        accept_paused_until_ns_ = monotonic_ns() + limits_.accept_backoff_ns;
+        handler_.dropping(nullptr, FramedDrop::OutOfDescriptors, static_cast<std::size_t>(errno));
+      }
+      return;  // EAGAIN: all taken; ECONNABORTED: the peer went
+    }
     if (connections_.size() >= limits_.max_connections) {
-      ::close(fd);
-      handler_.dropping(nullptr, FramedDrop::TooManyClients, 0);
-      continue;
+      // Evict the idlest, if it has been idle long enough (a client that connects and says
+      // nothing must not lock the real driver out); else refuse the newcomer.
+      const std::int64_t now = monotonic_ns();
+      FramedConnection* idlest = nullptr;
+      for (auto& c : connections_)
+        if (!c->drop && (idlest == nullptr || c->last_frame_ns < idlest->last_frame_ns)) idlest = c.get();
+      if (idlest == nullptr || now - idlest->last_frame_ns < limits_.evict_idle_after_ns) {
+        ::close(fd);
+        handler_.dropping(nullptr, FramedDrop::TooManyClients, 0);
+        continue;
+      }
+      handler_.dropping(idlest, FramedDrop::IdleEvicted,
+                        static_cast<std::size_t>((now - idlest->last_frame_ns) / 1'000'000'000));
+      idlest->drop = true;
+      close_dropped();
     }
     limit_send_buffer(fd, limits_.send_buffer_bytes);
     std::unique_ptr<FramedConnection> c = handler_.make_connection();
     c->fd = fd;
     c->number = ++accepted_;
     c->window_start_ns = monotonic_ns();
+    c->last_frame_ns = c->window_start_ns;
     handler_.accepted(*c);
     connections_.push_back(std::move(c));
   }
@@ -160,7 +180,8 @@ void FramedServer::run() {
     fds.clear();
     {
       std::lock_guard lock(mutex_);
-      fds.push_back({listen_fd_, POLLIN, 0});
+      const bool paused = monotonic_ns() < accept_paused_until_ns_;
+      fds.push_back({listen_fd_, static_cast<short>(paused ? 0 : POLLIN), 0});
       fds.push_back({wake_fd_, POLLIN, 0});
       for (const auto& c : connections_)
         fds.push_back({c->fd, static_cast<short>(POLLIN | (c->out.empty() ? 0 : POLLOUT)), 0});
@@ -183,7 +204,10 @@ void FramedServer::run() {
     }
     if (fds[0].revents & POLLIN) accept_all();
     close_dropped();
-    wait_ms = std::clamp(handler_.tick(monotonic_ns()), 0, 100);
+    const std::int64_t now = monotonic_ns();
+    wait_ms = std::clamp(handler_.tick(now), 0, 100);
+    if (now < accept_paused_until_ns_)
+      wait_ms = std::min(wait_ms, static_cast<int>((accept_paused_until_ns_ - now) / 1'000'000) + 1);
     // What the tick appended (a paced update, a status) goes out now.
     for (auto& c : connections_)
       if (!c->drop && !c->out.empty()) flush(*c);

@@ -174,7 +174,8 @@ struct BridgeServer::Impl final : FramedHandler {
   struct Device {           // a tracker a client announced
     std::string serial;     // the stats' key ("" when not listed)
     std::int32_t role = 0;
-    std::optional<Role> bodyd;
+    std::optional<Role> wanted;  // the role it announces (bodyd_role)
+    std::optional<Role> bodyd;   // the role it feeds: `wanted` while this device owns it
     bool status_ok = true;      // its last TrackerStatus was OK (none yet counts as OK)
     bool imu_only = false;      // its last Position had data_source IMU
     bool last_valid = false;    // the last sample forwarded (or held) was valid
@@ -199,6 +200,9 @@ struct BridgeServer::Impl final : FramedHandler {
   Encoder encoder;
   BridgeStats stats;
   RateMeter rate;  // samples forwarded to the sink
+  // Which connection (its number) and device own each of bodyd's roles: the first to announce
+  // one keeps it until its connection closes (a second headset must not make the body jump).
+  std::map<Role, std::pair<std::uint64_t, std::int32_t>> owners;
   std::int64_t last_tracked_publish_ns = INT64_MIN;  // the last publish() with a tracked headset
   std::int64_t last_status_ns = 0;                   // the virtual trackers' status last sent
 
@@ -234,7 +238,7 @@ struct BridgeServer::Impl final : FramedHandler {
   void push_invalid(const Connection& c) {
     if (sink == nullptr) return;
     for (const auto& [id, d] : c.devices) {
-      if (!d.bodyd) continue;
+      if (!d.bodyd) continue;  // only roles this connection owns
       SourceSample s;
       s.sample.t_ns = now_ns();
       s.sample.role = *d.bodyd;
@@ -276,6 +280,30 @@ struct BridgeServer::Impl final : FramedHandler {
   }
 
   void forget_devices(Connection& c) {
+    std::vector<Role> released;
+    for (auto it = owners.begin(); it != owners.end();) {
+      if (it->second.first != c.number) {
+        ++it;
+        continue;
+      }
+      released.push_back(it->first);
+      it = owners.erase(it);
+    }
+    // A device of another open connection that announced a released role takes it over.
+    for (Role r : released) {
+      for (const auto& other : server.connections()) {
+        if (other.get() == &c || other->drop) continue;
+        auto& oc = static_cast<Connection&>(*other);
+        for (auto& [id, d] : oc.devices) {
+          if (d.wanted != r || d.bodyd || owners.count(r)) continue;
+          owners.emplace(r, std::pair{oc.number, id});
+          d.bodyd = r;
+          if (stats.roles_use.count(d.serial)) stats.roles_use[d.serial] = std::string(role_name(r));
+          spdlog::info("bridge {}: client {}'s device {} now feeds the {} (client {} left)", path, oc.number, id,
+                       role_name(r), c.number);
+        }
+      }
+    }
     for (const auto& [id, d] : c.devices) {
       if (d.serial.empty()) continue;
       stats.roles_in.erase(d.serial);
@@ -317,7 +345,18 @@ struct BridgeServer::Impl final : FramedHandler {
         return;
       case FramedDrop::TooManyClients:
         ++stats.refused;
-        reject("too_many_clients", "more than " + std::to_string(kMaxConnections) + " clients at once: refused");
+        reject("too_many_clients", "more than " + std::to_string(kMaxConnections) +
+                                       " clients at once, none idle for 2 s: refused");
+        return;
+      case FramedDrop::IdleEvicted:
+        ++stats.dropped;
+        reject("idle_evicted", "client " + std::to_string(c->number) + " sent nothing for " + std::to_string(bytes) +
+                                   " s while a new client waited for one of the " + std::to_string(kMaxConnections) +
+                                   " places: it is dropped");
+        return;
+      case FramedDrop::OutOfDescriptors:
+        reject("out_of_descriptors", std::string("cannot accept a client: ") + std::strerror(static_cast<int>(bytes)) +
+                                         " (ulimit -n): accepting pauses 100 ms; raise the limit if this is not an attack");
         return;
     }
   }
@@ -380,9 +419,20 @@ struct BridgeServer::Impl final : FramedHandler {
     }
     Device& d = c.devices[m.tracker_id];
     d.role = m.role;
-    d.bodyd = bodyd_role(m.role);
+    d.wanted = bodyd_role(m.role);
+    d.bodyd = d.wanted;
+    std::string use = d.bodyd ? std::string(role_name(*d.bodyd)) : std::string("not used");
+    if (d.bodyd) {
+      const auto [it, added] = owners.try_emplace(*d.bodyd, c.number, m.tracker_id);
+      if (!added && it->second != std::pair{c.number, m.tracker_id}) {
+        reject("role_taken", "client " + std::to_string(c.number) + "'s device " + std::to_string(m.tracker_id) +
+                                 " \"" + printable(m.serial) + "\" announces the " + use + ", which client " +
+                                 std::to_string(it->second.first) + " already has: not used until that one closes");
+        use = "not used (the " + use + " of client " + std::to_string(it->second.first) + ")";
+        d.bodyd.reset();
+      }
+    }
     if (!d.bodyd) ++stats.ignored;
-    const std::string use = d.bodyd ? std::string(role_name(*d.bodyd)) : std::string("not used");
     if (d.serial.empty() && c.listed >= kMaxDevicesListed) {
       ++stats.devices_not_listed;
       return;
@@ -391,6 +441,8 @@ struct BridgeServer::Impl final : FramedHandler {
       ++c.listed;
       d.serial = m.serial.empty() ? "#" + std::to_string(c.number) + "." + std::to_string(m.tracker_id)
                                   : printable(m.serial, 64);
+      // Another connection's device with the same serial keeps its entry.
+      if (stats.roles_in.count(d.serial)) d.serial += " (client " + std::to_string(c.number) + ")";
     }
     stats.roles_in[d.serial] = m.role;
     stats.roles_use[d.serial] = use;
@@ -405,6 +457,18 @@ struct BridgeServer::Impl final : FramedHandler {
       return;
     }
     Device& d = it->second;
+    // Every Position is checked, used or not: a client sending garbage is told so.
+    const Vec3 p(m.x, m.y, m.z);
+    const Quat q(m.qw, m.qx, m.qy, m.qz);
+    const double norm = std::sqrt(q.coeffs().squaredNorm());
+    if ((m.has_position && (!limits::position_plausible(p.x()) || !limits::position_plausible(p.y()) ||
+                            !limits::position_plausible(p.z()))) ||
+        !std::isfinite(norm) || std::fabs(norm - 1.0) > limits::kQuatNormTolerance) {
+      reject("bad_pose", "Position of tracker " + std::to_string(m.tracker_id) + " is not a pose (position (" +
+                             std::to_string(m.x) + ", " + std::to_string(m.y) + ", " + std::to_string(m.z) +
+                             ") m, quaternion norm " + std::to_string(norm) + ")");
+      return;
+    }
     if (!d.bodyd || sink == nullptr) {
       ++stats.ignored;
       return;
@@ -416,17 +480,6 @@ struct BridgeServer::Impl final : FramedHandler {
       // treats the position as lost (as a hand out of the cameras' view) until FULL / OK again.
       ++stats.untrusted;
       forward(d, s);
-      return;
-    }
-    const Vec3 p(m.x, m.y, m.z);
-    const Quat q(m.qw, m.qx, m.qy, m.qz);
-    const double norm = std::sqrt(q.coeffs().squaredNorm());
-    if (!limits::position_plausible(p.x()) || !limits::position_plausible(p.y()) ||
-        !limits::position_plausible(p.z()) || !std::isfinite(norm) ||
-        std::fabs(norm - 1.0) > limits::kQuatNormTolerance) {
-      reject("bad_pose", "Position of tracker " + std::to_string(m.tracker_id) + " is not a pose (position (" +
-                             std::to_string(m.x) + ", " + std::to_string(m.y) + ", " + std::to_string(m.z) +
-                             ") m, quaternion norm " + std::to_string(norm) + ")");
       return;
     }
     s.sample.valid = true;

@@ -15,7 +15,10 @@
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
+#include <sys/un.h>
 #include <unistd.h>
+
+#include <cstring>
 
 #include <fstream>
 #include <regex>
@@ -55,7 +58,7 @@ TEST(DescriptorLimit, ControlAndOscQueryAnswerWithoutSpinningUnderUlimit64) {
   const auto endpoints_file = dir.path / "endpoints.json";
   test::Child child({"/usr/bin/prlimit", "--nofile=64:64", "--", (test::bin_dir() / "bodyd").string(), "--replay",
                      (test::source_dir() / "data/demo/walk.csv").string(), "--method", "ik", "--loop", "--source",
-                     "vrchat:127.0.0.1:0", "--pub", "tcp://127.0.0.1:*", "--control", "tcp://127.0.0.1:*",
+                     "vrchat:127.0.0.1:0", "--source", "steamvr:" + (dir.path / "run" / "SlimeVRDriver").string(), "--pub", "tcp://127.0.0.1:*", "--control", "tcp://127.0.0.1:*",
                      "--endpoints-file", endpoints_file.string(), "--log-level", "info"},
                     dir.path / "stderr.txt");
   const auto endpoints = test::wait_endpoints(endpoints_file, 10000);
@@ -76,6 +79,15 @@ TEST(DescriptorLimit, ControlAndOscQueryAnswerWithoutSpinningUnderUlimit64) {
       (void)::send(fd, part.data(), part.size(), MSG_NOSIGNAL);
       hogs.push_back(fd);
     }
+  }
+  // And the SteamVR bridge's socket (issue 43 item 5: out of descriptors it spun at a full core).
+  for (int i = 0; i < 8; ++i) {
+    const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::strncpy(addr.sun_path, (dir.path / "run" / "SlimeVRDriver").c_str(), sizeof addr.sun_path - 1);
+    if (::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0) hogs.push_back(fd);
+    else ::close(fd);
   }
   EXPECT_GE(hogs.size(), 60u);  // the kernel's backlog takes them whether or not bodyd accepts
 

@@ -8,7 +8,12 @@
 // python3 or python3-protobuf is missing.
 #include "slimevr_helpers.h"
 
+#include <sys/socket.h>
 #include <sys/stat.h>
+#include <sys/un.h>
+
+#include <cstring>
+#include <thread>
 
 namespace bodyd {
 namespace {
@@ -227,7 +232,8 @@ TEST(SteamvrBridge, BadInputIsCountedAndDroppedWhileTheGoodDriverKeepsItsTracker
     const char* reason;
     bool closes;
   };
-  const Case cases[] = {{"too_long", "frame_too_long", true}, {"too_short", "frame_too_short", true},
+  const Case cases[] = {{"too_long", "frame_too_long", true},   {"second_headset", "role_taken", false},
+                        {"too_short", "frame_too_short", true},
                         {"malformed", "malformed", false},    {"nan_pose", "bad_pose", false},
                         {"unknown_role", "unknown_role", false}, {"flood", "flood", true},
                         {"never_reads", "slow_reader", true}};
@@ -256,7 +262,7 @@ TEST(SteamvrBridge, BadInputIsCountedAndDroppedWhileTheGoodDriverKeepsItsTracker
     EXPECT_GE(src["rejected_by_reason"].value(c.reason, 0), 1) << c.reason << " in " << src.dump();
     EXPECT_GE(out_status["rejected_by_reason"].value(c.reason, 0), 1) << c.reason;
   }
-  EXPECT_GE(src["rejected"].get<int>(), 7);
+  EXPECT_GE(src["rejected"].get<int>(), 8);
   EXPECT_GE(src["counters"]["dropped"].get<int>(), 4);
 
   // The good driver played to the end, never dropped, its trackers moving all along.
@@ -268,6 +274,9 @@ TEST(SteamvrBridge, BadInputIsCountedAndDroppedWhileTheGoodDriverKeepsItsTracker
   ASSERT_EQ(r.announced.size(), 1u);
   EXPECT_GT(r.groups.size(), 1500u) << "12 x 178 frames played";
   EXPECT_GT(loop.poses.size(), 1500u) << "the ZeroMQ stream went on";
+  // The second connection's headset (30 m away) never became the head (issue 43 item 3).
+  const std::size_t head = joint_index(loop.skeleton, "Head");
+  for (const auto& p : loop.poses) ASSERT_LT(std::abs(p.joints[head].position_m[0]), 10.0f) << "the head jumped";
   // The log names each reason (rate-limited, not once per frame).
   const std::string log = loop.daemon->log();
   for (const Case& c : cases) EXPECT_NE(log.find(c.reason), std::string::npos) << c.reason;
@@ -277,6 +286,37 @@ TEST(SteamvrBridge, BadInputIsCountedAndDroppedWhileTheGoodDriverKeepsItsTracker
   EXPECT_EQ(log.find('\r'), std::string::npos);
   EXPECT_EQ(log.find("\n[info] forged line"), std::string::npos);
   EXPECT_NE(log.find("weird\\x1b[2J\\x0d\\x0a[info] forged line"), std::string::npos) << log;
+}
+
+// Four clients that connect and say nothing do not lock the real driver out (issue 43 item 4):
+// once they have been idle for 2 s, a new client evicts the idlest instead of being refused.
+TEST(SteamvrBridge, IdleClientsAreEvictedForTheRealDriver) {
+  Loop loop;
+  if (std::string why = python_skip_reason(loop.python); !why.empty()) GTEST_SKIP() << why;
+  ASSERT_TRUE(loop.start("tcp://127.0.0.1:*"));
+  std::vector<int> idle;
+  for (int i = 0; i < 4; ++i) {
+    const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::strncpy(addr.sun_path, loop.socket.c_str(), sizeof addr.sun_path - 1);
+    ASSERT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+    idle.push_back(fd);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(2500));
+  ASSERT_EQ(loop.run_client(loop.play_args(), loop.dir.path / "client.err"), 0);
+  const auto status = test::control_request(loop.ctx, loop.endpoints["control"], R"({"cmd":"status"})");
+  ASSERT_TRUE(status) << loop.daemon->log();
+  const nlohmann::json& src = (*status)["sources"][0];
+  EXPECT_GE(src["rejected_by_reason"].value("idle_evicted", 0), 1) << src.dump();
+  EXPECT_EQ(src["rejected_by_reason"].value("too_many_clients", 0), 0) << src.dump();
+  for (int fd : idle) ::close(fd);
+  loop.daemon->signal(SIGINT);
+  ASSERT_EQ(loop.daemon->wait(10000), 0) << loop.daemon->log();
+  const Received r = parse(read_jsonl(loop.dir.path / "received.jsonl"));
+  ASSERT_EQ(r.announced.size(), 1u);
+  expect_announced(r.announced[0]);
+  EXPECT_GT(r.groups.size(), 100u);
 }
 
 // The trackers stay in the driver's space after `reset` (bodyd-ctl reset re-centres bodyd's

@@ -373,6 +373,17 @@ def bad(args):
             a.tracker_added.tracker_role = role
             s.sendall(frame(a))
         s.sendall(position("head", 0.0, 1.6, 0.0, 0.0, 0.0, 0.0, 1.0))  # id 0: never announced
+    elif kind == "second_headset":
+        # Another connection announces a headset 30 m away and moves it for 2 s at 90 Hz: the
+        # headset stays the first connection's (bodyd counts role_taken).
+        a = pb.ProtobufMessage()
+        a.tracker_added.tracker_id = 0
+        a.tracker_added.tracker_serial = "intruder-hmd"
+        a.tracker_added.tracker_role = 19
+        s.sendall(frame(a))
+        for _ in range(180):
+            s.sendall(position("head", 30.0, 1.6, 30.0, 0.0, 0.0, 0.0, 1.0))
+            time.sleep(1.0 / 90.0)
     elif kind == "flood":
         # More frames in a second than any driver sends (bodyd allows 20,000: 8 devices at the
         # driver's 500 Hz with batteries are about 4,100).

@@ -33,6 +33,7 @@ struct FramedConnection {
   std::vector<std::uint8_t> in, out;
   std::int64_t window_start_ns = 0;  // the flood check's one-second window
   std::uint32_t window_frames = 0;
+  std::int64_t last_frame_ns = 0;    // its last whole frame (or its accept): the idlest is evicted first
   bool drop = false;  // closed by the thread at the end of its round
 };
 
@@ -43,6 +44,12 @@ struct FramedServerLimits {
   int send_buffer_bytes = kSendBufferBytes;                // SO_SNDBUF of each connection
   std::uint32_t max_frames_per_second = kMaxFramesPerSecond;  // a client sending more is dropped
   std::size_t read_chunk_bytes = 4096;                     // one recv()
+  // When max_connections are open, a new client evicts the one whose last frame is oldest, if
+  // that is at least this long ago; else the new one is refused.
+  std::int64_t evict_idle_after_ns = 2'000'000'000;
+  // Out of file descriptors, accepting pauses this long (the listening socket stays readable,
+  // so retrying at once would spin).
+  std::int64_t accept_backoff_ns = 100'000'000;
 };
 
 // Why the server drops a connection (or refuses one) on its own.
@@ -51,7 +58,9 @@ enum class FramedDrop : std::uint8_t {
   FrameTooShort,   // a frame declares less than its 4 length bytes (`bytes`: what it declares)
   Flood,           // more than max_frames_per_second frames in a second
   SlowReader,      // more than max_pending_out_bytes waiting (`bytes`: how many)
-  TooManyClients,  // max_connections already (no connection: refused before it is one)
+  TooManyClients,  // max_connections already, none idle (no connection: refused before it is one)
+  IdleEvicted,     // the idlest of max_connections, evicted for a new client (`bytes`: seconds idle)
+  OutOfDescriptors,  // accept() failed with EMFILE / ENFILE (no connection; `bytes`: errno): paused
 };
 
 // What the owner does with the server's events; every call is made with the server's mutex held.
@@ -123,6 +132,7 @@ class FramedServer : NonCopyable {
   mutable std::mutex mutex_;  // what follows, and the handler's state
   std::vector<std::unique_ptr<FramedConnection>> connections_;
   std::uint64_t accepted_ = 0, frames_in_ = 0;
+  std::int64_t accept_paused_until_ns_ = 0;  // out of descriptors: the listening socket rests until then
 };
 
 }  // namespace bodyd::drivers::slimevr
