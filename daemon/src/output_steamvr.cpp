@@ -116,6 +116,7 @@ std::unique_ptr<Output> make_steamvr_output(const OutputSpec& spec, const Output
   PlaceMask mask = 0;
   std::string path;
   if (!body_tracker_output_spec(spec, driver_socket, mask, path, error)) return nullptr;
+  sv::warn_if_shadowed(path);
   return std::make_unique<SteamvrOutput>(path, mask);
 }
 

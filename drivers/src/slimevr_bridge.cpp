@@ -90,6 +90,18 @@ std::string default_driver_socket_dir(std::string& error) {
   return {};
 }
 
+void warn_if_shadowed(const std::string& path) {
+  const std::string runtime = env("XDG_RUNTIME_DIR");
+  if (runtime.empty()) return;
+  const std::string first = runtime + "/" + std::string(kDriverSocketName);
+  std::error_code ec;
+  if (first == path || !std::filesystem::exists(std::filesystem::symlink_status(first, ec))) return;
+  spdlog::warn("bridge: {} exists (a SlimeVR server, or one that is gone?): SlimeVR's driver outside SteamVR's "
+               "container connects to the first of its places that exists, so it may never reach bodyd on {}; "
+               "stop that server or remove the file if nothing listens on it",
+               printable(first, 200), printable(path, 200));
+}
+
 std::string default_socket_dir(std::string& error) {
   if (std::string d = env("XDG_RUNTIME_DIR"); !d.empty()) return d;
   if (std::string d = default_driver_socket_dir(error); !d.empty()) return d;
@@ -690,6 +702,7 @@ std::unique_ptr<TrackerSource> open_steamvr_source(std::string_view spec, std::s
     error = "--source " + std::string(spec) + ": " + e;
     return nullptr;
   }
+  warn_if_shadowed(path);
   return std::make_unique<BridgeSource>("steamvr:" + path, shared_bridge(path));
 }
 

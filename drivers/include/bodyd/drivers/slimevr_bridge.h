@@ -145,6 +145,11 @@ inline constexpr std::string_view kMonadoInputSocketName = "SlimeVRInput";
 // the container and outside it. Empty (and `error`) when neither XDG_DATA_HOME nor HOME is set.
 [[nodiscard]] std::string default_driver_socket_dir(std::string& error);
 
+// Logs a warning when $XDG_RUNTIME_DIR/SlimeVRDriver exists and is not `path`: the driver picks
+// the first of its places that exists (not one that accepts), so a stale socket file there (or
+// a SlimeVR server) keeps it from bodyd's socket.
+void warn_if_shadowed(const std::string& path);
+
 // A spec's socket path: `argument` (a path; "~/" is the home directory), or
 // `default_dir`/`name` when empty. Empty and `error` when it cannot be made.
 [[nodiscard]] std::string socket_path(std::string_view argument, std::string_view name, std::string& error,
