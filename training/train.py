@@ -118,6 +118,21 @@ def parse_args():
     p.add_argument("--observed-weight", type=float, default=0.1,
                    help="loss weight of observed entries relative to unobserved ones (1 = equal)")
     p.add_argument("--tracker-noise", type=float, default=0.01, help="noise (normalised units) on observed tracker entries")
+    p.add_argument("--extra-roles", default="",
+                   help="body-tracker roles besides head and hands that a sample may observe (issue 44), comma-separated "
+                        "from " + ",".join(EXTRA_ROLES) + " (empty: head and hands only, as before)")
+    p.add_argument("--extra-role-prob", type=float, default=0.3,
+                   help="per sample and extra role: probability that the role is tracked")
+    p.add_argument("--extra-rot-only-prob", type=float, default=0.3,
+                   help="of the tracked extra roles: probability that only the rotation is observed (an IMU tracker)")
+    p.add_argument("--extra-drop-prob", type=float, default=0.15,
+                   help="per tracked extra role: probability of a tracking-loss span (as --hand-drop-prob)")
+    p.add_argument("--extra-mount-cm", type=float, default=2.0,
+                   help="strapping error of an extra tracker: a constant position offset per sample, this many cm "
+                        "(standard deviation per axis)")
+    p.add_argument("--extra-mount-deg", type=float, default=5.0,
+                   help="strapping error of an extra tracker: a constant rotation offset per sample, about this many "
+                        "degrees (standard deviation per axis of the rotation vector)")
     p.add_argument("--holdout-every", type=int, default=20, help="every Nth training clip is held out for monitoring")
     p.add_argument("--exclude-split", action="append", default=[], metavar="FILE",
                    help="never train on (nor monitor with) the clips this file lists: '#' comments, then one path per "
@@ -153,6 +168,13 @@ def parse_args():
         if not (math.isfinite(v) and v >= 0):
             p.error(f"{flag} takes minutes, a finite number >= 0 (0 = no limit), got {v}")
     return a
+
+
+# The body-tracker roles a user may add to head and hands (docs/conventions.md) and the skeleton
+# joint each observes (issue 44).
+EXTRA_ROLES = {"hips": "Hips", "chest": "Chest", "left_foot": "Foot_L", "right_foot": "Foot_R",
+               "left_knee": "LowerLeg_L", "right_knee": "LowerLeg_R", "left_elbow": "LowerArm_L",
+               "right_elbow": "LowerArm_R"}
 
 
 def read_clip_list(path):
@@ -211,6 +233,37 @@ class Masker:
         te = meta["tracker_entries"]
         self.head = torch.tensor(te["head"], device=device)
         self.hands = [torch.tensor(te["left_hand"], device=device), torch.tensor(te["right_hand"], device=device)]
+        # Extra roles: a joint's 9 entries are its position (3) then its rotation's first two columns (6).
+        self.extra = []  # (name, position entries, rotation entries)
+        for name in [r for r in args.extra_roles.split(",") if r]:
+            if name not in EXTRA_ROLES:
+                sys.exit(f"--extra-roles: unknown role {name!r}; expected some of {', '.join(EXTRA_ROLES)}")
+            base = meta["joint_position_entries"][EXTRA_ROLES[name]][0]
+            self.extra.append((name, torch.arange(base, base + 3, device=device),
+                               torch.arange(base + 3, base + 9, device=device)))
+
+    def span_visible(self, B, gen, prob):
+        """(B, W) visibility: 1, or 0 over one random span with probability `prob` (tracking lost for a while)."""
+        W, dev = self.W, self.device
+        frame_idx = torch.arange(W, device=dev).view(1, W)
+        vis = torch.ones(B, W, device=dev)
+        drop = torch.rand(B, generator=gen, device=dev) < prob
+        start = torch.randint(0, W, (B,), generator=gen, device=dev).view(B, 1)
+        length = torch.randint(1, W + 1, (B,), generator=gen, device=dev).view(B, 1)
+        span = (frame_idx >= start) & (frame_idx < start + length)
+        vis[drop.view(B, 1) & span] = 0.0
+        return vis
+
+    def extra_masks(self, B, gen):
+        """Per extra role: (B, W) position visibility and (B, W) rotation visibility."""
+        a, dev = self.args, self.device
+        out = []
+        for _ in self.extra:
+            tracked = (torch.rand(B, generator=gen, device=dev) < a.extra_role_prob).float().view(B, 1)
+            rot_only = (torch.rand(B, generator=gen, device=dev) < a.extra_rot_only_prob).float().view(B, 1)
+            vis = self.span_visible(B, gen, a.extra_drop_prob) * tracked
+            out.append((vis * (1 - rot_only), vis))
+        return out
 
     def __call__(self, B, gen):
         W, D, a, dev = self.W, self.D, self.args, self.device
@@ -218,13 +271,12 @@ class Masker:
         m[:, :, self.head] = 1.0
         frame_idx = torch.arange(W, device=dev).view(1, W)
         for hand in self.hands:
-            vis = torch.ones(B, W, device=dev)
-            drop = torch.rand(B, generator=gen, device=dev) < a.hand_drop_prob
-            start = torch.randint(0, W, (B,), generator=gen, device=dev).view(B, 1)
-            length = torch.randint(1, W + 1, (B,), generator=gen, device=dev).view(B, 1)
-            span = (frame_idx >= start) & (frame_idx < start + length)
-            vis[drop.view(B, 1) & span] = 0.0
+            vis = self.span_visible(B, gen, a.hand_drop_prob)
             m[:, :, hand] = vis.unsqueeze(-1).expand(B, W, hand.numel())
+        if self.extra:  # drawn after the hands: without --extra-roles the masks are the old ones, draw for draw
+            for (_, pos, rot), (pvis, rvis) in zip(self.extra, self.extra_masks(B, gen)):
+                m[:, :, pos] = pvis.unsqueeze(-1).expand(B, W, 3)
+                m[:, :, rot] = rvis.unsqueeze(-1).expand(B, W, 6)
         # Prefix of fully observed frames: length W-1 (online case) or uniform in [0, W-1].
         full = torch.rand(B, generator=gen, device=dev) < a.full_prefix_prob
         plen = torch.randint(0, W, (B,), generator=gen, device=dev)
@@ -470,6 +522,31 @@ def main():
             frac = max(frac, (time.time() - t0 + wall_before) / 60.0 / a.minutes)
         return a.lr * 0.5 * (1 + math.cos(math.pi * min(1.0, frac)))
 
+    def strapped(obs, g):
+        """obs with each extra role's joint seen through a strapped tracker: a constant offset per sample in
+        the joint's own frame, position R o (o ~ N(0, --extra-mount-cm) per axis) and rotation R Q (Q about a
+        random rotation vector ~ N(0, --extra-mount-deg) per axis)."""
+        B = obs.shape[0]
+        raw = obs * std_d + mean_d
+        for _, pos, rot in masker.extra:
+            c0 = torch.nn.functional.normalize(raw[:, :, rot[:3]], dim=-1)
+            c1 = raw[:, :, rot[3:]]
+            c1 = torch.nn.functional.normalize(c1 - (c1 * c0).sum(-1, keepdim=True) * c0, dim=-1)
+            c2 = torch.cross(c0, c1, dim=-1)
+            o = torch.randn(B, 1, 3, generator=g, device=dev) * (a.extra_mount_cm / 100.0)
+            raw[:, :, pos] = raw[:, :, pos] + c0 * o[..., 0:1] + c1 * o[..., 1:2] + c2 * o[..., 2:3]
+            v = torch.randn(B, 3, generator=g, device=dev) * math.radians(a.extra_mount_deg)
+            angle = v.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+            k = v / angle
+            K = torch.zeros(B, 3, 3, device=dev)
+            K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
+            K = K - K.transpose(1, 2)
+            sa, ca = torch.sin(angle).view(B, 1, 1), torch.cos(angle).view(B, 1, 1)
+            Q = (torch.eye(3, device=dev).expand(B, 3, 3) + sa * K + (1 - ca) * (K @ K)).view(B, 1, 3, 3)
+            raw[:, :, rot[:3]] = c0 * Q[..., 0, 0:1] + c1 * Q[..., 1, 0:1] + c2 * Q[..., 2, 0:1]
+            raw[:, :, rot[3:]] = c0 * Q[..., 0, 1:2] + c1 * Q[..., 1, 1:2] + c2 * Q[..., 2, 1:2]
+        return (raw - mean_d) / std_d
+
     def loss_on(model, idx, g, augment=False):
         x0 = draw(idx, g, augment)
         B = x0.shape[0]
@@ -482,6 +559,8 @@ def main():
         # trackers their noise (both small, in normalised units).
         obs = x0 + a.prefix_noise * prefix.unsqueeze(-1) * torch.randn(x0.shape, generator=g, device=dev)
         obs = obs + a.tracker_noise * torch.randn(x0.shape, generator=g, device=dev)
+        if masker.extra and (a.extra_mount_cm > 0 or a.extra_mount_deg > 0):
+            obs = strapped(obs, g)
         if augment and a.self_prefix > 0:
             # The online loop's past is what it emitted: the model's own reconstruction, trackers exact. Here it
             # is approximated by one reconstruction of the whole window from its trackers (no past), by the EMA
@@ -513,7 +592,8 @@ def main():
     style_idx = excl_idx_t[torch.randperm(len(excl_idx_t), generator=torch.Generator().manual_seed(7))[:512].to(dev)] \
         if len(excl_idx_t) else None
 
-    def monitor(model, idx):
+    def monitor(model, idx, extra=()):
+        """Newest-frame error with head, hands and the `extra` roles ((name, pos, rot) of masker.extra) tracked."""
         x0 = draw(idx, None, False)
         B = x0.shape[0]
         m = torch.zeros_like(x0)
@@ -521,6 +601,9 @@ def main():
         m[:, W - 1, masker.head] = 1.0
         for hand in masker.hands:
             m[:, W - 1, hand] = 1.0
+        for _, pos, rot in extra:
+            m[:, W - 1, pos] = 1.0
+            m[:, W - 1, rot] = 1.0
         g = torch.Generator(device=dev)
         g.manual_seed(5)
         out = ddim_sample(model, x0, m, ab, 4, g)
@@ -584,6 +667,10 @@ def main():
                 all_cm, lower_cm = monitor(ema, mon_idx)
                 style = (" excluded_newest_frame_cm all {:.2f} lower {:.2f}".format(*monitor(ema, style_idx))
                          if style_idx is not None else "")
+                # With every extra role tracked too (hips, feet, ...): what a user with body trackers gets.
+                hips_feet = [e for e in masker.extra if e[0] in ("hips", "left_foot", "right_foot")]
+                if hips_feet and style_idx is not None:
+                    style += " excluded_hips_feet_cm all {:.2f} lower {:.2f}".format(*monitor(ema, style_idx, hips_feet))
             msg = (f"step {step} train_loss {loss.item():.5f} holdout_loss_ema {hl:.5f} "
                    f"holdout_newest_frame_cm all {all_cm:.2f} lower {lower_cm:.2f}{style} "
                    f"wall_min {(time.time() - t0 + wall_before) / 60:.1f}")

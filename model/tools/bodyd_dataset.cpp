@@ -38,11 +38,13 @@ void write_npy(const std::filesystem::path& path, const std::vector<float>& data
 
 int main(int argc, char** argv) {
   CLI::App app{"bodyd-dataset: export training windows from BVH clips with bodyd's feature code"};
-  std::filesystem::path split, out_dir;
+  std::vector<std::filesystem::path> splits;
+  std::filesystem::path out_dir;
   std::vector<std::filesystem::path> bvh_files;
   std::string name = "train";
   int window = 20, stride = 2;
-  app.add_option("--split", split, "split file (paths relative to its folder's parent)");
+  app.add_option("--split", splits, "split file (paths relative to its folder's parent); may be given more than once "
+                                    "(e.g. splits/train.txt and splits/train-extra.txt)");
   app.add_option("files", bvh_files, "BVH files (instead of or besides --split)");
   app.add_option("--out", out_dir, "output folder")->required();
   app.add_option("--name", name, "output base name: NAME.npy and NAME.json")->capture_default_str();
@@ -51,7 +53,7 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   try {
     std::vector<std::filesystem::path> files = bvh_files;
-    if (!split.empty()) {
+    for (const auto& split : splits) {
       auto s = read_split(split);
       files.insert(files.end(), s.begin(), s.end());
     }
