@@ -23,6 +23,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <optional>
 #include <sstream>
 #include <thread>
@@ -39,8 +40,10 @@ using bodyd::test::TempDir;
 // then SIGKILL after 3 s, on destruction. A process that cannot start throws.
 class Process : public bodyd::test::Process {
  public:
-  Process(const std::vector<std::string>& args, const fs::path& dir, const std::string& name)
-      : bodyd::test::Process(args, {.output_dir = dir, .name = name, .search_path = true, .destroy_grace_ms = 3000}) {}
+  Process(const std::vector<std::string>& args, const fs::path& dir, const std::string& name,
+          std::map<std::string, std::string> env = {})
+      : bodyd::test::Process(args, {.env = std::move(env), .output_dir = dir, .name = name, .search_path = true,
+                                    .destroy_grace_ms = 3000}) {}
   std::optional<int> wait(std::chrono::milliseconds timeout) { return bodyd::test::Process::wait(ms(timeout)); }
   std::optional<int> terminate(std::chrono::milliseconds timeout) { return bodyd::test::Process::terminate(ms(timeout)); }
 
@@ -117,17 +120,31 @@ std::string body_of(const std::string& response) {
   return at == std::string::npos ? std::string() : response.substr(at + 4);
 }
 
+// How the bridge learns the daemon's endpoints: --endpoint and --control, or a user config file
+// ($XDG_CONFIG_HOME/bodyd/config.json, Stack::config_home) naming them.
+enum class Endpoints { kFlags, kUserConfig };
+
+// The port of the bridge's "serving http://127.0.0.1:PORT/" line on its stdout, 0 until it is there.
+int http_port_of(const Process& bridge) {
+  const std::string out = bridge.out();
+  const size_t at = out.find("http://127.0.0.1:");
+  if (at == std::string::npos || out.find('/', at + 17) == std::string::npos) return 0;
+  return std::stoi(out.substr(at + 17));
+}
+
 // bodyd replaying the bundled recording (ik, looped) on an ephemeral port, and the bridge on
 // another; both killed when this goes out of scope.
 struct Stack {
   TempDir dir;
   std::unique_ptr<Process> daemon, bridge;
   int http_port = 0;
-  std::string control;
+  std::string pub, control;
+  fs::path config_home;  // Endpoints::kUserConfig: the bridge's XDG_CONFIG_HOME
   std::string error;
 
   // recording: the file bodyd replays (default: the bundled one).
-  explicit Stack(std::vector<std::string> bridge_flags = {}, fs::path recording = {}) {
+  explicit Stack(std::vector<std::string> bridge_flags = {}, fs::path recording = {},
+                 Endpoints endpoints_from = Endpoints::kFlags) {
     const fs::path bin = bodyd::test::bin_dir();
     const fs::path endpoints = dir.path / "endpoints.json";
     if (recording.empty()) recording = bodyd::test::source_dir() / "data/demo/walk.csv";
@@ -137,7 +154,6 @@ struct Stack {
                                  endpoints.string(),
                                  "--log-level", "warn"},
         dir.path, "bodyd");
-    std::string pub;
     for (int i = 0; i < 250 && pub.empty(); ++i) {
       std::this_thread::sleep_for(20ms);
       try {
@@ -153,15 +169,25 @@ struct Stack {
       error = "bodyd did not write its endpoints: " + daemon->err();
       return;
     }
-    std::vector<std::string> bridge_args{(bin / "bodyd-viewer-bridge").string(), "--endpoint", pub, "--control", control,
-                                         "--http", "127.0.0.1:0", "--log-level", "warn"};
+    std::vector<std::string> bridge_args{(bin / "bodyd-viewer-bridge").string(), "--http", "127.0.0.1:0", "--log-level",
+                                         "warn"};
+    std::map<std::string, std::string> env;
+    if (endpoints_from == Endpoints::kFlags) {
+      bridge_args.insert(bridge_args.end(), {"--endpoint", pub, "--control", control});
+    } else {
+      // As a user's config for the systemd unit (comments allowed), with endpoints that are not
+      // the defaults.
+      config_home = dir.path / "config";
+      fs::create_directories(config_home / "bodyd");
+      std::ofstream(config_home / "bodyd/config.json")
+          << "// bodyd --user-config\n{\"method\": \"ik\", \"pub\": \"" << pub << "\", \"control\": \"" << control << "\"}\n";
+      env["XDG_CONFIG_HOME"] = config_home.string();
+    }
     bridge_args.insert(bridge_args.end(), bridge_flags.begin(), bridge_flags.end());
-    bridge = std::make_unique<Process>(bridge_args, dir.path, "bridge");
+    bridge = std::make_unique<Process>(bridge_args, dir.path, "bridge", env);
     for (int i = 0; i < 250 && http_port == 0; ++i) {
       std::this_thread::sleep_for(20ms);
-      const std::string out = bridge->out();
-      const size_t at = out.find("http://127.0.0.1:");
-      if (at != std::string::npos && out.find('/', at + 17) != std::string::npos) http_port = std::stoi(out.substr(at + 17));
+      http_port = http_port_of(*bridge);
     }
     if (http_port == 0) error = "the bridge did not report its port: " + bridge->err();
   }
@@ -321,6 +347,38 @@ TEST(ViewerBridge, StatusCarriesTheDaemonsState) {
   EXPECT_TRUE(d.at("sources")[0].at("connected").get<bool>());
   EXPECT_TRUE(d.at("latency_us").contains("p99"));
   EXPECT_EQ(http_post(stack.http_port, "/status", "{}").rfind("HTTP/1.1 405", 0), 0u);
+}
+
+// Issue 43 item 16: without --endpoint and --control the bridge takes the daemon's endpoints from
+// the user's config file, as bodyd-ctl does (it used bodyd's defaults whatever the file said);
+// a flag still wins over the file.
+TEST(ViewerBridge, TakesTheEndpointsFromTheUserConfig) {
+  Stack stack({}, {}, Endpoints::kUserConfig);
+  ASSERT_EQ(stack.error, "");
+  ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
+  auto status = nlohmann::json::parse(body_of(http_get(stack.http_port, "/status")));
+  EXPECT_EQ(status.at("endpoint").get<std::string>(), stack.pub);
+  EXPECT_EQ(status.at("daemon").at("control").get<std::string>(), stack.control);
+  EXPECT_TRUE(status.at("daemon").at("answered").get<bool>());
+  // --control on the command line wins over the file's; the poses still come from the file's "pub".
+  Process flagged({(bodyd::test::bin_dir() / "bodyd-viewer-bridge").string(), "--control", "none", "--http", "127.0.0.1:0",
+                   "--log-level", "warn"},
+                  stack.dir.path, "flagged", {{"XDG_CONFIG_HOME", stack.config_home.string()}});
+  int port = 0;
+  for (int i = 0; i < 250 && port == 0; ++i) {
+    std::this_thread::sleep_for(20ms);
+    port = http_port_of(flagged);
+  }
+  ASSERT_NE(port, 0) << flagged.err();
+  bool poses = false;
+  for (int i = 0; i < 150 && !poses; ++i) {
+    std::this_thread::sleep_for(50ms);
+    status = nlohmann::json::parse(body_of(http_get(port, "/status")), nullptr, false);
+    poses = status.is_object() && status.value("poses", 0) > 5;
+  }
+  EXPECT_TRUE(poses) << flagged.err();
+  EXPECT_EQ(status.value("endpoint", ""), stack.pub);
+  EXPECT_EQ(status["daemon"].value("control", ""), "none");
 }
 
 TEST(ViewerBridge, CalibrateAndResetButtonsReachTheDaemon) {

@@ -662,6 +662,41 @@ std::string ensure_descriptors(rlim_t needed) {
   return {};
 }
 
+// The endpoints named in the user's config file, $XDG_CONFIG_HOME/bodyd/config.json (what
+// `bodyd --user-config` and the systemd unit read): "pub" (the pose stream) and "control", as
+// bodyd-ctl takes "control" from it (tools/bodyd_ctl.cpp). A key the file does not set stays
+// empty; a file that is missing sets none. A file that does not parse, or a key that is not a
+// string, is warned about and ignored: bodyd refuses such a file itself, and says why. A bind on
+// every interface (tcp://*:PORT) is connected to on 127.0.0.1.
+struct ConfigEndpoints {
+  fs::path file;
+  std::optional<std::string> pub, control;
+};
+
+ConfigEndpoints read_config_endpoints(const fs::path& file) {
+  ConfigEndpoints out{file, {}, {}};
+  std::error_code ec;
+  if (file.empty() || !fs::exists(file, ec)) return out;
+  const std::optional<std::string> text = read_file(file);
+  const nlohmann::json j = nlohmann::json::parse(text.value_or(""), nullptr, /*allow_exceptions=*/false,
+                                                 /*ignore_comments=*/true);
+  if (j.is_discarded() || !j.is_object()) {
+    spdlog::warn("{}: not a JSON object; its endpoints are not used (bodyd --user-config says what is wrong)", file.string());
+    return out;
+  }
+  for (const auto& [key, value] : {std::pair{"pub", &out.pub}, std::pair{"control", &out.control}}) {
+    if (!j.contains(key)) continue;
+    if (j[key].is_string() && !j[key].get<std::string>().empty()) {
+      *value = j[key].get<std::string>();
+      // bodyd binds there; "*" (every interface, with allow_remote) is not an address to connect to.
+      if ((*value)->rfind("tcp://*:", 0) == 0) (*value)->replace(0, 7, "tcp://127.0.0.1");
+    } else {
+      spdlog::warn("{}: \"{}\" is not an endpoint string; using the default", file.string(), key);
+    }
+  }
+  return out;
+}
+
 // mg_stop, promptly: CivetWeb's accept thread polls its listening socket in 2 s steps and sees
 // the stop flag only when that poll returns, so connections of our own wake it.
 void stop_server(mg_context* ctx, const std::string& host, int port) {
@@ -697,11 +732,14 @@ int main(int argc, char** argv) {
   Paths paths{default_web_root(), {}};
   std::string log_level = "info";
   bool hold_load = false;
-  app.add_option("--endpoint", endpoint, "the daemon's pose stream (PUB) endpoint")->capture_default_str();
+  const ConfigEndpoints config = read_config_endpoints(paths::user_config_file());
+  app.add_option("--endpoint", endpoint,
+                 "the daemon's pose stream (PUB) endpoint (default: \"pub\" in " + config.file.string() +
+                     " when it sets one, else " + endpoint + ")");
   app.add_option("--control", control,
                  "the daemon's control endpoint: its status for the page, the skeleton at start, the calibrate and "
-                 "reset buttons; 'none' for poses only")
-      ->capture_default_str();
+                 "reset buttons; 'none' for poses only (default: \"control\" in " +
+                     config.file.string() + " when it sets one, else " + control + ")");
   app.add_option("--http", http, "HOST:PORT to serve the page on (port 0: any free port)")->capture_default_str();
   app.add_flag("--allow-remote", allow_remote, "allow a non-loopback --http address");
   app.add_option("--web-root", paths.web_root, "folder with index.html and viewer.js")->capture_default_str();
@@ -715,6 +753,17 @@ int main(int argc, char** argv) {
     return app.exit(e) == 0 ? 0 : 2;
   }
   spdlog::set_level(spdlog::level::from_str(log_level));
+  // The user's config names the daemon's endpoints unless a flag does (issue 43 item 16).
+  std::string endpoint_from = "--endpoint", control_from = "--control";
+  if (app.count("--endpoint") == 0) {
+    endpoint_from = config.pub ? "\"pub\" in " + config.file.string() : "the default";
+    endpoint = config.pub.value_or(endpoint);
+  }
+  if (app.count("--control") == 0) {
+    control_from = config.control ? "\"control\" in " + config.file.string() : "the default";
+    control = config.control.value_or(control);
+  }
+  if (config.pub || config.control) spdlog::info("pose stream {} ({}), control {} ({})", endpoint, endpoint_from, control, control_from);
   if (paths.three_dir.empty()) paths.three_dir = default_three_dir(paths.web_root);
   if (!fs::exists(paths.web_root / "index.html")) {
     fmt::print(stderr, "bodyd-viewer-bridge: {} does not exist (pass --web-root the viewer/ folder)\n",
@@ -740,7 +789,7 @@ int main(int argc, char** argv) {
   std::string error;
   auto poses = client::Client::connect(options, error);
   if (!poses) {
-    fmt::print(stderr, "bodyd-viewer-bridge: --endpoint {}: {}\n", endpoint, error);
+    fmt::print(stderr, "bodyd-viewer-bridge: pose endpoint {} ({}): {}\n", endpoint, endpoint_from, error);
     return 2;
   }
   // The control socket gets its own client: the pose thread never waits on a control request.
@@ -750,7 +799,7 @@ int main(int argc, char** argv) {
     control_options.receive_hwm = 1;
     control_client = client::Client::connect(control_options, error);
     if (!control_client) {
-      fmt::print(stderr, "bodyd-viewer-bridge: --control {}: {}\n", control, error);
+      fmt::print(stderr, "bodyd-viewer-bridge: control endpoint {} ({}): {}\n", control, control_from, error);
       return 2;
     }
     protocol::SkeletonMessage skel;
