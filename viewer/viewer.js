@@ -63,6 +63,7 @@ let poses = 0;
 const UP = new THREE.Vector3(0, 1, 0);
 
 function buildSkeleton(msg) {
+  if (skeleton && skeleton.id === msg.skeleton_id) return;  // the same one again (a reconnect)
   if (skeleton) {
     for (const m of skeleton.joints) scene.remove(m);
     for (const b of skeleton.bones) scene.remove(b.mesh);
@@ -213,28 +214,36 @@ async function post(path, body) {
 document.getElementById('calibrate').addEventListener('click', () => post('/api/calibrate', { from: 'head' }));
 document.getElementById('reset').addEventListener('click', () => post('/api/reset', {}));
 
+let lastSeq = null;  // the newest pose drawn
+
+// One message of the bridge (docs/viewer.md): from the WebSocket, or one of those the bridge wrote
+// into the page as it served it (served: true).
+function onMessage(msg, served) {
+  if (msg.type === 'skeleton') {
+    buildSkeleton(msg);
+  } else if (msg.type === 'status') {
+    showStatus(msg);
+  } else if (msg.type === 'pose') {
+    if (showPose(msg)) {
+      ++poses;
+      lastSeq = msg.seq;
+      render();
+      firstPoseDrawn();
+      // seq and count only: the pose's t_ns is the trackers' clock (for live sources the
+      // daemon's CLOCK_MONOTONIC, time since boot), which means nothing to a viewer.
+      if (served) setStatus('connecting', `pose ${msg.seq} (the newest when the page was served) · connecting…`);
+      else setStatus('streaming', `pose ${msg.seq} · ${poses} received`);
+    } else {
+      setStatus('connected', 'waiting for the skeleton');
+    }
+  }
+}
+
 function connect() {
   const ws = new WebSocket(`ws://${location.host}/ws`);
-  ws.onopen = () => setStatus('connected', 'connected, waiting for poses');
-  ws.onmessage = (event) => {
-    const msg = JSON.parse(event.data);
-    if (msg.type === 'skeleton') {
-      buildSkeleton(msg);
-    } else if (msg.type === 'status') {
-      showStatus(msg);
-    } else if (msg.type === 'pose') {
-      if (showPose(msg)) {
-        ++poses;
-        render();
-        firstPoseDrawn();
-        // seq and count only: the pose's t_ns is the trackers' clock (for live sources the
-        // daemon's CLOCK_MONOTONIC, time since boot), which means nothing to a viewer.
-        setStatus('streaming', `pose ${msg.seq} · ${poses} received`);
-      } else {
-        setStatus('connected', 'waiting for the skeleton');
-      }
-    }
-  };
+  ws.onopen = () => setStatus('connected', lastSeq === null ? 'connected, waiting for poses'
+                                                             : `pose ${lastSeq} · connected, waiting for new poses`);
+  ws.onmessage = (event) => onMessage(JSON.parse(event.data), false);
   ws.onclose = () => {
     setStatus('disconnected', 'disconnected from the bridge, retrying…');
     setTimeout(connect, 1000);
@@ -248,6 +257,14 @@ window.addEventListener('resize', () => {
   render();
 });
 
+// What the bridge wrote into the page (the newest skeleton, pose and status it had), drawn before
+// the load event: the first paint, and a screenshot taken at the load event, show the body and the
+// panel without waiting for the WebSocket (issue 43 item 16).
+const initialElement = document.getElementById('initial-state');
+const initial = initialElement ? JSON.parse(initialElement.textContent || '{}') : {};
+for (const msg of [initial.skeleton, initial.pose, initial.status]) {
+  if (msg) onMessage(msg, true);
+}
 render();
 connect();
 if (holdLoad) {

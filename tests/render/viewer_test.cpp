@@ -255,6 +255,71 @@ std::optional<std::string> find_chromium() {
   return std::nullopt;
 }
 
+bool have_three() {
+  return fs::exists(bodyd::test::source_dir() / "viewer/node_modules/three/build/three.module.js") ||
+         fs::exists("/usr/share/javascript/three/three.module.js");
+}
+
+// Headless Chromium on `url` with `extra` flags (--screenshot=..., --dump-dom): WebGL rendered on
+// the CPU by SwiftShader, no network of its own, a profile in `dir`. --timeout caps the wait for
+// the load event; --virtual-time-budget cannot be used (it never ends while a WebSocket is open).
+std::vector<std::string> chromium_args(const std::string& chromium, const fs::path& dir, std::vector<std::string> extra,
+                                       const std::string& url) {
+  std::vector<std::string> args{chromium, "--headless", "--no-sandbox", "--disable-gpu-sandbox", "--use-angle=swiftshader",
+                                "--enable-unsafe-swiftshader", "--no-first-run", "--disable-extensions",
+                                "--disable-background-networking", "--disable-sync", "--disable-component-update",
+                                "--no-default-browser-check", "--user-data-dir=" + (dir / "profile").string(),
+                                "--timeout=30000"};
+  args.insert(args.end(), extra.begin(), extra.end());
+  args.push_back(url);
+  return args;
+}
+
+// Lit orange (#ff7f0e: bones, joints) and red (#d62728: head and hands) pixels of a screenshot;
+// nullopt when it is not an 800x600 PNG.
+struct SkeletonPixels {
+  int orange = 0, red = 0;
+};
+std::optional<SkeletonPixels> skeleton_pixels(const fs::path& png) {
+  cairo_surface_t* img = cairo_image_surface_create_from_png(png.c_str());
+  if (cairo_surface_status(img) != CAIRO_STATUS_SUCCESS) {
+    cairo_surface_destroy(img);
+    return std::nullopt;
+  }
+  const int w = cairo_image_surface_get_width(img), h = cairo_image_surface_get_height(img);
+  const int stride = cairo_image_surface_get_stride(img);
+  const unsigned char* data = cairo_image_surface_get_data(img);
+  SkeletonPixels n;
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      const std::uint32_t px = *reinterpret_cast<const std::uint32_t*>(data + y * stride + 4 * x);
+      const int r = (px >> 16) & 0xFF, g = (px >> 8) & 0xFF, b = px & 0xFF;
+      // Orange to yellow: the shade depends on the three.js version's lighting.
+      if (r > 120 && r - b > 90 && g > 0.35 * r && g <= r) ++n.orange;
+      if (r > 100 && g < 0.4 * r && b < 0.4 * r) ++n.red;
+    }
+  }
+  cairo_surface_destroy(img);
+  if (w != 800 || h != 600) return std::nullopt;
+  return n;
+}
+
+// The value of the first `name="..."` attribute in `dom`, "" when there is none.
+std::string attribute(const std::string& dom, const std::string& name) {
+  const std::string key = name + "=\"";
+  const size_t at = dom.find(key);
+  if (at == std::string::npos) return "";
+  return dom.substr(at + key.size(), dom.find('"', at + key.size()) - at - key.size());
+}
+
+// The text of the element with id `id` up to its first child element.
+std::string element_text(const std::string& dom, const std::string& id) {
+  const size_t at = dom.find("id=\"" + id + "\"");
+  if (at == std::string::npos) return "";
+  const size_t text_at = dom.find('>', at) + 1;
+  return dom.substr(text_at, dom.find('<', text_at) - text_at);
+}
+
 }  // namespace
 
 TEST(ViewerBridge, ServesThePageAndPushesPoses) {
@@ -330,6 +395,54 @@ TEST(ViewerBridge, ServesThePageAndPushesPoses) {
     }
   }
   EXPECT_TRUE(closed);
+}
+
+// Issue 43 item 16: the page as served carries the bridge's newest skeleton, pose and status, so
+// it can draw them before its WebSocket delivers anything (a plain screenshot showed only "connected,
+// waiting for poses"). The daemon replays from a folder named "</script><!--": the source's name,
+// in the status, cannot end the page's script element.
+TEST(ViewerBridge, ThePageCarriesTheNewestSkeletonPoseAndStatus) {
+  TempDir odd;
+  const fs::path folder = odd.path / "<" / "script><!--";
+  fs::create_directories(folder);
+  fs::copy_file(bodyd::test::source_dir() / "data/demo/walk.csv", folder / "walk.csv");
+  Stack stack({}, folder / "walk.csv");
+  ASSERT_EQ(stack.error, "");
+  ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
+  const std::string template_page = read_file(bodyd::test::source_dir() / "viewer/index.html");
+  const auto count = [](const std::string& text, const std::string& what) {
+    size_t n = 0;
+    for (size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++n;
+    return n;
+  };
+  // The status reaches the bridge once a second: the page is fetched until it has one.
+  nlohmann::json state;
+  std::string page;
+  for (int i = 0; i < 60 && !(state.is_object() && state["status"].is_object()); ++i) {
+    if (i > 0) std::this_thread::sleep_for(50ms);
+    page = body_of(http_get(stack.http_port, "/"));
+    const std::string open = "<script type=\"application/json\" id=\"initial-state\">";
+    const size_t at = page.find(open);
+    ASSERT_NE(at, std::string::npos) << page;
+    const size_t from = at + open.size();
+    state = nlohmann::json::parse(page.substr(from, page.find("</script>", from) - from), nullptr, false);
+    ASSERT_FALSE(state.is_discarded()) << page.substr(from, 300);
+  }
+  EXPECT_EQ(count(page, "</script>"), count(template_page, "</script>")) << "the state ended a script element";
+  EXPECT_EQ(count(page, "<!--"), count(template_page, "<!--"));
+  ASSERT_TRUE(state["skeleton"].is_object()) << state.dump().substr(0, 300);
+  EXPECT_EQ(state["skeleton"].value("type", ""), "skeleton");
+  EXPECT_EQ(state["skeleton"]["names"].size(), 22u);
+  ASSERT_TRUE(state["pose"].is_object());
+  EXPECT_EQ(state["pose"].value("type", ""), "pose");
+  EXPECT_EQ(state["pose"]["skeleton_id"], state["skeleton"]["skeleton_id"]);
+  const double hips_y = state["pose"]["joints"]["Hips"][1].get<double>();
+  EXPECT_GT(hips_y, 0.5);  // about 0.9 m above the floor
+  EXPECT_LT(hips_y, 1.3);
+  ASSERT_TRUE(state["status"].is_object());
+  EXPECT_EQ(state["status"].value("type", ""), "status");
+  EXPECT_TRUE(state["status"]["daemon"].value("answered", false));
+  EXPECT_NE(state["status"].dump().find("</script><!--/walk.csv"), std::string::npos) << "the source's name, as it is";
 }
 
 TEST(ViewerBridge, StatusCarriesTheDaemonsState) {
@@ -605,9 +718,7 @@ TEST(ViewerBridge, RefusesADescriptorLimitTooLowForItsWorkers) {
 TEST(ViewerBrowser, HeadlessChromiumShowsTheSkeleton) {
   const auto chromium = find_chromium();
   if (!chromium) GTEST_SKIP() << "chromium is not installed (apt-get install chromium); the viewer's browser test is skipped";
-  const fs::path npm_three = bodyd::test::source_dir() / "viewer/node_modules/three/build/three.module.js";
-  const fs::path debian_three = "/usr/share/javascript/three/three.module.js";
-  if (!fs::exists(npm_three) && !fs::exists(debian_three)) {
+  if (!have_three()) {
     GTEST_SKIP() << "three.js is missing (apt-get install libjs-three, or npm ci --prefix viewer); the viewer's browser "
                     "test is skipped";
   }
@@ -616,42 +727,20 @@ TEST(ViewerBrowser, HeadlessChromiumShowsTheSkeleton) {
   ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
   const fs::path shot = stack.dir.path / "shot.png";
   // ?hold-load: the page's load event waits for the first drawn pose, and chromium takes the
-  // screenshot at the load event (--timeout caps the wait; --virtual-time-budget never ends while
-  // a WebSocket is open). SwiftShader renders WebGL on the CPU.
-  Process browser({*chromium, "--headless", "--no-sandbox", "--disable-gpu-sandbox", "--use-angle=swiftshader",
-                   "--enable-unsafe-swiftshader", "--no-first-run", "--disable-extensions", "--disable-background-networking",
-                   "--disable-sync", "--disable-component-update", "--no-default-browser-check", "--hide-scrollbars",
-                   "--user-data-dir=" + (stack.dir.path / "profile").string(), "--window-size=800,600",
-                   "--timeout=30000", "--screenshot=" + shot.string(),
-                   "http://127.0.0.1:" + std::to_string(stack.http_port) + "/?hold-load"},
+  // screenshot at the load event.
+  Process browser(chromium_args(*chromium, stack.dir.path,
+                                {"--hide-scrollbars", "--window-size=800,600", "--screenshot=" + shot.string()},
+                                "http://127.0.0.1:" + std::to_string(stack.http_port) + "/?hold-load"),
                   stack.dir.path, "chromium");
   const auto code = browser.wait(60000ms);
   ASSERT_TRUE(code.has_value()) << "chromium did not finish";
   ASSERT_TRUE(fs::exists(shot)) << "no screenshot; chromium exit " << *code << ": " << browser.err().substr(0, 2000);
-
-  cairo_surface_t* img = cairo_image_surface_create_from_png(shot.c_str());
-  ASSERT_EQ(cairo_surface_status(img), CAIRO_STATUS_SUCCESS);
-  const int w = cairo_image_surface_get_width(img), h = cairo_image_surface_get_height(img);
-  const int stride = cairo_image_surface_get_stride(img);
-  const unsigned char* data = cairo_image_surface_get_data(img);
-  EXPECT_EQ(w, 800);
-  EXPECT_EQ(h, 600);
-  // Lit orange (#ff7f0e: bones, joints) and red (#d62728: head and hands) pixels.
-  int orange = 0, red = 0;
-  for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x) {
-      const std::uint32_t px = *reinterpret_cast<const std::uint32_t*>(data + y * stride + 4 * x);
-      const int r = (px >> 16) & 0xFF, g = (px >> 8) & 0xFF, b = px & 0xFF;
-      // Orange to yellow: the shade depends on the three.js version's lighting.
-      if (r > 120 && r - b > 90 && g > 0.35 * r && g <= r) ++orange;
-      if (r > 100 && g < 0.4 * r && b < 0.4 * r) ++red;
-    }
-  }
-  cairo_surface_destroy(img);
+  const auto pixels = skeleton_pixels(shot);
+  ASSERT_TRUE(pixels.has_value()) << "not an 800x600 PNG: " << shot.string();
   // The legend's two swatches are ~80 pixels each; the skeleton covers thousands.
-  EXPECT_GT(orange, 1500) << "the screenshot shows no skeleton: " << shot.string();
-  EXPECT_GT(red, 300) << "the screenshot shows no tracked head and hands";
-  std::cerr << "skeleton pixels: " << orange << " orange, " << red << " red\n";
+  EXPECT_GT(pixels->orange, 1500) << "the screenshot shows no skeleton: " << shot.string();
+  EXPECT_GT(pixels->red, 300) << "the screenshot shows no tracked head and hands";
+  std::cerr << "skeleton pixels: " << pixels->orange << " orange, " << pixels->red << " red\n";
   if (::testing::Test::HasFailure()) {
     // Keep the screenshot for a look.
     std::error_code ec;
@@ -659,6 +748,51 @@ TEST(ViewerBrowser, HeadlessChromiumShowsTheSkeleton) {
   }
 }
 
+// Issue 43 item 16: a plain screenshot (no ?hold-load, a bridge without --enable-hold-load) showed
+// only "connected, waiting for poses": Chromium takes it at the load event, before the WebSocket has
+// delivered anything. The bridge now writes its newest skeleton, pose and status into the page it
+// serves, and the page draws them before its load event. So that what is checked cannot come over
+// the WebSocket, the test holds all 16 of the bridge's WebSockets while Chromium runs (the page's
+// own is refused): before the fix the screenshot had no skeleton at all, whatever the timing.
+// --dump-dom of the plain page, WebSocket free, shows the pose drawn and the panel filled.
+TEST(ViewerBrowser, APlainScreenshotShowsTheBodyAtOnce) {
+  const auto chromium = find_chromium();
+  if (!chromium) GTEST_SKIP() << "chromium is not installed (apt-get install chromium); the viewer's browser test is skipped";
+  if (!have_three()) GTEST_SKIP() << "three.js is missing (apt-get install libjs-three, or npm ci --prefix viewer)";
+  Stack stack;
+  ASSERT_EQ(stack.error, "");
+  ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
+  const std::string url = "http://127.0.0.1:" + std::to_string(stack.http_port) + "/";
+  const fs::path shot = stack.dir.path / "plain.png";
+  {
+    std::vector<std::unique_ptr<Socket>> websockets;
+    for (int i = 0; i < 16; ++i) {
+      websockets.push_back(std::make_unique<Socket>(stack.http_port));
+      ASSERT_EQ(ws_handshake(*websockets.back(), stack.http_port).rfind("HTTP/1.1 101", 0), 0u) << i;
+    }
+    Process browser(chromium_args(*chromium, stack.dir.path,
+                                  {"--hide-scrollbars", "--window-size=800,600", "--screenshot=" + shot.string()}, url),
+                    stack.dir.path, "chromium");
+    ASSERT_TRUE(browser.wait(60000ms).has_value()) << "chromium did not finish";
+    ASSERT_TRUE(fs::exists(shot)) << "no screenshot: " << browser.err().substr(0, 2000);
+  }
+  const auto pixels = skeleton_pixels(shot);
+  ASSERT_TRUE(pixels.has_value()) << "not an 800x600 PNG: " << shot.string();
+  EXPECT_GT(pixels->orange, 1500) << "the plain screenshot shows no skeleton: " << shot.string();
+  EXPECT_GT(pixels->red, 300) << "the plain screenshot shows no tracked head and hands";
+  if (::testing::Test::HasFailure()) {
+    std::error_code ec;
+    fs::copy_file(shot, fs::temp_directory_path() / "bodyd-viewer-test-failed-plain.png", fs::copy_options::overwrite_existing, ec);
+  }
+
+  Process dump(chromium_args(*chromium, stack.dir.path, {"--dump-dom"}, url), stack.dir.path, "dump");
+  ASSERT_TRUE(dump.wait(60000ms).has_value()) << "chromium did not finish";
+  const std::string dom = dump.out();
+  EXPECT_GE(std::atoi(attribute(dom, "data-poses").c_str()), 1) << dom.substr(0, 3000);
+  EXPECT_EQ(element_text(dom, "status").rfind("pose ", 0), 0u) << element_text(dom, "status");
+  EXPECT_EQ(attribute(dom, "data-daemon-state"), "answering") << dom.substr(0, 3000);
+  EXPECT_EQ(attribute(dom, "data-sources"), "1");
+}
 
 TEST(ViewerBrowser, HeadlessChromiumShowsTheDaemonsStatus) {
   const auto chromium = find_chromium();
@@ -673,38 +807,26 @@ TEST(ViewerBrowser, HeadlessChromiumShowsTheDaemonsStatus) {
   ASSERT_TRUE(stack.wait_for_poses()) << stack.bridge->err();
   // ?hold-load also waits for the first status message, so the DOM Chromium dumps at the load
   // event holds the status panel as the page filled it.
-  Process browser({*chromium, "--headless", "--no-sandbox", "--disable-gpu-sandbox", "--use-angle=swiftshader",
-                   "--enable-unsafe-swiftshader", "--no-first-run", "--disable-extensions", "--disable-background-networking",
-                   "--disable-sync", "--disable-component-update", "--no-default-browser-check",
-                   "--user-data-dir=" + (stack.dir.path / "profile").string(), "--timeout=30000", "--dump-dom",
-                   "http://127.0.0.1:" + std::to_string(stack.http_port) + "/?hold-load"},
+  Process browser(chromium_args(*chromium, stack.dir.path, {"--dump-dom"},
+                                "http://127.0.0.1:" + std::to_string(stack.http_port) + "/?hold-load"),
                   stack.dir.path, "chromium");
   ASSERT_TRUE(browser.wait(60000ms).has_value()) << "chromium did not finish";
   const std::string dom = browser.out();
   ASSERT_NE(dom.find("id=\"daemon\""), std::string::npos) << dom.substr(0, 3000);
   // The panel's data attributes carry what it shows (docs/viewer.md).
-  const auto attribute = [&](const std::string& name) -> std::string {
-    const std::string key = name + "=\"";
-    const size_t at = dom.find(key);
-    if (at == std::string::npos) return "";
-    return dom.substr(at + key.size(), dom.find('"', at + key.size()) - at - key.size());
-  };
-  EXPECT_EQ(attribute("data-daemon-state"), "answering") << dom.substr(0, 3000);
-  EXPECT_EQ(attribute("data-sources"), "1");
-  const std::string rate = attribute("data-frames-per-s");
+  EXPECT_EQ(attribute(dom, "data-daemon-state"), "answering") << dom.substr(0, 3000);
+  EXPECT_EQ(attribute(dom, "data-sources"), "1");
+  const std::string rate = attribute(dom, "data-frames-per-s");
   ASSERT_FALSE(rate.empty());
   EXPECT_GT(std::stod(rate), 10.0);
-  EXPECT_FALSE(attribute("data-latency-p99-us").empty());
+  EXPECT_FALSE(attribute(dom, "data-latency-p99-us").empty());
   EXPECT_NE(dom.find("id=\"calibrate\""), std::string::npos);
   EXPECT_NE(dom.find("id=\"reset\""), std::string::npos);
   EXPECT_NE(dom.find("walk.csv"), std::string::npos) << "the source's name is not shown";
   // Issue 20 item 8: a long source line wraps inside the panel instead of running off the
   // window's right edge, and the status line shows no unexplained tracker-clock time.
-  EXPECT_EQ(attribute("data-overflow"), "false") << "the daemon panel's content is wider than the panel";
-  const size_t status_at = dom.find("id=\"status\"");
-  ASSERT_NE(status_at, std::string::npos);
-  const size_t text_at = dom.find('>', status_at) + 1;
-  const std::string status_text = dom.substr(text_at, dom.find('<', text_at) - text_at);
-  EXPECT_NE(status_text.find("received"), std::string::npos) << status_text;
+  EXPECT_EQ(attribute(dom, "data-overflow"), "false") << "the daemon panel's content is wider than the panel";
+  const std::string status_text = element_text(dom, "status");
+  EXPECT_EQ(status_text.rfind("pose ", 0), 0u) << status_text;
   EXPECT_EQ(status_text.find(" t "), std::string::npos) << "status line: " << status_text;
 }

@@ -281,14 +281,15 @@ class Bridge {
     if (uri == "/ws") return reply(conn, 400, "text/plain", "/ws is a WebSocket endpoint (Upgrade: websocket)\n");
     if (uri == "/status") return reply(conn, 200, "application/json", status_json().dump() + "\n");
     std::optional<fs::path> file;
-    if (uri == "/" || uri == "/index.html") {
+    const bool page = uri == "/" || uri == "/index.html";
+    if (page) {
       file = paths_.web_root / "index.html";
     } else if (uri == "/viewer.js") {
       file = paths_.web_root / "viewer.js";
     } else if (uri.rfind("/three/", 0) == 0 && safe_name(uri.substr(7)) && fs::path(uri).extension() == ".js") {
       file = paths_.three_dir / uri.substr(7);
     }
-    const std::optional<std::string> body = file ? read_file(*file) : std::nullopt;
+    std::optional<std::string> body = file ? read_file(*file) : std::nullopt;
     if (!body) {
       std::string why = fmt::format("{} not found\n", uri);
       if (file && uri.rfind("/three/", 0) == 0) {
@@ -296,6 +297,7 @@ class Bridge {
       }
       return reply(conn, 404, "text/plain; charset=utf-8", why);
     }
+    if (page) body = with_initial_state(std::move(*body), initial_state_json());
     return reply(conn, 200, content_type(*file), *body, method == "HEAD");
   }
 
@@ -468,6 +470,36 @@ class Bridge {
     std::string out;
     for (char c : text.substr(0, 100)) out += (c >= 0x20 && c < 0x7f) ? c : '?';
     return out;
+  }
+
+  // What the page draws before its WebSocket has delivered anything (issue 43 item 16: a
+  // screenshot at the load event, or a page on a busy machine, showed only "connected, waiting
+  // for poses"): the newest skeleton, pose and status, the messages a new WebSocket gets first,
+  // as one JSON object {"skeleton", "pose", "status"} (null for what the bridge does not have yet).
+  std::string initial_state_json() {
+    std::lock_guard lock(shared_.mutex);
+    const auto or_null = [](const std::string& message) { return message.empty() ? std::string("null") : message; };
+    return "{\"skeleton\":" + or_null(shared_.skeleton_json) + ",\"pose\":" + or_null(shared_.pose_json) +
+           ",\"status\":" + or_null(shared_.status_json) + "}";
+  }
+
+  // The page with `state` in its <script type="application/json" id="initial-state"> element
+  // (viewer/index.html); a page without the element is served as it is. Every '<' of the JSON
+  // becomes \u003c (it can only be inside a string there), so no text in it, a source's name
+  // included, can end the script element ("</script>") or start a comment.
+  static std::string with_initial_state(std::string page, const std::string& state) {
+    static constexpr std::string_view kElement = "<script type=\"application/json\" id=\"initial-state\">{}</script>";
+    const size_t at = page.find(kElement);
+    if (at == std::string::npos) return page;
+    std::string escaped;
+    escaped.reserve(state.size());
+    for (char c : state) {
+      if (c == '<') escaped += "\\u003c";
+      else escaped += c;
+    }
+    const size_t braces = at + kElement.find("{}");
+    page.replace(braces, 2, escaped);
+    return page;
   }
 
   // Counts this connection for its address (once); the count now.
