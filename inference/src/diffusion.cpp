@@ -159,6 +159,7 @@ void DiffusionReconstructor::reset() {
   hand_rot_offset_ = {Quat::Identity(), Quat::Identity()};
   foot_locked_ = {};
   foot_release_offset_ = {Vec3::Zero(), Vec3::Zero()};
+  lost_head_ = {};
   sampler_.reseed(options_.seed);
 }
 
@@ -366,14 +367,42 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
   return true;
 }
 
-bool DiffusionReconstructor::head_now(std::int64_t t_ns, HeadNow& head) const {
+bool DiffusionReconstructor::head_now(std::int64_t t_ns, HeadNow& head) {
   head.valid = tracker_at(Role::Head, t_ns, t_ns, head.p, head.q);
   if (head.valid) return true;
-  // Head lost: keep the body where the last valid head sample put it.
+  // Head lost: the body stays where the last valid head sample put it, unless both hands are
+  // tracked now and were then: the body then goes where the hands went (their midpoint's
+  // horizontal displacement since the head's last sample; a walking user's hands move with the
+  // body, their swing cancels between the two), for at most kHeadDeadReckoningNs. So a headset
+  // tracked by rotation only for a moment does not leave the body standing while the user walks.
   const TrackerSample* last = history_.newest_valid_at_or_before(Role::Head, t_ns);
   if (last == nullptr) return false;
   head.p = last->position_m;
   head.q = last->rotation;
+  if (t_ns - last->t_ns > kHeadDeadReckoningNs) return true;
+  // The hands' midpoint when the head was last seen, taken once per loss (the history may not
+  // keep that far back for the whole loss).
+  if (lost_head_.t_ns != last->t_ns) {
+    lost_head_.t_ns = last->t_ns;
+    lost_head_.hands_ok = true;
+    lost_head_.hands_mid = Vec3::Zero();
+    for (Role hand : {Role::LeftHand, Role::RightHand}) {
+      Vec3 p;
+      Quat q;
+      lost_head_.hands_ok = lost_head_.hands_ok && tracker_at(hand, last->t_ns, last->t_ns, p, q);
+      lost_head_.hands_mid += 0.5 * p;
+    }
+  }
+  if (!lost_head_.hands_ok) return true;
+  Vec3 now_mid = Vec3::Zero();
+  for (Role hand : {Role::LeftHand, Role::RightHand}) {
+    Vec3 p;
+    Quat q;
+    if (!tracker_at(hand, t_ns, t_ns, p, q)) return true;
+    now_mid += 0.5 * p;
+  }
+  head.p.x() += now_mid.x() - lost_head_.hands_mid.x();
+  head.p.z() += now_mid.z() - lost_head_.hands_mid.z();
   return true;
 }
 

@@ -325,6 +325,43 @@ TEST_F(DefaultModel, ALostHandComesBackSmoothly) {
   EXPECT_LT((run.poses.back().global.positions[features::kHandL] - last.positions[features::kHandL]).norm(), 0.01);
 }
 
+// A headset tracked by rotation only for 1.5 s mid-walk (issue 42: SteamVR's TrackingResult_
+// Fallback_RotationOnly, which the bridge turns into lost head samples): the body follows the
+// hands instead of standing where the head was last seen while the user walks on. Target: the
+// waist's error inside the window at most twice its error outside.
+TEST_F(DefaultModel, ALostHeadFollowsTheHandsWhileTheUserWalks) {
+  if (!test::have_bandai()) GTEST_SKIP() << "no " << test::bandai();
+  const Motion clip = read_bvh(test::bandai() / "dataset-2" / "dataset-2_walk_normal_002.bvh");
+  auto samples = trackers(clip, 90.0);
+  const auto times = frame_times(clip);
+  constexpr std::int64_t kFrom = 4'000'000'000, kTo = 5'500'000'000;
+  for (TrackerSample& s : samples)
+    if (s.role == Role::Head && s.t_ns >= kFrom && s.t_ns < kTo) s.valid = false;
+  DiffusionReconstructor r(model_);
+  const Outputs run = feed_and_reconstruct(r, samples, times);
+  const auto hips = static_cast<size_t>(features::kHips);
+  double in = 0, out = 0, walked = 0;
+  int n_in = 0, n_out = 0;
+  Vec3 start = Vec3::Zero();
+  for (size_t f = 0; f < times.size(); ++f) {
+    if (times[f] < 2'500'000'000) continue;  // the reconstruction's history fills first
+    const GlobalPose truth = forward_kinematics(clip.skeleton, clip.frames[f]);
+    const double e = (run.poses[f].global.positions[hips] - truth.positions[hips]).norm();
+    if (times[f] >= kFrom && times[f] < kTo) {
+      if (n_in == 0) start = truth.positions[hips];
+      walked = (truth.positions[hips] - start).norm();
+      in += e, ++n_in;
+    } else {
+      out += e, ++n_out;
+    }
+  }
+  ASSERT_GT(n_in, 30);
+  ASSERT_GT(walked, 1.0) << "the clip should walk through the window";
+  std::cout << "waist error: " << 100 * out / n_out << " cm outside the window, " << 100 * in / n_in
+            << " cm inside (the hips walked " << walked << " m in it)\n";
+  EXPECT_LE(in / n_in, 2.0 * out / n_out);
+}
+
 TEST_F(DefaultModel, UserHeightScalesTheBody) {
   const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
   const auto times = frame_times(clip);

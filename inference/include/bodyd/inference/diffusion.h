@@ -109,8 +109,16 @@ class DiffusionReconstructor final : public Reconstructor {
     features::WorldEntries world;  // of `global`: what each later window rotates into its frame
     std::array<bool, 2> contact{};
   };
+  // How long a lost head follows the hands (head_now) before the body stays where it was.
+  static constexpr std::int64_t kHeadDeadReckoningNs = 3'000'000'000;
+  struct LostHead {
+    std::int64_t t_ns = INT64_MIN;  // the last valid head sample's time this was taken for
+    bool hands_ok = false;          // both hands were tracked then
+    Vec3 hands_mid = Vec3::Zero();  // their midpoint then (model scale)
+  };
+  LostHead lost_head_;
   // The head at the requested time (model scale): its tracker, or where the last valid head
-  // sample was (valid false).
+  // sample was moved by the hands since (valid false).
   struct HeadNow {
     Vec3 p = Vec3::Zero();
     Quat q = Quat::Identity();
@@ -129,7 +137,7 @@ class DiffusionReconstructor final : public Reconstructor {
     std::array<Quat, 2> q{Quat::Identity(), Quat::Identity()};
   };
   // reconstruct()'s stages, in order (diffusion.cpp). False: no valid head sample yet.
-  bool head_now(std::int64_t t_ns, HeadNow& head) const;
+  bool head_now(std::int64_t t_ns, HeadNow& head);
   // The window's canonical frame: the head's, or on a noisy head the smoothed anchor's.
   features::Canonical anchor(std::int64_t t_ns, const HeadNow& head);
   // The window's observations and mask (obs_, mask_), normalised; the trackers at its newest frame.
