@@ -59,7 +59,8 @@ const firstPose = new Promise((resolve) => { firstPoseDrawn = resolve; });
 const firstStatus = new Promise((resolve) => { firstStatusShown = resolve; });
 
 let skeleton = null;  // { names, parents, joints: [Mesh], bones: [{mesh, child, parent}] }
-let poses = 0;
+let poses = 0;        // poses drawn by this page
+let lastSeq = null;   // the newest pose drawn
 const UP = new THREE.Vector3(0, 1, 0);
 
 function buildSkeleton(msg) {
@@ -123,9 +124,28 @@ function showPose(msg) {
 
 function render() { renderer.render(scene, camera); }
 
+// This page's own drawing rate: poses drawn per second of the browser's clock, over the last
+// second or more. It is the page's, not the daemon's: a busy machine or a background tab draws
+// fewer poses than bodyd publishes (the bridge sends only the newest), and the panel's
+// "poses published per second" is bodyd's.
+let drawnPerS = null;
+let rateSince = { t: performance.now(), poses: 0 };
+setInterval(() => {
+  const now = performance.now();
+  drawnPerS = (poses - rateSince.poses) / ((now - rateSince.t) / 1000);
+  rateSince = { t: now, poses };
+  statusEl.dataset.drawnPerS = fmt(drawnPerS, 1);
+  if (statusEl.dataset.state === 'streaming') setStatus('streaming', streamingText());
+}, 1000);
+
+function streamingText() {
+  return `pose ${lastSeq} · ${poses} drawn · this page draws ${fmt(drawnPerS, 1)} poses/s`;
+}
+
 function setStatus(state, text) {
   statusEl.dataset.state = state;
   statusEl.dataset.poses = String(poses);
+  statusEl.dataset.drawnPerS = fmt(drawnPerS, 1);
   statusEl.textContent = text;
 }
 
@@ -164,6 +184,19 @@ function showStatus(msg) {
   }
   sourcesEl.replaceChildren();
   numbersEl.replaceChildren();
+  const addRow = (name, value) => {
+    const row = numbersEl.insertRow();
+    cell(row, name);
+    cell(row, value, 'v');
+  };
+  // The daemon's pose rate is what it published, counted by the bridge from the stream's seq and
+  // publish times (so neither the bridge's nor this page's speed enters it, and it is known with
+  // --control none too); what this page draws per second is in the status line, labelled as the
+  // page's (issue 43 item 16: one "poses per second" said neither whose rate it was nor how it was
+  // counted).
+  daemonEl.dataset.publishedPerS = fmt(msg.published_per_s, 1);
+  addRow('poses published per second', fmt(msg.published_per_s, 1));
+  addRow('poses lost on the way here', fmt(msg.dropped));
   if (!s) return;
   const sources = s.sources || [];
   daemonEl.dataset.sources = String(sources.length);
@@ -176,23 +209,13 @@ function showStatus(msg) {
     if (src.last_error) cell(sourcesEl.insertRow(), src.last_error, 'bad').colSpan = 3;
   }
   const lat = s.latency_us || {}, rec = s.reconstruct_us || {};
-  daemonEl.dataset.framesPerS = fmt(d.frames_per_s, 1);
   daemonEl.dataset.latencyP99Us = fmt(lat.p99);
-  const rows = [
-    ['poses per second', fmt(d.frames_per_s, 1)],
-    ['poses sent', fmt(s.frames_out)],
-    ['samples dropped (queue full)', fmt(s.samples_dropped)],
-    ['poses not sent', fmt(s.sends_failed)],
-    ['poses lost on the way here', fmt(msg.dropped)],
-    ['latency p50 / p99 (ms)', `${fmt(lat.p50 / 1000, 2)} / ${fmt(lat.p99 / 1000, 2)}`],
-    ['reconstruction p50 / p99 (ms)', `${fmt(rec.p50 / 1000, 2)} / ${fmt(rec.p99 / 1000, 2)}`],
-    ['head height (m)', `${fmt(s.head_height_m, 3)} ${s.height_calibrated ? '(calibrated)' : '(model default)'}`],
-  ];
-  for (const [name, value] of rows) {
-    const row = numbersEl.insertRow();
-    cell(row, name);
-    cell(row, value, 'v');
-  }
+  addRow('poses sent', fmt(s.frames_out));
+  addRow('samples dropped (queue full)', fmt(s.samples_dropped));
+  addRow('poses not sent', fmt(s.sends_failed));
+  addRow('latency p50 / p99 (ms)', `${fmt(lat.p50 / 1000, 2)} / ${fmt(lat.p99 / 1000, 2)}`);
+  addRow('reconstruction p50 / p99 (ms)', `${fmt(rec.p50 / 1000, 2)} / ${fmt(rec.p99 / 1000, 2)}`);
+  addRow('head height (m)', `${fmt(s.head_height_m, 3)} ${s.height_calibrated ? '(calibrated)' : '(model default)'}`);
   // For tests (docs/viewer.md): whether anything in the panel is wider than the panel.
   daemonEl.dataset.overflow = String(daemonEl.scrollWidth > daemonEl.clientWidth);
 }
@@ -214,8 +237,6 @@ async function post(path, body) {
 document.getElementById('calibrate').addEventListener('click', () => post('/api/calibrate', { from: 'head' }));
 document.getElementById('reset').addEventListener('click', () => post('/api/reset', {}));
 
-let lastSeq = null;  // the newest pose drawn
-
 // One message of the bridge (docs/viewer.md): from the WebSocket, or one of those the bridge wrote
 // into the page as it served it (served: true).
 function onMessage(msg, served) {
@@ -232,7 +253,7 @@ function onMessage(msg, served) {
       // seq and count only: the pose's t_ns is the trackers' clock (for live sources the
       // daemon's CLOCK_MONOTONIC, time since boot), which means nothing to a viewer.
       if (served) setStatus('connecting', `pose ${msg.seq} (the newest when the page was served) · connecting…`);
-      else setStatus('streaming', `pose ${msg.seq} · ${poses} received`);
+      else setStatus('streaming', streamingText());
     } else {
       setStatus('connected', 'waiting for the skeleton');
     }

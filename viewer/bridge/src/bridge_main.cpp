@@ -4,9 +4,9 @@
 // JSON over a WebSocket; the page's calibrate and reset buttons are forwarded to the control
 // socket. HTTP and WebSocket are CivetWeb's (libcivetweb). Specification: docs/viewer.md.
 //
-// Threads: the pose thread receives poses (bodyd::client) and keeps the newest as JSON; the
-// status thread asks the daemon for `status` once a second; the push thread sends what is new to
-// every open WebSocket at most every 10 ms; CivetWeb's worker threads serve files and forward the
+// Threads: the pose thread receives poses (bodyd::client) and keeps the newest as JSON and the
+// rate the daemon publishes at (publish_rate.h); the status thread asks the daemon for `status`
+// once a second; the push thread sends what is new to every open WebSocket at most every 10 ms; CivetWeb's worker threads serve files and forward the
 // buttons. A browser that falls behind loses poses (only the newest is ever sent), never delays
 // the others' by more than CivetWeb's write timeout.
 //
@@ -19,6 +19,7 @@
 #include "bodyd/base/loopback.h"
 #include "bodyd/client/client.h"
 #include "bodyd/paths/data_files.h"
+#include "publish_rate.h"
 
 #include <CLI/CLI.hpp>
 #include <civetweb.h>
@@ -160,6 +161,9 @@ struct Shared {
   std::string pose_json, skeleton_json, status_json;
   std::uint64_t pose_version = 0, skeleton_version = 0, status_version = 0;
   std::uint64_t poses = 0, dropped = 0, malformed = 0;
+  // Poses the daemon publishes per second, from the stream's seq and publish_t_ns (PublishRate);
+  // nullopt before two poses and after a second without one.
+  std::optional<double> published_per_s;
   std::condition_variable changed;
 };
 
@@ -328,13 +332,24 @@ class Bridge {
 
   // ---- bridge threads -------------------------------------------------------------------
 
-  // Receives poses until g_stop; keeps the newest as JSON.
+  // Receives poses until g_stop; keeps the newest as JSON, and the daemon's publishing rate.
   void pose_thread() {
     protocol::PoseMessage pose;
     std::uint32_t skeleton_id = 0;
+    viewer::PublishRate rate;
+    auto last_pose = std::chrono::steady_clock::now();
     while (!g_stop.load()) {
       const client::Received r = poses_.receive(pose, 100ms);
-      if (r == client::Received::kTimeout) continue;
+      if (r == client::Received::kTimeout) {
+        // Only the bridge's clock can tell that the stream has stopped: a second without a pose
+        // (bodyd publishes at least a few per second while it has trackers) and the rate is unknown.
+        if (std::chrono::steady_clock::now() - last_pose > 1s) {
+          rate.clear();
+          std::lock_guard lock(shared_.mutex);
+          shared_.published_per_s.reset();
+        }
+        continue;
+      }
       if (r == client::Received::kError) {
         spdlog::error("pose stream: {}", poses_.error());
         std::this_thread::sleep_for(100ms);
@@ -353,6 +368,8 @@ class Bridge {
         nlohmann::ordered_json j = client::pose_to_json(pose, skel ? &*skel : nullptr, false);
         j["type"] = "pose";
         pose_json = j.dump();
+        rate.add(pose.seq, pose.publish_t_ns);
+        last_pose = std::chrono::steady_clock::now();
       }
       {
         std::lock_guard lock(shared_.mutex);
@@ -367,6 +384,7 @@ class Bridge {
         shared_.poses = poses_.stats().poses;
         shared_.dropped = poses_.stats().dropped;
         shared_.malformed = poses_.stats().malformed;
+        shared_.published_per_s = rate.per_s();
       }
       shared_.changed.notify_all();
     }
@@ -534,6 +552,7 @@ class Bridge {
            {"dropped", shared_.dropped},
            {"malformed", shared_.malformed},
            {"skeleton", !shared_.skeleton_json.empty()}};
+      j["published_per_s"] = shared_.published_per_s ? nlohmann::json(*shared_.published_per_s) : nlohmann::json();
     }
     {
       std::lock_guard lock(clients_mutex_);
