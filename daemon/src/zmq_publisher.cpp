@@ -6,12 +6,20 @@
 #include <spdlog/spdlog.h>
 #include <zmq.h>
 
+#include <sys/socket.h>
+
 #include <algorithm>
 #include <array>
+#include <atomic>
+#include <cerrno>
+#include <cstring>
 
 namespace bodyd::daemon {
 namespace {
 constexpr std::int64_t kSkeletonPeriodNs = 1'000'000'000;  // docs/protocol.md: once per second
+// Subscribers at once: a quarter of the free descriptors, within these (connection_cap).
+constexpr std::size_t kMinSubscribers = 4, kMaxSubscribers = 64;
+constexpr int kBacklog = 8;  // connections the kernel queues before bodyd accepts them
 }
 
 ZmqPublisher::ZmqPublisher(std::string endpoint, std::string what, const DaemonConfig& config)
@@ -34,7 +42,17 @@ std::string ZmqPublisher::open() {
   if (std::string e = set_curve_server(pub, curve_secret_file_, curve_public_); !e.empty()) return e;
   if (!curve_allow_dir_.empty() && !curve_public_.empty())
     if (std::string e = socket_.allow_only_keys_in(curve_allow_dir_); !e.empty()) return e;
-  return bind_socket(pub, endpoint_, what_, allow_remote_, !curve_public_.empty(), bound_);
+  // Subscribers are capped, so idle ones cannot take every descriptor (out of descriptors, libzmq
+  // 4.3 aborts the process in an ipc:// listener's accept()); a short listen queue bounds how many
+  // wait beyond the cap.
+  const int backlog = kBacklog;
+  zmq_setsockopt(pub, ZMQ_BACKLOG, &backlog, sizeof backlog);
+  if (std::string e = guard_.start(socket_.context(), pub, what_, connection_cap(kMinSubscribers, kMaxSubscribers));
+      !e.empty())
+    return e;
+  std::string e = bind_socket(pub, endpoint_, what_, allow_remote_, !curve_public_.empty(), bound_);
+  guard_.set_bound(bound_);
+  return e;
 }
 
 bool ZmqPublisher::send(const OutputFrame& frame, std::string& out_error) {
@@ -98,7 +116,8 @@ bool ZmqPublisher::wait_for_subscription(int timeout_ms, std::int64_t now_ns) {
 
 nlohmann::json ZmqPublisher::status() const {
   return {{"subscriptions", subscriptions()}, {"skeleton_sends_failed", skeleton_sends_failed()},
-          {"curve", !curve_public_.empty()}};
+          {"curve", !curve_public_.empty()}, {"max_subscribers", guard_.max_connections()},
+          {"subscribers_refused", guard_.refused()}};
 }
 
 std::unique_ptr<ZmqPublisher> make_pub_output(const DaemonConfig& config) {

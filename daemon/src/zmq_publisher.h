@@ -27,7 +27,10 @@ class ZmqPublisher final : public Output {
   void poll(std::int64_t now_ns) override;
   void set_skeleton(const Skeleton& skeleton, const std::vector<std::uint8_t>& bytes) override;
   [[nodiscard]] nlohmann::json status() const override;
-  void close() override { socket_.close(); }
+  void close() override {
+    guard_.stop();
+    socket_.close();
+  }
 
   // Sends the skeleton message now. Counted as a failed send when ZeroMQ refuses it (then it
   // stays pending: the next send() or poll() tries again, before the pose).
@@ -48,6 +51,7 @@ class ZmqPublisher final : public Output {
   bool allow_remote_ = false;
   int send_hwm_ = 1000;
   ZmqSocket socket_;
+  ConnectionGuard guard_;  // after socket_: stopped before the socket closes
   std::vector<std::uint8_t> skeleton_bytes_;  // reconstruction thread only
   std::int64_t last_skeleton_ns_ = 0;
   bool skeleton_pending_ = false;  // set_skeleton() gave one not sent yet (reconstruction thread only)

@@ -6,12 +6,15 @@
 #include <spdlog/spdlog.h>
 #include <zmq.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <mutex>
 #include <set>
 #include <cstring>
 #include <string_view>
 
+#include <dirent.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
@@ -153,6 +156,156 @@ std::string bind_socket(void* socket, const std::string& endpoint, const std::st
       spdlog::info("{} {}: reachable from other machines; CURVE encryption is on", what, endpoint);
   }
   return {};
+}
+
+std::size_t descriptors_open() {
+  DIR* dir = ::opendir("/proc/self/fd");
+  if (!dir) return 0;
+  std::size_t n = 0;
+  while (const dirent* e = ::readdir(dir))
+    if (e->d_name[0] != '.') ++n;
+  ::closedir(dir);
+  return n > 0 ? n - 1 : 0;  // not the directory's own
+}
+
+std::size_t connection_cap(std::size_t min, std::size_t max) {
+  rlimit limit{};
+  if (::getrlimit(RLIMIT_NOFILE, &limit) != 0 || limit.rlim_cur == RLIM_INFINITY) return max;
+  const std::size_t open = descriptors_open();
+  const std::size_t free = limit.rlim_cur > open ? static_cast<std::size_t>(limit.rlim_cur) - open : 0;
+  return std::clamp(free / 4, min, max);
+}
+
+bool is_connection_of(int fd, const std::string& bound_endpoint) {
+  sockaddr_storage local{};
+  socklen_t len = sizeof local;
+  int type = 0;
+  socklen_t type_len = sizeof type;
+  return ::getsockname(fd, reinterpret_cast<sockaddr*>(&local), &len) == 0 &&
+         ::getsockopt(fd, SOL_SOCKET, SO_TYPE, &type, &type_len) == 0 && type == SOCK_STREAM &&
+         (bound_endpoint.rfind("ipc://", 0) == 0 ? local.ss_family == AF_UNIX : local.ss_family != AF_UNIX);
+}
+
+namespace {
+std::atomic<int> guards{0};  // a unique inproc endpoint per guarded socket
+}
+
+ConnectionGuard::~ConnectionGuard() { stop(); }
+
+std::string ConnectionGuard::start(void* context, void* socket, const std::string& what, std::size_t max_connections) {
+  what_ = what;
+  max_ = max_connections;
+  const std::string endpoint = "inproc://bodyd-connection-guard-" + std::to_string(guards++);
+  if (zmq_socket_monitor(socket, endpoint.c_str(),
+                         ZMQ_EVENT_ACCEPTED | ZMQ_EVENT_ACCEPT_FAILED | ZMQ_EVENT_DISCONNECTED) != 0)
+    return what + ": cannot monitor the socket: " + zmq_error_text();
+  socket_ = socket;
+  pair_ = zmq_socket(context, ZMQ_PAIR);
+  const int unlimited = 0, zero = 0;
+  if (!pair_ || zmq_setsockopt(pair_, ZMQ_RCVHWM, &unlimited, sizeof unlimited) != 0 ||
+      zmq_setsockopt(pair_, ZMQ_LINGER, &zero, sizeof zero) != 0 || zmq_connect(pair_, endpoint.c_str()) != 0)
+    return what + ": cannot monitor the socket: " + zmq_error_text();
+  stop_.store(false);
+  thread_ = std::thread([this] { run(); });
+  return {};
+}
+
+void ConnectionGuard::set_bound(const std::string& bound_endpoint) {
+  std::lock_guard lock(mutex_);
+  bound_ = bound_endpoint;
+  ipc_path_ = ipc_socket_path(bound_endpoint);
+}
+
+void ConnectionGuard::stop() {
+  stop_.store(true);
+  if (thread_.joinable()) thread_.join();
+  if (socket_) zmq_socket_monitor(socket_, nullptr, 0);
+  socket_ = nullptr;
+  if (pair_) zmq_close(pair_);
+  pair_ = nullptr;
+  std::lock_guard lock(mutex_);
+  if (hidden_ && ::rename((ipc_path_ + ".full").c_str(), ipc_path_.c_str()) == 0) hidden_ = false;
+}
+
+void ConnectionGuard::run() {
+  while (!stop_.load()) {
+    zmq_pollitem_t item{pair_, 0, ZMQ_POLLIN, 0};
+    if (zmq_poll(&item, 1, 100) <= 0) continue;
+    // Events are two frames: 2 bytes event, 4 bytes value (descriptor or errno); the endpoint.
+    for (int n = 0; n < 1000; ++n) {
+      zmq_msg_t event, endpoint;
+      zmq_msg_init(&event);
+      if (zmq_msg_recv(&event, pair_, ZMQ_DONTWAIT) < 0) {
+        zmq_msg_close(&event);
+        break;
+      }
+      std::uint16_t id = 0;
+      std::uint32_t value = 0;
+      if (zmq_msg_size(&event) >= 6) {
+        std::memcpy(&id, zmq_msg_data(&event), 2);
+        std::memcpy(&value, static_cast<const char*>(zmq_msg_data(&event)) + 2, 4);
+      }
+      const bool more = zmq_msg_more(&event);
+      zmq_msg_close(&event);
+      if (more) {
+        zmq_msg_init(&endpoint);
+        (void)zmq_msg_recv(&endpoint, pair_, 0);
+        zmq_msg_close(&endpoint);
+      }
+      on_event(id, value);
+    }
+    gate();
+  }
+}
+
+void ConnectionGuard::on_event(std::uint16_t event, std::uint32_t value) {
+  const int fd = static_cast<int>(value);
+  if (event == ZMQ_EVENT_ACCEPTED) {
+    peers_.push_back(fd);
+    if (peers_.size() <= max_) return;
+    if (!cap_logged_) {
+      cap_logged_ = true;
+      spdlog::warn("{}: {} connections, the most (a quarter of the free file descriptors, at most 64); more are "
+                   "refused while it is so (logged once)",
+                   what_, max_);
+    }
+    refuse(fd);
+  } else if (event == ZMQ_EVENT_DISCONNECTED) {
+    peers_.erase(std::remove(peers_.begin(), peers_.end(), fd), peers_.end());
+  } else if (event == ZMQ_EVENT_ACCEPT_FAILED && (value == EMFILE || value == ENFILE)) {
+    if (!exhaustion_logged_) {
+      exhaustion_logged_ = true;
+      spdlog::warn("{}: out of file descriptors ({}; ulimit -n): its newest connection is closed to let the waiting "
+                   "one in; raise the limit if this is not an attack (logged once)",
+                   what_, std::strerror(static_cast<int>(value)));
+    }
+    if (!peers_.empty()) refuse(peers_.back());
+  }
+}
+
+// Shuts a connection down (libzmq then closes it and reports DISCONNECTED), if it is still
+// ours: a descriptor closed and reused since its event is left alone.
+void ConnectionGuard::refuse(int fd) {
+  std::string bound;
+  {
+    std::lock_guard lock(mutex_);
+    bound = bound_;
+  }
+  if (!is_connection_of(fd, bound)) {
+    peers_.erase(std::remove(peers_.begin(), peers_.end(), fd), peers_.end());
+    return;
+  }
+  ::shutdown(fd, SHUT_RDWR);
+  refused_.fetch_add(1, std::memory_order_relaxed);
+}
+
+// An ipc:// socket file is hidden while the cap is reached and back once a connection left.
+void ConnectionGuard::gate() {
+  std::lock_guard lock(mutex_);
+  if (ipc_path_.empty()) return;
+  const bool full = peers_.size() >= max_;
+  if (full && !hidden_ && ::rename(ipc_path_.c_str(), (ipc_path_ + ".full").c_str()) == 0) hidden_ = true;
+  if (!full && hidden_ && ::rename((ipc_path_ + ".full").c_str(), ipc_path_.c_str()) == 0) hidden_ = false;
 }
 
 }  // namespace bodyd::daemon

@@ -121,5 +121,56 @@ TEST(DescriptorLimit, ControlAndOscQueryAnswerWithoutSpinningUnderUlimit64) {
   EXPECT_EQ(child.wait(10000), 0) << child.log();
 }
 
+// The default endpoints are ipc://, whose libzmq 4.3 listener aborts the process when accept()
+// meets EMFILE (ipc_listener.cpp's errno_assert; issue 43 item 6: 45 idle pose subscribers under
+// `ulimit -n 64`, then one control request: SIGABRT). The publisher now counts its subscribers
+// and refuses those beyond a quarter of the free descriptors, so the control socket still gets
+// one: bodyd answers and keeps running.
+TEST(DescriptorLimit, IdleSubscribersOnIpcNeverAbortBodyd) {
+#if defined(__SANITIZE_ADDRESS__)
+  GTEST_SKIP() << "under the sanitizers' runtime, which itself needs file descriptors (make sanitize)";
+#endif
+  if (::access("/usr/bin/prlimit", X_OK) != 0) GTEST_SKIP() << "prlimit (util-linux) is not installed";
+  test::TempDir dir;
+  const auto endpoints_file = dir.path / "endpoints.json";
+  const std::string pose = (dir.path / "run" / "pose").string(), control = (dir.path / "run" / "control").string();
+  test::Child child({"/usr/bin/prlimit", "--nofile=64:64", "--", (test::bin_dir() / "bodyd").string(), "--replay",
+                     (test::source_dir() / "data/demo/walk.csv").string(), "--method", "ik", "--loop", "--pub",
+                     "ipc://" + pose, "--control", "ipc://" + control, "--endpoints-file", endpoints_file.string()},
+                    dir.path / "stderr.txt");
+  ASSERT_TRUE(test::wait_endpoints(endpoints_file, 10000)) << child.log();
+  std::vector<int> hogs;
+  for (int i = 0; i < 45; ++i) {
+    const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::strncpy(addr.sun_path, pose.c_str(), sizeof addr.sun_path - 1);
+    if (::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0) hogs.push_back(fd);
+    else ::close(fd);
+  }
+  // Those beyond the cap are refused, and while it is reached the socket file is hidden (ENOENT).
+  std::cout << hogs.size() << " of 45 connected\n";
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // bodyd accepts (and refuses) them
+  zmq::context_t ctx;
+  std::optional<nlohmann::json> status;
+  for (int attempt = 0; attempt < 5 && !status; ++attempt)
+    status = test::control_request(ctx, "ipc://" + control, R"({"cmd":"status"})", 2000);
+  ASSERT_TRUE(status) << "the control socket did not answer: " << child.log();
+  EXPECT_TRUE(child.running()) << "bodyd stopped: " << child.log();
+  EXPECT_GT(status->value("outputs", nlohmann::json::array()).size(), 0u);
+  EXPECT_NE(child.log().find("--pub: "), std::string::npos) << child.log();  // the cap, said once
+  for (int fd : hogs) ::close(fd);
+  // Once they are gone the endpoint takes subscribers again: the socket file is back.
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  zmq::socket_t sub(ctx, zmq::socket_type::sub);
+  sub.set(zmq::sockopt::subscribe, "");
+  sub.set(zmq::sockopt::rcvtimeo, 5000);
+  sub.connect("ipc://" + pose);
+  zmq::message_t topic;
+  EXPECT_TRUE(sub.recv(topic)) << "no message on the pose endpoint after the hogs left: " << child.log();
+  child.signal(SIGTERM);
+  EXPECT_EQ(child.wait(10000), 0) << child.log();
+}
+
 }  // namespace
 }  // namespace bodyd
