@@ -9,6 +9,7 @@
 
 #include <atomic>
 #include <condition_variable>
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -18,8 +19,9 @@
 namespace bodyd::daemon {
 
 struct Command {
-  enum class Kind { Height, FromHead, Swap, Recentre, PoseBegin, PoseCancel } kind = Kind::Height;
+  enum class Kind { Height, FromHead, Swap, Recentre, PoseBegin } kind = Kind::Height;
   double height_m = 0.0;                 // Height: the standing head height (0: the model's size); PoseBegin: timeout, s
+  std::uint64_t pose_id = 0;             // PoseBegin: the request's id (its reply's key)
   std::unique_ptr<Reconstructor> recon;  // Swap: the new reconstructor
   std::string model_path;                // Swap: its model file ("" for ik)
 };

@@ -2,8 +2,10 @@
 
 #include "bodyd/daemon/config.h"
 
+#include <chrono>
 #include <cmath>
 #include <initializer_list>
+#include <thread>
 
 namespace bodyd::daemon {
 namespace {
@@ -24,7 +26,7 @@ std::string unknown_key(const json& request, const std::string& cmd, std::initia
   return {};
 }
 
-json dispatch(const json& request, ControlTarget& target) {
+ControlReply dispatch(const json& request, ControlTarget& target) {
   if (!request.is_object()) return control_error("a request is a JSON object like {\"cmd\":\"status\"}");
   const auto cmd_it = request.find("cmd");
   if (cmd_it == request.end())
@@ -93,9 +95,9 @@ json dispatch(const json& request, ControlTarget& target) {
 json control_error(const std::string& message) { return json{{"ok", false}, {"error", message}}; }
 
 json ControlTarget::recentre() { return control_error("reset: re-centring is not supported here"); }
-json ControlTarget::calibrate_pose(double) { return control_error("calibrate from pose: not supported here"); }
+ControlReply ControlTarget::calibrate_pose(double) { return control_error("calibrate from pose: not supported here"); }
 
-json handle_control_request(std::string_view request, ControlTarget& target) {
+ControlReply answer_control_request(std::string_view request, ControlTarget& target) {
   json parsed = json::parse(request.begin(), request.end(), nullptr, /*allow_exceptions=*/false);
   if (parsed.is_discarded()) return control_error("the request is not valid JSON; send e.g. {\"cmd\":\"status\"}");
   try {
@@ -103,6 +105,19 @@ json handle_control_request(std::string_view request, ControlTarget& target) {
   } catch (const std::exception& e) {
     // A target failing is a bug or an unexpected state, reported rather than killing the control thread.
     return control_error(std::string("internal error: ") + e.what());
+  }
+}
+
+json handle_control_request(std::string_view request, ControlTarget& target) {
+  ControlReply answer = answer_control_request(request, target);
+  if (!answer.later) return std::move(answer.reply);
+  for (;;) {
+    try {
+      if (std::optional<json> reply = answer.later()) return std::move(*reply);
+    } catch (const std::exception& e) {
+      return control_error(std::string("internal error: ") + e.what());
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
 }
 

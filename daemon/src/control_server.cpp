@@ -235,8 +235,10 @@ void ControlServer::loop(ControlTarget& target) {
   frames.reserve(kMaxFrames);
   while (!stop_.load()) {
     zmq_pollitem_t items[2] = {{router, 0, ZMQ_POLLIN, 0}, {monitor_, 0, ZMQ_POLLIN, 0}};
-    const int ready = zmq_poll(items, monitor_ ? 2 : 1, 100);
+    // A waiting request is looked at every 10 ms, so its answer leaves soon after it is ready.
+    const int ready = zmq_poll(items, monitor_ ? 2 : 1, waiting_.empty() ? 100 : 10);
     retry_listener();
+    answer_waiting(/*stopping=*/false);
     if (ready <= 0) continue;
     if (monitor_ && (items[1].revents & ZMQ_POLLIN)) {
       // Events are two frames: 2 bytes event, 4 bytes value (descriptor or errno); the endpoint.
@@ -286,16 +288,47 @@ void ControlServer::loop(ControlTarget& target) {
       continue;
     }
     const std::size_t body_frames = frames.size() - delimiter - 1;
-    const nlohmann::json reply = body_frames != 1 ? control_error("a request is one frame of JSON text")
-                                                  : handle_control_request(frames.back().data, target);
-    const std::string text = reply.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
-    // The envelope back as it came, then the reply. If the first frame is refused (peer gone, or
-    // its queue full) nothing of this message was queued; later frames then cannot fail.
-    bool sent = true;
-    for (std::size_t i = 0; i <= delimiter && sent; ++i)
-      sent = zmq_send(router, frames[i].data.data(), frames[i].data.size(), ZMQ_SNDMORE | ZMQ_DONTWAIT) >= 0;
-    if (sent) sent = zmq_send(router, text.data(), text.size(), ZMQ_DONTWAIT) >= 0;
-    if (!sent) spdlog::debug("control: reply not sent ({}); the client has gone or does not read", zmq_error_text());
+    ControlReply answer = body_frames != 1 ? ControlReply(control_error("a request is one frame of JSON text"))
+                                           : answer_control_request(frames.back().data, target);
+    std::vector<std::string> envelope;
+    envelope.reserve(delimiter + 1);
+    for (std::size_t i = 0; i <= delimiter; ++i) envelope.push_back(std::move(frames[i].data));
+    if (answer.later) {
+      waiting_.push_back({std::move(envelope), std::move(answer.later)});
+      continue;
+    }
+    send_reply(envelope, answer.reply.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
+  }
+  answer_waiting(/*stopping=*/true);
+}
+
+bool ControlServer::send_reply(const std::vector<std::string>& envelope, const std::string& text) {
+  void* router = socket_.get();
+  // The envelope back as it came, then the reply. If the first frame is refused (peer gone, or
+  // its queue full) nothing of this message was queued; later frames then cannot fail.
+  bool sent = true;
+  for (std::size_t i = 0; i < envelope.size() && sent; ++i)
+    sent = zmq_send(router, envelope[i].data(), envelope[i].size(), ZMQ_SNDMORE | ZMQ_DONTWAIT) >= 0;
+  if (sent) sent = zmq_send(router, text.data(), text.size(), ZMQ_DONTWAIT) >= 0;
+  if (!sent) spdlog::debug("control: reply not sent ({}); the client has gone or does not read", zmq_error_text());
+  return sent;
+}
+
+void ControlServer::answer_waiting(bool stopping) {
+  for (auto it = waiting_.begin(); it != waiting_.end();) {
+    std::optional<nlohmann::json> reply;
+    try {
+      reply = it->later();
+    } catch (const std::exception& e) {
+      reply = control_error(std::string("internal error: ") + e.what());
+    }
+    if (!reply && stopping) reply = control_error("bodyd is stopping: the request was not finished");
+    if (!reply) {
+      ++it;
+      continue;
+    }
+    send_reply(it->envelope, reply->dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
+    it = waiting_.erase(it);
   }
 }
 

@@ -1,6 +1,8 @@
 // The control socket (docs/control.md): a ROUTER socket answering REQ clients, each request
-// with its own envelope, and the thread that answers it. The
-// requests are parsed by control.h's handle_control_request, which calls the ControlTarget.
+// with its own envelope, and the thread that answers it. The requests are parsed by control.h's
+// answer_control_request, which calls the ControlTarget. A request whose answer comes later (the
+// calibration pose's wait) keeps its envelope here and is answered when its LaterReply gives the
+// reply, while the thread goes on answering everyone else.
 #pragma once
 
 #include "bodyd/daemon/control.h"
@@ -12,6 +14,7 @@
 #include <map>
 #include <string>
 #include <thread>
+#include <vector>
 
 namespace bodyd::daemon {
 
@@ -37,12 +40,23 @@ class ControlServer {
   void evict_idlest();
   void drop_listener();
   void retry_listener();
+  // Sends `text` to the peer of `envelope` (its routing id .. empty delimiter); false when the
+  // peer has gone or does not read.
+  bool send_reply(const std::vector<std::string>& envelope, const std::string& text);
+  // Answers the waiting requests whose replies are ready (all of them with `stopping`).
+  void answer_waiting(bool stopping);
 
   using Clock = std::chrono::steady_clock;
   struct Peer {
     Clock::time_point last_active;  // accepted, or last request
     std::uint64_t order = 0;        // accept order, for ties
   };
+
+  struct Waiting {
+    std::vector<std::string> envelope;
+    LaterReply later;
+  };
+  std::vector<Waiting> waiting_;  // requests answered later, oldest first (control thread)
 
   ZmqSocket socket_;
   void* monitor_ = nullptr;  // PAIR receiving the ROUTER's monitor events (control thread)

@@ -15,6 +15,7 @@
 #include "bodyd/inference/calibration.h"
 #include "bodyd/drivers/open_source.h"
 #include "bodyd/protocol/pose_message.h"
+#include "calibration_pose_wait.h"
 #include "calibration_state.h"
 #include "command_channel.h"
 #include "control_server.h"
@@ -37,6 +38,7 @@
 #include <cstring>
 #include <ctime>
 #include <fstream>
+#include <map>
 #include <mutex>
 #include <thread>
 
@@ -145,7 +147,10 @@ struct Daemon::Impl final : ControlTarget {
   ReconstructionSummary summary;
   json recentre_status = json{{"recentred", false}};
   json mounting_status = json::object();
-  std::optional<json> pose_result;  // the calibration pose's reply, handed to the control thread
+  // The calibration poses' replies by request id, handed to the control thread (at most two: one
+  // answered, not yet collected, and the next one's).
+  std::map<std::uint64_t, json> pose_results;
+  std::uint64_t last_pose_id = 0;  // control thread
   bool offsets_configured = false;
 
   // Reconstruction-thread state.
@@ -184,10 +189,10 @@ struct Daemon::Impl final : ControlTarget {
   BodyReference body_reference;
   Mounting default_mount;
   MountingOrigins mounting_origin{MountingOrigin::Default, MountingOrigin::Default, MountingOrigin::Default};
-  // The calibration pose: started by the control thread (calibrate_pose), fed raw samples here,
-  // its result handed back through pose_result (shared_mutex).
-  std::optional<PoseCalibrator> pose_calibrator;
-  std::int64_t pose_deadline_ns = 0;
+  // The calibration pose: started by the control thread (calibrate_pose), fed raw samples and
+  // ticked here, its reply handed back through pose_results (shared_mutex).
+  std::optional<CalibrationPoseWait> pose_wait;
+  std::uint64_t pose_id = 0;
   // The auto calibration's head refinement: a calibrator fed raw samples while it waits, for the
   // first kAutoHeadRefineWindowNs of head samples.
   std::optional<PoseCalibrator> auto_pose;
@@ -360,24 +365,9 @@ struct Daemon::Impl final : ControlTarget {
   // Reconstruction thread: the raw sample (before mounting, offsets, re-centring) to the
   // calibration pose in progress and to the auto calibration's head refinement.
   void feed_pose_calibrators(const TrackerSample& raw, std::int64_t arrival_ns) {
-    if (pose_calibrator) {
-      if (std::optional<PoseCalibration> c = pose_calibrator->push(raw)) {
-        json reply = apply_pose_calibration(*c);
-        pose_calibrator.reset();
-        std::lock_guard lock(shared_mutex);
-        pose_result = std::move(reply);
-      } else if (monotonic_ns() > pose_deadline_ns) {
-        const std::string refusal = pose_calibrator->last_refusal();
-        pose_calibrator.reset();
-        std::lock_guard lock(shared_mutex);
-        pose_result = control_error(
-            refusal.empty()
-                ? "calibrate from pose: no still second (the headset and every tracked controller held still for 1 s) "
-                  "before the timeout: stand straight, look ahead, let the arms hang relaxed at the sides, hold still "
-                  "and retry"
-                : "calibrate from pose: not the calibration pose: " + refusal + "; then retry");
-      }
-    }
+    if (pose_wait)
+      if (std::optional<CalibrationPoseWait::Outcome> o = pose_wait->push(raw, arrival_ns))
+        finish_pose_wait(std::move(*o));
     if (auto_pose) {
       if (std::optional<PoseCalibration> c = auto_pose->push(raw)) {
         auto_pose.reset();
@@ -394,6 +384,20 @@ struct Daemon::Impl final : ControlTarget {
         }
       }
     }
+  }
+
+  // Reconstruction thread: ends the calibration pose's wait with its reply.
+  void finish_pose_wait(CalibrationPoseWait::Outcome outcome) {
+    pose_wait.reset();
+    json reply;
+    if (outcome.calibration) {
+      reply = apply_pose_calibration(*outcome.calibration);
+    } else {
+      spdlog::info("calibration pose refused: {}", outcome.refusal);
+      reply = control_error("calibrate from pose: " + outcome.refusal);
+    }
+    std::lock_guard lock(shared_mutex);
+    pose_results[pose_id] = std::move(reply);
   }
 
   // The auto calibration's refinement of the headset's mounting (its pitch) from a still
@@ -578,22 +582,18 @@ struct Daemon::Impl final : ControlTarget {
                     {"recentred", true}};
       }
       case Command::Kind::PoseBegin: {
+        if (pose_wait)
+          return control_error(
+              "calibrate from pose: a calibration pose is already waiting (another request started it): wait for its "
+              "answer, then retry");
         if (!latest_head.fresh(now_ns))
           return control_error(
               "calibrate from pose: no valid head sample in the last 2 s: wear the headset (is it tracking?) and retry");
-        pose_calibrator.emplace(body_reference, default_mount, PoseCalibrationOptions{});
-        pose_deadline_ns = monotonic_ns() + static_cast<std::int64_t>(c.height_m * 1e9);
-        {
-          std::lock_guard lock(shared_mutex);
-          pose_result.reset();
-        }
+        pose_wait.emplace(body_reference, default_mount, now_ns, c.height_m);
+        pose_id = c.pose_id;
         spdlog::info("calibration pose: waiting up to {:.0f} s for a still second (stand straight, look ahead, arms "
                      "relaxed at the sides)",
                      c.height_m);
-        return json{{"ok", true}};
-      }
-      case Command::Kind::PoseCancel: {
-        pose_calibrator.reset();
         return json{{"ok", true}};
       }
       case Command::Kind::Swap: {
@@ -690,6 +690,9 @@ struct Daemon::Impl final : ControlTarget {
         notify();
       }
       const std::int64_t now_ns = monotonic_ns();
+      if (pose_wait)
+        if (std::optional<CalibrationPoseWait::Outcome> o = pose_wait->tick(now_ns, queue.size() == 0))
+          finish_pose_wait(std::move(*o));
       warn_if_no_head(now_ns);
       recorder.poll(now_ns);  // the recording reaches the file at least every half second
     }
@@ -778,36 +781,31 @@ struct Daemon::Impl final : ControlTarget {
     return commands.run(std::move(c));
   }
 
-  // Control thread: starts the calibration pose on the reconstruction thread, then waits for
-  // its result (the reconstruction thread ends it at the still second or the deadline).
-  json calibrate_pose(double timeout_s) override {
+  // Control thread: starts the calibration pose on the reconstruction thread; the reply comes
+  // later, when the reconstruction thread ends the wait (the still second, a refusal, the
+  // timeout), and the control socket answers other requests meanwhile.
+  ControlReply calibrate_pose(double timeout_s) override {
     Command c;
     c.kind = Command::Kind::PoseBegin;
     c.height_m = timeout_s;
+    c.pose_id = ++last_pose_id;
+    const std::uint64_t id = c.pose_id;
     json started = commands.run(std::move(c));
     if (!started.value("ok", false)) return started;
-    const auto give_up = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s + 1.0);
-    while (std::chrono::steady_clock::now() < give_up && !stop_flag.load()) {
-      {
-        std::lock_guard lock(shared_mutex);
-        if (pose_result) {
-          json r = std::move(*pose_result);
-          pose_result.reset();
-          return r;
-        }
+    // The reconstruction thread answers by the timeout; this is for a thread that stopped.
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s + 2.0);
+    return ControlReply(LaterReply([this, id, give_up]() -> std::optional<json> {
+      std::lock_guard lock(shared_mutex);
+      if (auto it = pose_results.find(id); it != pose_results.end()) {
+        json r = std::move(it->second);
+        pose_results.erase(it);
+        return r;
       }
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    }
-    Command cancel;
-    cancel.kind = Command::Kind::PoseCancel;
-    (void)commands.run(std::move(cancel));
-    std::lock_guard lock(shared_mutex);
-    if (pose_result) {
-      json r = std::move(*pose_result);
-      pose_result.reset();
-      return r;
-    }
-    return control_error("calibrate from pose: no samples arrived before the timeout (is the headset tracking?)");
+      if (stop_flag.load()) return control_error("calibrate from pose: bodyd is stopping");
+      if (std::chrono::steady_clock::now() > give_up)
+        return control_error("calibrate from pose: the reconstruction thread did not answer (a bug: see bodyd's log)");
+      return std::nullopt;
+    }));
   }
 
   json shutdown() override {

@@ -314,21 +314,28 @@ std::string PoseCalibrator::pose_problem(const PoseCalibration& c, const std::ar
     if (!c.measured[static_cast<size_t>(h)]) continue;
     const Vec3& p = device_p[static_cast<size_t>(h)];
     const double horizontal = std::hypot(p.x() - device_p[0].x(), p.z() - device_p[0].z());
-    if (p.y() < 0.35 * head_y || p.y() > 0.8 * head_y || horizontal > 0.45)
+    if (p.y() < 0.35 * head_y || p.y() > 0.8 * head_y || horizontal > 0.45) {
+      refusal_clear_ = p.y() < (0.35 - kClearHandHeightRatio) * head_y ||
+                       p.y() > (0.8 + kClearHandHeightRatio) * head_y || horizontal > 0.45 + kClearHandDistanceM;
       return fmt::format("the {} is not hanging at your side ({:.2f} m high with the headset at {:.2f} m, {:.2f} m "
                          "from it horizontally): let both arms hang relaxed",
                          role_name(kRoles[static_cast<size_t>(h)]), p.y(), head_y, horizontal);
+    }
     const double change = mounting_difference(c.mounting.T_device_joint[static_cast<size_t>(h)],
                                               defaults_.T_device_joint[static_cast<size_t>(h)])
                               .angle_deg;
-    if (change > options_.max_grip_change_deg)
+    if (change > options_.max_grip_change_deg) {
+      refusal_clear_ = change > options_.max_grip_change_deg + kClearTurnDeg;
       return fmt::format("the {} controller is turned {:.0f} degrees from pointing ahead: hold each controller "
                          "naturally, pointing forward",
                          role_name(kRoles[static_cast<size_t>(h)]), change);
+    }
   }
   const double head_change = mounting_difference(c.mounting.T_device_joint[0], defaults_.T_device_joint[0]).angle_deg;
-  if (head_change > options_.max_head_change_deg)
+  if (head_change > options_.max_head_change_deg) {
+    refusal_clear_ = head_change > options_.max_head_change_deg + kClearTurnDeg;
     return fmt::format("the headset is tilted {:.0f} degrees from level: look straight ahead", head_change);
+  }
   return {};
 }
 

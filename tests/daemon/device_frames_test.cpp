@@ -81,6 +81,7 @@ DaemonConfig replay_config(const std::filesystem::path& log, const std::filesyst
 struct OneRequest {
   std::optional<json> reply;
   json status;
+  json status_at_reply;  // asked right after the reply came
 };
 OneRequest replay_and_request(const DaemonConfig& c, const std::string& request, std::uint64_t min_samples = 30,
                               int timeout_ms = 6000) {
@@ -95,6 +96,7 @@ OneRequest replay_and_request(const DaemonConfig& c, const std::string& request,
   for (int i = 0; i < 300 && d.status()["samples_in"].get<std::uint64_t>() < min_samples; ++i)
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   out.reply = test::control_request(ctx, d.control_endpoint(), request, timeout_ms);
+  out.status_at_reply = d.status();
   d.request_stop();
   runner.join();
   out.status = d.status();
@@ -204,6 +206,98 @@ TEST(CalibrationPose, RefusesRaisedArmsAndSaysWhy) {
   EXPECT_NE((*reply)["error"].get<std::string>().find("left_hand is not hanging at your side"), std::string::npos)
       << reply->dump();
   EXPECT_EQ(r.status["mounting"]["roles"]["left_hand"]["origin"], "default");
+}
+
+// Issue 43 item 14: a still second clearly out of the pose is refused at once, not at the
+// timeout: asked to wait up to 30 s, bodyd answers while the 20 s recording still plays.
+TEST(CalibrationPose, RefusesAClearlyRaisedArmAtOnce) {
+  test::TempDir dir;
+  const BodyReference ref = reference();
+  auto joints = calibration_pose_joints(ref, 1.5);
+  joints[1].position_m.y() = 1.6;  // the left hand up at the head
+  write_device_log(dir.path / "raised.csv", still_device_stream(joints, default_mounting(ref), 20.0));
+  const OneRequest r = replay_and_request(replay_config(dir.path / "raised.csv", dir.path, "ik"),
+                                          R"({"cmd":"calibrate","from":"pose","timeout_s":30})", 30, 20000);
+  ASSERT_TRUE(r.reply) << "no answer: bodyd waited for the timeout";
+  EXPECT_EQ((*r.reply)["ok"], false) << r.reply->dump();
+  EXPECT_NE((*r.reply)["error"].get<std::string>().find("left_hand is not hanging at your side"), std::string::npos)
+      << r.reply->dump();
+  EXPECT_EQ(r.status_at_reply["sources"][0]["finished"], false) << "the answer came after the recording ended";
+}
+
+// A headset looking around (never still) at 1.5 m for `head_s` seconds, and two controllers
+// hanging still at the sides for `hands_s` seconds, 90 Hz.
+std::vector<TrackerSample> swaying_head_stream(const BodyReference& ref, double head_s, double hands_s) {
+  const auto joints = calibration_pose_joints(ref, 1.5);
+  const Mounting m = default_mounting(ref);
+  std::vector<TrackerSample> out;
+  for (int k = 0; k < static_cast<int>(std::max(head_s, hands_s) * 90.0); ++k) {
+    const double t = k / 90.0;
+    for (Role r : kRoles) {
+      if (t >= (r == Role::Head ? head_s : hands_s)) continue;
+      RigidTransform J = joints[static_cast<size_t>(r)];
+      if (r == Role::Head) J.position_m.x() += 0.1 * std::sin(2.0 * M_PI * 0.5 * t);
+      const TrackerSample s{static_cast<std::int64_t>(std::llround(t * 1e9)), r, true, J.position_m, J.rotation,
+                            PoseFrame::Joint};
+      out.push_back(joint_to_device(s, m.T_device_joint[static_cast<size_t>(r)]));
+    }
+  }
+  return out;
+}
+
+// Issue 43 item 14: the headset's samples stop 3 s into the wait; bodyd says so then (the
+// controllers still send), instead of a timeout asking whether the headset tracks.
+TEST(CalibrationPose, SaysWhenTheHeadsetsSamplesStop) {
+  test::TempDir dir;
+  write_device_log(dir.path / "stops.csv", swaying_head_stream(reference(), 3.0, 20.0));
+  const OneRequest r = replay_and_request(replay_config(dir.path / "stops.csv", dir.path, "ik"),
+                                          R"({"cmd":"calibrate","from":"pose","timeout_s":30})", 30, 20000);
+  ASSERT_TRUE(r.reply) << "no answer: bodyd waited for the timeout";
+  EXPECT_EQ((*r.reply)["ok"], false) << r.reply->dump();
+  const std::string error = (*r.reply)["error"];
+  EXPECT_NE(error.find("tracking stopped at "), std::string::npos) << error;
+  EXPECT_NE(error.find("the headset's samples stopped"), std::string::npos) << error;
+  EXPECT_EQ(r.status_at_reply["sources"][0]["finished"], false) << "the answer came after the recording ended";
+}
+
+// Issue 43 item 14: the control socket answers while a calibration pose waits. Three requests on
+// one connection, in this order: the calibration pose (3 s, the head never still), status, a
+// second calibration pose. The replies come back status first, then the second calibration's
+// refusal (one is waiting already), and the first calibration's answer last.
+TEST(CalibrationPose, TheControlSocketAnswersDuringTheWait) {
+  test::TempDir dir;
+  write_device_log(dir.path / "sway.csv", swaying_head_stream(reference(), 20.0, 20.0));
+  Daemon d(replay_config(dir.path / "sway.csv", dir.path, "ik"),
+           daemon::make_default_factory(test::source_dir() / "data" / "demo" / "skeleton.bvh"));
+  ASSERT_EQ(d.start(), "");
+  std::thread runner([&] { d.run(); });
+  for (int i = 0; i < 300 && d.status()["samples_in"].get<std::uint64_t>() < 30; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  zmq::context_t ctx;
+  zmq::socket_t dealer(ctx, zmq::socket_type::dealer);  // one connection: the requests arrive in order
+  dealer.set(zmq::sockopt::linger, 0);
+  dealer.set(zmq::sockopt::rcvtimeo, 15000);
+  dealer.connect(d.control_endpoint());
+  for (const char* request : {R"({"cmd":"calibrate","from":"pose","timeout_s":3})", R"({"cmd":"status"})",
+                              R"({"cmd":"calibrate","from":"pose"})"}) {
+    dealer.send(zmq::message_t(), zmq::send_flags::sndmore);  // the delimiter a REQ socket sends
+    dealer.send(zmq::buffer(std::string(request)));
+  }
+  std::vector<json> replies;
+  for (int i = 0; i < 3; ++i) {
+    zmq::message_t delimiter, body;
+    if (!dealer.recv(delimiter) || !dealer.recv(body)) break;
+    replies.push_back(json::parse(body.to_string()));
+  }
+  d.request_stop();
+  runner.join();
+  ASSERT_EQ(replies.size(), 3u);
+  EXPECT_EQ(replies[0]["ok"], true) << replies[0].dump();
+  EXPECT_TRUE(replies[0].contains("samples_in")) << "not the status reply: " << replies[0].dump();
+  EXPECT_EQ(replies[1]["ok"], false) << replies[1].dump();
+  EXPECT_NE(replies[1].value("error", "").find("already waiting"), std::string::npos) << replies[1].dump();
+  EXPECT_EQ(replies[2]["ok"], false) << replies[2].dump();
+  EXPECT_NE(replies[2].value("error", "").find("no still second"), std::string::npos) << replies[2].dump();
 }
 
 // Issue 16 item 5: a headset with identity rotation (looking ahead, as VRChat's converted pose and

@@ -1,18 +1,34 @@
 // The control socket's requests (docs/control.md): JSON in, JSON out.
 //
-// handle_control_request() parses and checks a request and calls the matching ControlTarget
-// function; it never throws and always returns a JSON object with "ok". Malformed requests
-// (not JSON, not an object, no "cmd", wrong types, unknown commands or keys) get
-// {"ok": false, "error": "..."} saying what is wrong.
+// answer_control_request() parses and checks a request and calls the matching ControlTarget
+// function; it never throws and always answers a JSON object with "ok", now or, for a request
+// that waits (the calibration pose), later. Malformed requests (not JSON, not an object, no
+// "cmd", wrong types, unknown commands or keys) get {"ok": false, "error": "..."} saying what is
+// wrong.
 #pragma once
 
 #include <nlohmann/json.hpp>
 
+#include <functional>
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 
 namespace bodyd::daemon {
+
+// The answer to a request that waits for something (calibrate "from": "pose" waits for a still
+// second): called on the control thread between other requests until it returns the reply, so a
+// wait never holds up `status` or anything else. It must not block.
+using LaterReply = std::function<std::optional<nlohmann::json>()>;
+
+// A request's answer: the reply now, or (`later` set) a reply to collect later.
+struct ControlReply {
+  ControlReply(nlohmann::json now) : reply(std::move(now)) {}  // NOLINT(google-explicit-constructor): a plain reply
+  explicit ControlReply(LaterReply pending) : later(std::move(pending)) {}
+  nlohmann::json reply;  // when `later` is empty
+  LaterReply later;
+};
 
 // What the control socket can ask of the daemon. Called on the control thread. Each returns
 // the reply object, "ok" included.
@@ -29,10 +45,11 @@ class ControlTarget {
   // Re-centres the tracking space: the user's current facing and floor position become forward
   // and the origin ("reset", docs/control.md). The default answers that it is not supported.
   virtual nlohmann::json recentre();
-  // The calibration pose ({"cmd":"calibrate","from":"pose"}, docs/control.md): waits up to
-  // `timeout_s` for a still second of the trackers and learns each device's mounting and the
-  // height from it. The default answers that it is not supported.
-  virtual nlohmann::json calibrate_pose(double timeout_s);
+  // The calibration pose ({"cmd":"calibrate","from":"pose"}, docs/control.md): starts waiting up
+  // to `timeout_s` for a still second of the trackers, from which it learns each device's
+  // mounting and the height; the reply comes later (ControlReply::later). The default answers at
+  // once that it is not supported.
+  virtual ControlReply calibrate_pose(double timeout_s);
 };
 
 // The commands, for messages.
@@ -42,6 +59,10 @@ inline constexpr std::string_view kControlCommands = "status, skeleton, calibrat
 inline constexpr double kMinUserHeightM = 0.5;
 inline constexpr double kMaxUserHeightM = 2.6;
 
+// The control socket's entry: the reply, or the LaterReply to poll for it.
+[[nodiscard]] ControlReply answer_control_request(std::string_view request, ControlTarget& target);
+// The same, waiting for a later reply (polling it every 10 ms): for callers with nothing else to
+// answer meanwhile (tests, fuzzing).
 [[nodiscard]] nlohmann::json handle_control_request(std::string_view request, ControlTarget& target);
 
 // An error reply.

@@ -169,6 +169,13 @@ class PoseCalibrator {
   [[nodiscard]] bool done() const { return done_; }
   // Why the last still second was not the calibration pose (empty when none was refused).
   [[nodiscard]] const std::string& last_refusal() const { return refusal_; }
+  // The last refusal was clear: a hand, a controller or the headset beyond its limit by a margin
+  // (kClearHandHeightRatio, kClearHandDistanceM, kClearTurnDeg), not a near miss that the next
+  // still second may pass. The daemon refuses such a pose at once instead of at its timeout.
+  [[nodiscard]] bool last_refusal_clear() const { return !refusal_.empty() && refusal_clear_; }
+  static constexpr double kClearHandHeightRatio = 0.05;  // of the headset's height, beyond 0.35 ... 0.8
+  static constexpr double kClearHandDistanceM = 0.10;    // beyond 0.45 m from the headset
+  static constexpr double kClearTurnDeg = 10.0;          // beyond max_grip_change_deg / max_head_change_deg
 
  private:
   [[nodiscard]] std::optional<PoseCalibration> try_estimate(std::int64_t t_ns) const;
@@ -182,6 +189,7 @@ class PoseCalibrator {
   std::array<bool, kRoleCount> any_invalid_{};
   bool done_ = false;
   mutable std::string refusal_;
+  mutable bool refusal_clear_ = false;
 };
 
 }  // namespace bodyd
