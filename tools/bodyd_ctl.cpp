@@ -1,7 +1,7 @@
 // bodyd-ctl: the command-line client of bodyd's control socket (docs/ctl.md, docs/control.md).
 //
 //   bodyd-ctl status [--json]
-//   bodyd-ctl calibrate --head-height-m 1.62 | --height-m 1.80 | --from-head | --pose
+//   bodyd-ctl calibrate --head-height-m 1.62 | --height-m 1.80 | --from-head | --pose [--in SECONDS]
 //   bodyd-ctl reset
 //   bodyd-ctl reload-model [PATH]
 //   bodyd-ctl shutdown
@@ -19,6 +19,7 @@
 #include <zmq.hpp>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -27,6 +28,7 @@
 #include <optional>
 #include <sstream>
 #include <string>
+#include <thread>
 
 namespace {
 
@@ -323,6 +325,20 @@ void print_reply(const std::string& cmd, const json& r) {
   else std::cout << r.dump(2) << "\n";
 }
 
+// bodyd waits this long for the calibration pose's still second.
+constexpr double kPoseWaitS = 5.0;
+
+// The steps of the calibration pose, then a countdown of `seconds` (one number a second), then
+// "hold still": the request is sent right after.
+void count_down(int seconds) {
+  std::cerr << "bodyd-ctl: stand straight, look ahead, arms relaxed at your sides, controllers pointing forward... ";
+  for (int left = seconds; left > 0; --left) {
+    std::cerr << left << "... " << std::flush;
+    std::this_thread::sleep_for(std::chrono::seconds(1));
+  }
+  std::cerr << "hold still" << std::endl;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -351,9 +367,16 @@ int main(int argc, char** argv) {
   auto* o_head = calibrate->add_option("--head-height-m", head_height_m, "standing head height, metres (exact)");
   auto* o_height = calibrate->add_option("--height-m", height_m, "body height, metres (head height = 0.90 x this)");
   auto* o_from = calibrate->add_flag("--from-head", from_head, "take the current head tracker height (stand up straight)");
-  calibrate->add_flag("--pose", pose,
-                      "the calibration pose: stand straight, look ahead, arms relaxed at the sides, hold still for one "
-                      "second; learns how the headset and controllers sit on you, and your height (docs/vr-apps.md)");
+  auto* o_pose = calibrate->add_flag(
+      "--pose", pose,
+      "the calibration pose: stand straight, look ahead, arms relaxed at the sides, hold still for one "
+      "second; learns how the headset and controllers sit on you, and your height (docs/vr-apps.md)");
+  int pose_in_s = 0;
+  calibrate
+      ->add_option("--in", pose_in_s,
+                   "with --pose: count down SECONDS (0 to 30) with the steps, to get into the pose, then ask bodyd")
+      ->check(CLI::Range(0, 30))
+      ->needs(o_pose);
   o_head->excludes(o_height)->excludes(o_from);
   o_height->excludes(o_from);
 
@@ -381,9 +404,7 @@ int main(int argc, char** argv) {
     }
     if (pose) {
       req["from"] = "pose";
-      req["timeout_s"] = 5;
-      timeout_s = std::max(timeout_s, 8.0);  // bodyd waits up to 5 s for the still second
-      std::cerr << "bodyd-ctl: stand straight, look ahead, let your arms hang relaxed at your sides, and hold still...\n";
+      req["timeout_s"] = kPoseWaitS;
     } else if (from_head) req["from"] = "head";
     else if (o_head->count() > 0) req["head_height_m"] = head_height_m;
     else req["user_height_m"] = height_m;
@@ -407,6 +428,15 @@ int main(int argc, char** argv) {
   }
   std::optional<json> reply;
   try {
+    if (pose) {
+      // Nobody should count down to learn that bodyd is not there: ask it something first.
+      if (pose_in_s > 0 && !request(*target, json{{"cmd", "status"}}, timeout_s, curve)) {
+        std::cerr << no_answer_message(*target, timeout_s, curve.has_value());
+        return kExitNoAnswer;
+      }
+      count_down(pose_in_s);
+      timeout_s = std::max(timeout_s, kPoseWaitS + 3.0);  // bodyd answers within its wait
+    }
     reply = request(*target, req, timeout_s, curve);
   } catch (const zmq::error_t& e) {
     std::cerr << "bodyd-ctl: " << target->endpoint << " (" << target->from << "): " << e.what()

@@ -130,6 +130,56 @@ TEST_F(Ctl, CalibrateEachWay) {
 // After a reset the body stands at the origin facing +Z: the poses that follow have the Head
 // joint near x = z = 0 (the walk moves it ~1.4 m/s, so within a few tenths of a metre) and the
 // hips' heading near 0.
+// How often `what` occurs in `text`.
+std::size_t occurrences(const std::string& text, const std::string& what) {
+  std::size_t n = 0;
+  for (std::size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + what.size())) ++n;
+  return n;
+}
+
+// Issue 43 item 14: bodyd answers `bodyd-ctl status` while a `calibrate --pose` waits (the walk
+// never holds still, so it waits its whole 5 s) and the wait ends with bodyd's reason. It used to
+// be "no answer from bodyd ... Is bodyd running?": the control thread sat in the wait.
+TEST_F(Ctl, StatusIsAnsweredWhileCalibratePoseWaits) {
+  const std::string kWaiting = "calibration pose: waiting";
+  const std::size_t before = occurrences(bodyd_->err(), kWaiting);
+  Process calibrate({kCtl, "--control", control_, "calibrate", "--pose"},
+                    {.output_dir = dir_->path, .name = "ctl-pose"});
+  for (int i = 0; i < 800 && occurrences(bodyd_->err(), kWaiting) == before; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(25));
+  ASSERT_GT(occurrences(bodyd_->err(), kWaiting), before) << "bodyd never started the wait:\n" << bodyd_->err();
+  const RunResult r = ctl({"status"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("bodyd: up "), std::string::npos) << r.out;
+  EXPECT_FALSE(calibrate.wait(0)) << "the calibration ended before status was answered: " << calibrate.log();
+  EXPECT_EQ(calibrate.wait(20000), 1) << calibrate.log();
+  EXPECT_NE(calibrate.err().find("bodyd says: calibrate from pose: no still second"), std::string::npos)
+      << calibrate.err();
+}
+
+// Issue 43 item 14: --in SECONDS says the steps and counts down before asking bodyd.
+TEST_F(Ctl, CalibratePoseInSecondsCountsDownFirst) {
+  const RunResult r = ctl({"calibrate", "--pose", "--in", "2"});
+  EXPECT_EQ(r.exit_code, 1) << r.err;  // the walk is not the pose
+  std::size_t at = 0;
+  for (const char* part : {"stand straight, look ahead, arms relaxed at your sides", "2... ", "1... ", "hold still\n",
+                           "bodyd says: calibrate from pose: "}) {
+    const std::size_t found = r.err.find(part, at);
+    ASSERT_NE(found, std::string::npos) << "missing, or out of order: \"" << part << "\" in:\n" << r.err;
+    at = found;
+  }
+  EXPECT_EQ(r.err.find("3... "), std::string::npos) << r.err;
+  // Checked before anything is sent: 0 to 30 whole seconds, with --pose only.
+  for (const std::vector<std::string>& args : std::vector<std::vector<std::string>>{
+           {"calibrate", "--pose", "--in", "31"}, {"calibrate", "--pose", "--in", "-1"},
+           {"calibrate", "--pose", "--in", "1.5"}, {"calibrate", "--pose", "--in", "soon"},
+           {"calibrate", "--from-head", "--in", "3"}}) {
+    const RunResult bad = ctl(args);
+    EXPECT_EQ(bad.exit_code, 2) << args[2] << " " << args[3] << ": " << bad.err;
+    EXPECT_EQ(bad.err.find("hold still"), std::string::npos) << bad.err;
+  }
+}
+
 TEST_F(Ctl, ResetRecentresAndSaysSo) {
   const json skeleton = json::parse(ctl({"skeleton"}).out);
   const auto& names = skeleton["names"];
@@ -208,6 +258,12 @@ TEST(CtlNoDaemon, SaysWhichEndpointAndHowToStartOne) {
   EXPECT_NE(r.err.find("no answer from bodyd on " + endpoint), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("does not exist"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("systemctl --user start bodyd"), std::string::npos) << r.err;
+  // calibrate --pose --in asks first, so nobody counts down for a bodyd that is not there.
+  const RunResult pose = run({kCtl, "--control", endpoint, "--timeout-s", "0.5", "calibrate", "--pose", "--in", "5"},
+                             {.output_dir = dir.path}, 10000);
+  EXPECT_EQ(pose.exit_code, 3) << pose.err;
+  EXPECT_NE(pose.err.find("no answer from bodyd"), std::string::npos) << pose.err;
+  EXPECT_EQ(pose.err.find("5... "), std::string::npos) << pose.err;
 }
 
 // Last: stops a bodyd of its own.
