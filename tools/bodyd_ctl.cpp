@@ -269,6 +269,16 @@ void print_status(const json& r) {
     std::string state = s.value("finished", false) ? "finished" : s.value("connected", false) ? "connected" : "not connected";
     std::cout << fmt::format("  {}: {}, {:.1f} Hz, {} samples", s.value("name", std::string("?")), state,
                              s.value("rate_hz", 0.0), s.value("samples", json(0)).dump());
+    // The rate is every role's together (a headset and two controllers at 90 Hz: 270 Hz).
+    if (const json by_role = s.value("rate_hz_by_role", json::object()); by_role.is_object() && !by_role.empty()) {
+      std::string roles;
+      for (const auto& [role, hz] : by_role.items()) {
+        std::string name = role;
+        std::replace(name.begin(), name.end(), '_', ' ');
+        if (hz.is_number()) roles += fmt::format("{}{} {:.1f} Hz", roles.empty() ? "" : ", ", name, hz.get<double>());
+      }
+      std::cout << " (" << roles << ")";
+    }
     const std::string err = s.value("last_error", std::string());
     if (!err.empty()) std::cout << ", last error: " << err;
     std::cout << "\n";

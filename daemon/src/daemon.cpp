@@ -125,6 +125,7 @@ struct Daemon::Impl final : ControlTarget {
   ControlServer control;
 
   SampleQueue queue;
+  std::vector<std::unique_ptr<RoleRateSink>> source_sinks;  // one per source, in front of the queue
   std::vector<std::unique_ptr<drivers::TrackerSource>> sources;
   std::unique_ptr<Reconstructor> recon;  // the reconstruction thread's, once started
   std::thread recon_thread;
@@ -622,7 +623,7 @@ struct Daemon::Impl final : ControlTarget {
 
   bool start_sources() {
     for (std::size_t i = 0; i < sources.size(); ++i) {
-      if (std::string e = sources[i]->start(queue, static_cast<std::uint16_t>(i)); !e.empty()) {
+      if (std::string e = sources[i]->start(*source_sinks[i], static_cast<std::uint16_t>(i)); !e.empty()) {
         spdlog::critical("{}", e);
         return false;
       }
@@ -716,6 +717,9 @@ struct Daemon::Impl final : ControlTarget {
     s.offsets_configured = offsets_configured;
     s.record_trackers_file = config.record_trackers_file;
     for (const auto& source : sources) s.sources.push_back(source->status());
+    const std::int64_t now_ns = drivers::monotonic_ns();
+    for (std::size_t i = 0; i < sources.size(); ++i)
+      s.source_rates_hz_by_role.push_back(source_sinks[i]->rate_hz_by_role(now_ns));
     s.sources_started = sources_started.load();
     s.samples_dropped = queue.dropped();
     s.samples_dropped_stale = queue.dropped_stale();
@@ -904,6 +908,7 @@ std::string Daemon::start() {
     if (!source) return error;
     spdlog::info("source: {}", source->name());
     d.sources.push_back(std::move(source));
+    d.source_sinks.push_back(std::make_unique<RoleRateSink>(d.queue));
   }
 
   // --record-trackers: the header says what the recorded samples went through.

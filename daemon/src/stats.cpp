@@ -23,6 +23,32 @@ nlohmann::json TimingRing::summary_us() const {
       {"count", n}, {"window", m}, {"p50", pct(0.5)}, {"p99", pct(0.99)}, {"max", static_cast<double>(v.back()) / 1000.0}};
 }
 
+void RoleRateSink::count(const drivers::SourceSample& sample) {
+  const auto r = static_cast<std::size_t>(sample.sample.role);
+  if (r >= meters_.size()) return;
+  const std::int64_t now_ns = sample.arrival_ns;
+  std::lock_guard lock(mutex_);
+  Meter& m = meters_[r];
+  // drivers::RateMeter's rule: a window closes at the first sample a second after it opened, and
+  // that sample's time opens the next one.
+  if (m.last_ns == 0) m.window_start_ns = now_ns;
+  ++m.window_count;
+  m.last_ns = now_ns;
+  if (const std::int64_t elapsed_ns = now_ns - m.window_start_ns; elapsed_ns >= 1'000'000'000) {
+    m.rate_hz = static_cast<double>(m.window_count) * 1e9 / static_cast<double>(elapsed_ns);
+    m.window_start_ns = now_ns;
+    m.window_count = 0;
+  }
+}
+
+std::array<double, kRoleCount> RoleRateSink::rate_hz_by_role(std::int64_t now_ns) const {
+  std::array<double, kRoleCount> out{};
+  std::lock_guard lock(mutex_);
+  for (std::size_t r = 0; r < out.size(); ++r)
+    out[r] = meters_[r].last_ns != 0 && now_ns - meters_[r].last_ns <= kSilentNs ? meters_[r].rate_hz : 0.0;
+  return out;
+}
+
 void PipelineStats::to_json(nlohmann::json& j) const {
   j["samples_in"] = samples_in.get();
   j["samples_by_role"] = {

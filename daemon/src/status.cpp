@@ -28,12 +28,15 @@ json skeleton_reply(const protocol::SkeletonMessage& skeleton, double head_heigh
   return reply;
 }
 
-json source_status_json(const drivers::SourceStatus& st) {
+json source_status_json(const drivers::SourceStatus& st, const std::array<double, kRoleCount>& rate_hz_by_role) {
+  json by_role = json::object();
+  for (Role r : kRoles) by_role[std::string(role_name(r))] = rate_hz_by_role[static_cast<std::size_t>(r)];
   json j{{"name", st.name},
           {"connected", st.connected},
           {"finished", st.finished},
           {"samples", st.samples},
           {"rate_hz", st.rate_hz},
+          {"rate_hz_by_role", by_role},
           {"last_error", st.last_error},
           {"rejected", st.rejected},
           {"rejected_by_reason", st.rejected_by_reason},
@@ -71,7 +74,9 @@ json status_json(const StatusSnapshot& s, const PipelineStats& stats) {
   j["mounting"] = s.mounting;
   if (!s.record_trackers_file.empty()) j["record_trackers"] = s.record_trackers_file;
   json src = json::array();
-  for (const drivers::SourceStatus& st : s.sources) src.push_back(source_status_json(st));
+  for (std::size_t i = 0; i < s.sources.size(); ++i)
+    src.push_back(source_status_json(
+        s.sources[i], i < s.source_rates_hz_by_role.size() ? s.source_rates_hz_by_role[i] : std::array<double, kRoleCount>{}));
   j["sources"] = src;
   j["sources_started"] = s.sources_started;
   stats.to_json(j);

@@ -33,8 +33,9 @@ struct ReconstructionSummary {
 void summary_json(const ReconstructionSummary& summary, nlohmann::json& out);
 // The reply to {"cmd":"skeleton"} (docs/protocol.md "The skeleton on the control socket").
 [[nodiscard]] nlohmann::json skeleton_reply(const protocol::SkeletonMessage& skeleton, double head_height_m);
-// One source's entry in status "sources".
-[[nodiscard]] nlohmann::json source_status_json(const drivers::SourceStatus& status);
+// One source's entry in status "sources", with its rate role by role (RoleRateSink).
+[[nodiscard]] nlohmann::json source_status_json(const drivers::SourceStatus& status,
+                                                const std::array<double, kRoleCount>& rate_hz_by_role);
 // status "mounting": each role's mounting, where it came from and how far from the default.
 [[nodiscard]] nlohmann::json mounting_status_json(const Mounting& mounting, const Mounting& defaults,
                                                   const MountingOrigins& origins, const SampleConditioner& conditioner,
@@ -49,6 +50,7 @@ struct StatusSnapshot {
   nlohmann::json mounting;  // mounting_status_json()
   std::string record_trackers_file;
   std::vector<drivers::SourceStatus> sources;
+  std::vector<std::array<double, kRoleCount>> source_rates_hz_by_role;  // parallel to `sources`
   bool sources_started = false;
   std::uint64_t samples_dropped = 0, samples_dropped_stale = 0;
   std::size_t queue_depth = 0, queue_capacity = 0;

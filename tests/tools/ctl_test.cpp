@@ -62,12 +62,17 @@ class Ctl : public ::testing::Test {
 };
 
 TEST_F(Ctl, StatusIsASummaryAndJsonIsTheRawReply) {
-  // Wait for the first poses, so the numbers are there.
-  for (int i = 0; i < 100 && status().value("frames_out", 0) < 10; ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  // Wait for the first poses and each role's first full second of samples, so the numbers are there.
+  const auto ready = [](const json& j) {
+    const json by_role = j["sources"][0].value("rate_hz_by_role", json::object());
+    return j.value("frames_out", 0) >= 10 && by_role.value("head", 0.0) > 0.0 && by_role.value("left_hand", 0.0) > 0.0 &&
+           by_role.value("right_hand", 0.0) > 0.0;
+  };
+  for (int i = 0; i < 200 && !ready(status()); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));
   const RunResult r = ctl({"status"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   for (const char* part : {"bodyd: up ", "method ik", "sources:\n  replay:", "walk.csv: connected, ", " Hz, ",
+                           " samples (head ", " Hz, left hand ", " Hz, right hand ",
                            "samples: ", " dropped, queue ", "poses: ", " out", "reconstruction: p50 ", "latency ",
                            "calibration: head height ", "endpoints: poses ipc://"})
     EXPECT_NE(r.out.find(part), std::string::npos) << "missing \"" << part << "\" in:\n" << r.out;
@@ -82,6 +87,16 @@ TEST_F(Ctl, StatusIsASummaryAndJsonIsTheRawReply) {
   const json j = status();
   EXPECT_EQ(j["ok"], true);
   EXPECT_GE(j["frames_out"].get<int>(), 10);
+  // Issue 43 item 15: the source's rate is its roles' together; each role's is there too (the
+  // walk has a head and two hands at the same rate).
+  const json& source = j["sources"][0];
+  double sum_hz = 0.0;
+  for (const char* role : {"head", "left_hand", "right_hand"}) {
+    ASSERT_TRUE(source["rate_hz_by_role"].contains(role)) << source.dump();
+    EXPECT_GT(source["rate_hz_by_role"][role].get<double>(), 0.0) << source.dump();
+    sum_hz += source["rate_hz_by_role"][role].get<double>();
+  }
+  EXPECT_NEAR(sum_hz, source["rate_hz"].get<double>(), 0.25 * source["rate_hz"].get<double>()) << source.dump();
   EXPECT_EQ(j["control"], control_);
 }
 
