@@ -179,5 +179,44 @@ TEST(UserConfig, ShippedExampleLoads) {
   EXPECT_EQ(json::parse(r.out)["control"], "ipc:///tmp/bodyd/control");
 }
 
+// Issue 43 item 15: the setups the example config and the README's quick start show are valid:
+// each commented-out "sources" line of the example, uncommented, loads and names what it says,
+// and each `bodyd --source ...` command of the README passes bodyd's checks of its specs.
+TEST(UserConfig, TheSetupsTheExampleAndTheReadmeShowLoad) {
+  TempDir dir;
+  const std::string example = read_file(source_dir() / "packaging/config.example.json");
+  int setups = 0;
+  std::istringstream lines(example);
+  for (std::string line; std::getline(lines, line);) {
+    const std::size_t at = line.find("// \"sources\":");
+    if (at == std::string::npos) continue;
+    const std::string keys = line.substr(at + 3);  // "sources": [...], "outputs": [...],
+    std::string text = example;
+    text.replace(text.find(line), line.size(), keys);
+    ASSERT_TRUE(write_file(dir.path / "config.json", text));
+    const RunResult r = run({kBodyd, "--config", (dir.path / "config.json").string(), "--print-config"},
+                            {.output_dir = dir.path});
+    ASSERT_EQ(r.exit_code, 0) << keys << ": " << r.err;
+    const json printed = json::parse(r.out);
+    const json expected = json::parse("{" + keys.substr(0, keys.rfind(',')) + "}");
+    EXPECT_EQ(printed["sources"], expected["sources"]) << keys;
+    if (expected.contains("outputs")) {
+      EXPECT_EQ(printed["outputs"], expected["outputs"]) << keys;
+    }
+    ++setups;
+  }
+  EXPECT_GE(setups, 4) << "steamvr, monado, vrchat and hid";
+  const std::string readme = read_file(source_dir() / "README.md");
+  int commands = 0;
+  for (std::size_t at = readme.find("bodyd --source "); at != std::string::npos;
+       at = readme.find("bodyd --source ", at + 1)) {
+    const std::string command = readme.substr(at, readme.find_first_of("`\n", at) - at);
+    const ShellResult r = shell("'" + kBodyd + "'" + command.substr(5) + " --print-config 2>&1 >/dev/null");
+    EXPECT_EQ(r.status, 0) << "README.md: " << command << ": " << r.out;
+    ++commands;
+  }
+  EXPECT_GE(commands, 4) << "steamvr, monado, vrchat and hid";
+}
+
 }  // namespace
 }  // namespace bodyd::test
