@@ -89,8 +89,8 @@ std::vector<ConfigKey> make_rows() {
        .help = "--record-trackers may replace an existing file (without it an existing file is refused)"});
   add({.name = "rate_hz", .field = &at<&DaemonConfig::rate_hz>, .flag = "--rate-hz",
        .flag_check = FlagCheck::NonNegative,
-       .range = {0.0, limits::kMaxRateHz, false, false,
-                 "{key} must be between 0 (one pose per head sample) and {max}, not {value}"},
+       .range = {limits::kMinPoseRateHz, limits::kMaxRateHz, false, true,
+                 "{key} ({flag}) must be 0 (one pose per head sample) or between {min} and {max} poses a second, not {value}"},
        .help = "output rate limit; 0: one pose per head sample"});
   add({.name = "queue_capacity", .field = &at<&DaemonConfig::queue_capacity>, .flag = "--queue-capacity",
        .range = {static_cast<double>(kMinQueueCapacity), static_cast<double>(kMaxQueueCapacity), false, false,

@@ -1,9 +1,12 @@
 #include "bodyd/daemon/output.h"
 
 #include "bodyd/base/spec_options.h"
+#include "bodyd/motion/limits.h"
 
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -44,8 +47,9 @@ bool take_rate_option(OutputSpec& spec, double& out_rate_hz, std::string& error)
   } catch (const std::exception&) {
     used = 0;
   }
-  if (used == 0 || used != it->second.size() || !std::isfinite(v) || v < 0.0) {
-    error = "--output " + spec.text + ": rate \"" + it->second + "\": expected poses per second, a number >= 0 (0: every pose)";
+  if (used == 0 || used != it->second.size() || !(v == 0.0 || (v >= limits::kMinPoseRateHz && v <= limits::kMaxRateHz))) {
+    error = fmt::format("--output {}: rate \"{}\": expected poses per second, 0 (every pose) or between {} and {}", spec.text,
+                        it->second, limits::kMinPoseRateHz, limits::kMaxRateHz);
     return false;
   }
   out_rate_hz = v;
@@ -79,6 +83,9 @@ std::unique_ptr<Output> make_output(const OutputSpec& spec, const OutputEnv& env
   error = "--output " + spec.text + ": unknown output \"" + spec.scheme + "\" (known: " + schemes + "; docs/outputs.md)";
   return nullptr;
 }
+
+RateGate::RateGate(double rate_hz)
+    : rate_hz_(rate_hz > 0.0 ? std::clamp(rate_hz, limits::kMinPoseRateHz, limits::kMaxRateHz) : 0.0) {}
 
 bool RateGate::due(std::int64_t t_ns) {
   if (rate_hz_ <= 0.0) return true;

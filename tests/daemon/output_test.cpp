@@ -7,11 +7,13 @@
 #include "bodyd/daemon/config.h"
 #include "bodyd/daemon/output.h"
 #include "bodyd/daemon/vrchat.h"
+#include "bodyd/motion/limits.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 #include <cmath>
+#include <limits>
 #include <random>
 
 namespace bodyd {
@@ -68,7 +70,9 @@ TEST(OutputSpec, MalformedSpecsAreErrors) {
   EXPECT_NE(error.find("KEY=VALUE"), std::string::npos) << error;
   EXPECT_FALSE(daemon::parse_output_spec("vrchat:?rate=1&rate=2", spec, error));
   EXPECT_NE(error.find("twice"), std::string::npos) << error;
-  for (const char* bad : {"vrchat?rate=fast", "vrchat?rate=-1", "vrchat?rate=nan", "vrchat?rate=60Hz"}) {
+  // Issue 43 item 12: a rate is 0 (every pose) or within limits::kMinPoseRateHz .. kMaxRateHz.
+  for (const char* bad : {"vrchat?rate=fast", "vrchat?rate=-1", "vrchat?rate=nan", "vrchat?rate=60Hz", "vrchat?rate=1e-12",
+                          "vrchat?rate=0.09", "vrchat?rate=10001"}) {
     ASSERT_TRUE(daemon::parse_output_spec(bad, spec, error)) << bad;
     double rate = 0;
     EXPECT_FALSE(daemon::take_rate_option(spec, rate, error)) << bad;
@@ -155,6 +159,25 @@ TEST(RateGate, PassesAtMostTheRateAndToleratesJitter) {
     passed += gate.due(t) ? 1 : 0;
   }
   EXPECT_NEAR(passed, 300, 2);
+}
+
+// Issue 43 item 12: 1e9 / rate_hz as an int64 is undefined behaviour below about 1.1e-10 Hz, and
+// `--rate-hz 1e-12` published every pose. A gate made with an unchecked rate takes the nearest
+// rate the config accepts.
+TEST(RateGate, ARateOutsideTheLimitsIsTheNearestLimit) {
+  daemon::RateGate tiny(1e-12);
+  EXPECT_EQ(tiny.rate_hz(), limits::kMinPoseRateHz);
+  int passed = 0;
+  for (int i = 0; i < 900; ++i) passed += tiny.due(static_cast<std::int64_t>(i) * 11'111'111) ? 1 : 0;
+  EXPECT_LE(passed, 2);  // 10 s at one pose per 10 s, a quarter period early allowed
+  EXPECT_GE(passed, 1);
+  EXPECT_EQ(daemon::RateGate(1e300).rate_hz(), limits::kMaxRateHz);
+  EXPECT_EQ(daemon::RateGate(std::numeric_limits<double>::infinity()).rate_hz(), limits::kMaxRateHz);
+  for (double none : {0.0, -5.0, std::nan("")}) {
+    daemon::RateGate every(none);
+    EXPECT_EQ(every.rate_hz(), 0.0) << none;
+    for (int i = 0; i < 10; ++i) EXPECT_TRUE(every.due(i)) << none;
+  }
 }
 
 TEST(OutputsConfig, ListOfSpecsAndObjects) {

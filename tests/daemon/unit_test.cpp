@@ -398,6 +398,18 @@ TEST(Config, LimitsOnRatesSpeedsAndOffsets) {
   daemon::DaemonConfig c;
   c.rate_hz = 1e300;
   EXPECT_NE(daemon::validate_config(c).find("rate_hz"), std::string::npos);
+  // Issue 43 item 12: 0 (every head sample) or at least one pose in 10 s; 1e-12 published every pose.
+  for (double ok : {0.0, limits::kMinPoseRateHz, limits::kMaxRateHz}) {
+    c.rate_hz = ok;
+    EXPECT_EQ(daemon::validate_config(c), "") << ok;
+  }
+  c.rate_hz = 1e-12;
+  EXPECT_NE(daemon::validate_config(c).find("rate_hz"), std::string::npos);
+  const char* tiny_rate[] = {"bodyd", "--rate-hz", "1e-12"};
+  daemon::DaemonConfig t;
+  const auto tiny = daemon::parse_command_line(3, tiny_rate, t);
+  EXPECT_EQ(tiny.action, daemon::CliResult::Action::Exit);
+  EXPECT_EQ(tiny.exit_code, 2);
   c = {};
   c.replay_speed = 1e300;
   EXPECT_NE(daemon::validate_config(c).find("--speed"), std::string::npos);

@@ -121,7 +121,7 @@ struct OutputKind {
 [[nodiscard]] std::unique_ptr<Output> make_output(const OutputSpec& spec, const OutputEnv& env, std::string& error);
 
 // Takes option `key` out of `spec.options` as a rate in Hz (0 = every pose). False with
-// `error` set when it is not a finite number >= 0.
+// `error` set when it is not 0 or a number in limits::kMinPoseRateHz .. kMaxRateHz.
 [[nodiscard]] bool take_rate_option(OutputSpec& spec, double& out_rate_hz, std::string& error);
 
 // "KEY (unknown option of SCHEME outputs: expected A, B)" if spec has an option not in
@@ -129,10 +129,12 @@ struct OutputKind {
 [[nodiscard]] std::string check_options(const OutputSpec& spec, const std::vector<std::string_view>& known);
 
 // A rate limit in pose time: with rate_hz > 0, a pose at t_ns passes only if t_ns has reached
-// the next due time (a quarter period early is fine, so jitter does not halve the rate).
+// the next due time (a quarter period early is fine, so jitter does not halve the rate). A rate
+// that was not checked is taken safely: 0, below 0 or NaN is no limit, others are clamped to
+// limits::kMinPoseRateHz .. kMaxRateHz (rate_hz() says which).
 class RateGate {
  public:
-  explicit RateGate(double rate_hz = 0.0) : rate_hz_(rate_hz) {}
+  explicit RateGate(double rate_hz = 0.0);
   [[nodiscard]] bool due(std::int64_t t_ns);
   [[nodiscard]] double rate_hz() const { return rate_hz_; }
 

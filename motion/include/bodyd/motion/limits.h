@@ -30,6 +30,9 @@ inline constexpr double kMaxHeadHeightM = kMaxUserHeightM;
 
 // Rates (pose rate, sample rates), Hz.
 inline constexpr double kMaxRateHz = 10000.0;
+// A pose rate limit (--rate-hz, an output's ?rate=) is 0 (none) or at least this: one pose in
+// 10 s. Its period in ns must fit an int64 (1e9 / rate_hz), which a rate below 1.1e-10 Hz does not.
+inline constexpr double kMinPoseRateHz = 0.1;
 
 // Paced replay speed factor (--speed): strictly positive, at most this.
 inline constexpr double kMaxReplaySpeed = 1000.0;
