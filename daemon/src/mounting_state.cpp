@@ -1,13 +1,14 @@
 #include "mounting_state.h"
 
 #include "bodyd/motion/limits.h"
+#include "bodyd/motion/printable.h"
+#include "persisted_file.h"
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include <cmath>
 #include <fstream>
-#include <sstream>
 #include <sys/stat.h>
 
 namespace bodyd::daemon {
@@ -17,63 +18,83 @@ using nlohmann::json;
 namespace {
 
 constexpr double kMaxOffsetM = 0.5;  // a device is never half a metre from its joint
+constexpr const char* kFormat = "bodyd-mounting v1";
+constexpr const char* kWhatToDo = "delete the file and run `bodyd-ctl calibrate --pose` again; docs/daemon.md";
+
+// The member `key` of object `o`, nullptr when it has none.
+const json* member(const json& o, const char* key) {
+  const auto it = o.find(key);
+  return it == o.end() ? nullptr : &*it;
+}
+
+// `n` finite numbers from the array `key` of `o` into `out`; false when it is anything else.
+bool finite_numbers(const json& o, const char* key, std::size_t n, double* out) {
+  const json* a = member(o, key);
+  if (!a || !a->is_array() || a->size() != n) return false;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!(*a)[i].is_number()) return false;
+    out[i] = (*a)[i].get<double>();
+    if (!std::isfinite(out[i])) return false;
+  }
+  return true;
+}
 
 }  // namespace
 
 std::optional<MountingState> read_mounting_state(const std::filesystem::path& path, std::string& error) {
-  error.clear();
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) return std::nullopt;
   const auto fail = [&](const std::string& what) -> std::optional<MountingState> {
-    error = fmt::format("{}: {} (delete the file and run `bodyd-ctl calibrate --pose` again; docs/daemon.md)",
-                        path.string(), what);
+    error = fmt::format("{}: {} ({})", path.string(), what, kWhatToDo);
     return std::nullopt;
   };
-  if (!std::filesystem::is_regular_file(path, ec)) return fail("not a regular file");
-  std::ifstream in(path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  if (!in && !in.eof()) return fail("cannot be read");
+  const std::optional<std::string> text = read_persisted_file(path, kMaxPersistedFileBytes, error);
+  if (!text) {
+    if (!error.empty()) error = fmt::format("{} ({})", error, kWhatToDo);
+    return std::nullopt;
+  }
   json j;
   try {
-    j = json::parse(ss.str());
+    j = json::parse(*text);
   } catch (const json::exception& e) {
     return fail(std::string("not JSON: ") + e.what());
   }
-  if (!j.is_object() || j.value("format", "") != "bodyd-mounting v1") return fail("\"format\" is not \"bodyd-mounting v1\"");
-  if (!j.contains("roles") || !j["roles"].is_object()) return fail("\"roles\" is missing");
+  // Every member by its type before its value: json::value() and get() throw on a wrong type.
+  if (!j.is_object()) return fail("not a JSON object");
+  const json* format = member(j, "format");
+  if (!format || !format->is_string() || format->get<std::string>() != kFormat)
+    return fail(fmt::format("\"format\" is not \"{}\"", kFormat));
   MountingState st;
-  st.calibrated = j.value("calibrated", "");
-  if (j.contains("head_height_m")) {
-    if (!j["head_height_m"].is_number()) return fail("\"head_height_m\" is not a number");
-    st.head_height_m = j["head_height_m"].get<double>();
+  if (const json* calibrated = member(j, "calibrated")) {
+    if (!calibrated->is_string()) return fail("\"calibrated\" is not a string (the UTC time of the calibration)");
+    st.calibrated = printable(calibrated->get<std::string>());  // it goes to the log
+  }
+  if (const json* height = member(j, "head_height_m")) {
+    if (!height->is_number()) return fail("\"head_height_m\" is not a number");
+    st.head_height_m = height->get<double>();
     if (!(st.head_height_m == 0.0 ||
           (st.head_height_m >= limits::kMinHeadHeightM && st.head_height_m <= limits::kMaxHeadHeightM)))
       return fail(fmt::format("\"head_height_m\" {} is not a plausible standing head height", st.head_height_m));
   }
+  const json* roles = member(j, "roles");
+  if (!roles || !roles->is_object()) return fail("\"roles\" is not an object");
   for (Role r : kRoles) {
+    const auto i = static_cast<std::size_t>(r);
     const std::string name(role_name(r));
-    if (!j["roles"].contains(name)) return fail(fmt::format("roles.{} is missing", name));
-    const json& o = j["roles"][name];
-    const auto numbers = [&](const char* key, std::size_t n, double* out) -> bool {
-      if (!o.is_object() || !o.contains(key) || !o[key].is_array() || o[key].size() != n) return false;
-      for (std::size_t i = 0; i < n; ++i) {
-        if (!o[key][i].is_number()) return false;
-        out[i] = o[key][i].get<double>();
-        if (!std::isfinite(out[i])) return false;
-      }
-      return true;
-    };
+    const json* o = member(*roles, name.c_str());
+    if (!o || !o->is_object()) return fail(fmt::format("roles.{} is not an object", name));
+    if (const json* measured = member(*o, "measured")) {
+      if (!measured->is_boolean()) return fail(fmt::format("roles.{}.measured is not true or false", name));
+      st.measured[i] = measured->get<bool>();
+    }
     double p[3], q[4];
-    if (!numbers("position_m", 3, p)) return fail(fmt::format("roles.{}.position_m is not 3 finite numbers", name));
-    if (!numbers("rotation_xyzw", 4, q)) return fail(fmt::format("roles.{}.rotation_xyzw is not 4 finite numbers", name));
+    if (!finite_numbers(*o, "position_m", 3, p)) return fail(fmt::format("roles.{}.position_m is not 3 finite numbers", name));
+    if (!finite_numbers(*o, "rotation_xyzw", 4, q))
+      return fail(fmt::format("roles.{}.rotation_xyzw is not 4 finite numbers", name));
     const Vec3 pos(p[0], p[1], p[2]);
     if (pos.norm() > kMaxOffsetM) return fail(fmt::format("roles.{}.position_m is more than {} m from the joint", name, kMaxOffsetM));
     const Quat rot(q[3], q[0], q[1], q[2]);
     if (std::abs(rot.norm() - 1.0) > limits::kQuatNormTolerance)
       return fail(fmt::format("roles.{}.rotation_xyzw is not a unit quaternion", name));
-    st.mounting.T_device_joint[static_cast<std::size_t>(r)] = {pos, rot.normalized()};
-    st.measured[static_cast<std::size_t>(r)] = o.value("measured", false);
+    st.mounting.T_device_joint[i] = {pos, rot.normalized()};
   }
   return st;
 }

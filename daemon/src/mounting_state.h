@@ -5,7 +5,9 @@
 //    "roles": {"head": {"measured": true, "position_m": [0, -0.1, 0.08], "rotation_xyzw": [...]},
 //              "left_hand": {...}, "right_hand": {...}}}
 //
-// Written atomically (a temporary file renamed over it, mode 0600); read at start.
+// Read at start, with the rules of every persisted file (docs/reliability.md, "Persisted
+// files"): at most kMaxPersistedFileBytes, each field type-checked. Written atomically (a
+// temporary file renamed over it, mode 0600).
 #pragma once
 
 #include "bodyd/motion/mounting.h"
@@ -25,7 +27,8 @@ struct MountingState {
 };
 
 // Reads `path`. nullopt with `error` empty when the file does not exist; nullopt with `error`
-// set (file, field, what to do) when it is unreadable or holds a bad value.
+// set (file, field, what to do) when it is too large, unreadable, not the format or holds a
+// value of a wrong type or out of range.
 [[nodiscard]] std::optional<MountingState> read_mounting_state(const std::filesystem::path& path, std::string& error);
 // Writes `state` to `path` (creating its folder). Empty on success, otherwise what went wrong.
 [[nodiscard]] std::string write_mounting_state(const std::filesystem::path& path, const MountingState& state);

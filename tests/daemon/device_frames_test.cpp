@@ -15,12 +15,16 @@
 #include "../test_paths.h"
 #include "zmq_helpers.h"
 
+#include "bodyd/test/files.h"
+#include "bodyd/test/log_capture.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <random>
 #include <thread>
 
@@ -414,6 +418,86 @@ TEST(AutoCalibration, RefinesTheHeadsetsPitchFromAStillSecond) {
   EXPECT_LT(mounting_difference(transform_from_status(head), truth.T_device_joint[0]).angle_deg, 2.0) << head.dump();
   EXPECT_EQ(r.status["mounting"]["roles"]["left_hand"]["origin"], "default");
   EXPECT_EQ(r.status["calibration_source"], "auto");
+}
+
+// ------------------------------------------------------------------ the mounting file (issue 43)
+
+// A mounting file as a calibration pose writes it: `mounting`, every role measured.
+json mounting_file_json(const Mounting& mounting) {
+  json roles = json::object();
+  for (Role r : kRoles) {
+    const RigidTransform& T = mounting.T_device_joint[static_cast<size_t>(r)];
+    roles[std::string(role_name(r))] = {
+        {"measured", true},
+        {"position_m", {T.position_m.x(), T.position_m.y(), T.position_m.z()}},
+        {"rotation_xyzw", {T.rotation.x(), T.rotation.y(), T.rotation.z(), T.rotation.w()}}};
+  }
+  return {{"format", "bodyd-mounting v1"}, {"calibrated", "2026-12-02T10:00:00Z"}, {"head_height_m", 1.55}, {"roles", roles}};
+}
+
+// Starts a daemon whose mounting file holds `text`; its status and what it logged. The start
+// must succeed whatever the file holds.
+struct StartWithFile {
+  json status;
+  std::string log;
+};
+StartWithFile start_with_mounting_file(const test::TempDir& dir, const std::string& text) {
+  const BodyReference ref = reference();
+  write_device_log(dir.path / "still.csv", still_device_stream(calibration_pose_joints(ref, 1.5), default_mounting(ref), 0.2));
+  DaemonConfig c = replay_config(dir.path / "still.csv", dir.path, "ik");
+  c.mounting_file = (dir.path / "mounting.json").string();
+  EXPECT_TRUE(test::write_file(c.mounting_file, text));
+  StartWithFile out;
+  test::LogCapture log;
+  Daemon d(c, daemon::make_default_factory(test::source_dir() / "data" / "demo" / "skeleton.bvh"));
+  EXPECT_EQ(d.start(), "");
+  out.status = d.status();
+  d.stop();
+  out.log = log.text();
+  return out;
+}
+
+std::string origin(const json& status, Role r) { return status["mounting"]["roles"][std::string(role_name(r))]["origin"]; }
+
+// Item 8: a value of the wrong JSON type used to throw nlohmann's type_error out of start()
+// (bodyd: terminate, naming no file). Now: reported with the file and the field, defaults used.
+TEST(MountingFile, AWrongTypeIsReportedWithItsFieldAndTheDefaultsAreUsed) {
+  const json good = mounting_file_json(known_mounting(default_mounting(reference())));
+  const std::vector<std::pair<std::string, std::function<void(json&)>>> cases = {
+      {"\"format\"", [](json& j) { j["format"] = 1; }},
+      {"\"calibrated\"", [](json& j) { j["calibrated"] = 5; }},
+      {"roles.left_hand.measured", [](json& j) { j["roles"]["left_hand"]["measured"] = "yes"; }},
+      {"\"head_height_m\"", [](json& j) { j["head_height_m"] = "1.5"; }},
+      {"roles.head", [](json& j) { j["roles"]["head"] = 1; }},
+      {"\"roles\"", [](json& j) { j["roles"] = json::array(); }},
+      {"roles.right_hand.rotation_xyzw", [](json& j) { j["roles"]["right_hand"]["rotation_xyzw"][0] = "0"; }},
+  };
+  for (const auto& [field, spoil] : cases) {
+    SCOPED_TRACE(field);
+    test::TempDir dir;
+    json j = good;
+    spoil(j);
+    const StartWithFile r = start_with_mounting_file(dir, j.dump());
+    for (Role role : kRoles) EXPECT_EQ(origin(r.status, role), "default") << role_name(role);
+    EXPECT_NE(r.status["calibration_source"], "file");
+    const std::string where = (dir.path / "mounting.json").string() + ": " + field;
+    EXPECT_NE(r.log.find(where), std::string::npos) << r.log;
+    EXPECT_NE(r.log.find("calibrate --pose"), std::string::npos) << r.log;  // what to do
+  }
+  // The file as written is read (the cases above fail for their field alone).
+  test::TempDir dir;
+  const StartWithFile r = start_with_mounting_file(dir, good.dump());
+  for (Role role : kRoles) EXPECT_EQ(origin(r.status, role), "file") << role_name(role);
+}
+
+// Item 11: a 30 MB mounting file peaked at 641 MB of memory. Persisted files are read only up
+// to 1 MiB: over it, reported with the file and the limit, defaults used.
+TEST(MountingFile, AFileOverTheSizeLimitIsIgnored) {
+  const std::string good = mounting_file_json(known_mounting(default_mounting(reference()))).dump();
+  test::TempDir dir;
+  const StartWithFile r = start_with_mounting_file(dir, good + std::string(std::size_t{1} << 21, ' '));
+  for (Role role : kRoles) EXPECT_EQ(origin(r.status, role), "default") << role_name(role);
+  EXPECT_NE(r.log.find((dir.path / "mounting.json").string() + ": larger than 1048576 bytes"), std::string::npos) << r.log;
 }
 
 }  // namespace

@@ -1,0 +1,66 @@
+#include "persisted_file.h"
+
+#include <fmt/format.h>
+
+#include <cerrno>
+#include <cstdint>
+#include <cstring>
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+namespace bodyd::daemon {
+
+namespace {
+
+// Closes a descriptor at the end of its scope.
+struct ScopedFd {
+  int fd = -1;
+  ~ScopedFd() {
+    if (fd >= 0) ::close(fd);
+  }
+};
+
+std::string errno_text() { return std::strerror(errno); }
+
+}  // namespace
+
+std::optional<std::string> read_persisted_file(const std::filesystem::path& path, std::size_t max_bytes,
+                                               std::string& error) {
+  error.clear();
+  // O_NONBLOCK: a FIFO at the path must not stop the start; fstat then refuses it.
+  const ScopedFd file{::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC)};
+  if (file.fd < 0) {
+    if (errno == ENOENT) return std::nullopt;
+    error = fmt::format("{}: cannot be opened: {}", path.string(), errno_text());
+    return std::nullopt;
+  }
+  struct stat st {};
+  if (::fstat(file.fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    error = fmt::format("{}: not a regular file", path.string());
+    return std::nullopt;
+  }
+  const auto too_large = [&] {
+    error = fmt::format("{}: larger than {} bytes, the most a file bodyd keeps may hold", path.string(), max_bytes);
+    return std::nullopt;
+  };
+  if (static_cast<std::uintmax_t>(st.st_size) > max_bytes) return too_large();
+  // One byte more than the limit, in case the file grew since fstat.
+  std::string text(max_bytes + 1, '\0');
+  std::size_t used = 0;
+  while (used < text.size()) {
+    const ssize_t n = ::read(file.fd, text.data() + used, text.size() - used);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      error = fmt::format("{}: cannot be read: {}", path.string(), errno_text());
+      return std::nullopt;
+    }
+    if (n == 0) break;
+    used += static_cast<std::size_t>(n);
+  }
+  if (used > max_bytes) return too_large();
+  text.resize(used);
+  return text;
+}
+
+}  // namespace bodyd::daemon
