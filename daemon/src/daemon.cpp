@@ -863,7 +863,9 @@ std::string Daemon::start() {
   d.conditioner.set_mounting(d.default_mount);
   if (!d.config.mounting_file.empty()) {
     std::string merror;
-    if (std::optional<MountingState> st = read_mounting_state(d.config.mounting_file, merror)) {
+    if (std::optional<MountingState> st =
+            read_mounting_state(d.config.mounting_file, d.default_mount, PoseCalibrationOptions{}, merror)) {
+      for (const std::string& refused : st->refused) spdlog::warn("{}", refused);
       for (Role r : kRoles) {
         const int i = static_cast<int>(r);
         if (!st->measured[i]) continue;

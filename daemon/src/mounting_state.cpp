@@ -41,7 +41,8 @@ bool finite_numbers(const json& o, const char* key, std::size_t n, double* out) 
 
 }  // namespace
 
-std::optional<MountingState> read_mounting_state(const std::filesystem::path& path, std::string& error) {
+std::optional<MountingState> read_mounting_state(const std::filesystem::path& path, const Mounting& defaults,
+                                                 const PoseCalibrationOptions& limits, std::string& error) {
   const auto fail = [&](const std::string& what) -> std::optional<MountingState> {
     error = fmt::format("{}: {} ({})", path.string(), what, kWhatToDo);
     return std::nullopt;
@@ -95,6 +96,16 @@ std::optional<MountingState> read_mounting_state(const std::filesystem::path& pa
     if (std::abs(rot.norm() - 1.0) > limits::kQuatNormTolerance)
       return fail(fmt::format("roles.{}.rotation_xyzw is not a unit quaternion", name));
     st.mounting.T_device_joint[i] = {pos, rot.normalized()};
+    // The limits of the calibration pose that wrote it: a rotation typed by hand (identity is
+    // 125 degrees from the headset's default) would tilt every pose.
+    const double change_deg = mounting_difference(st.mounting.T_device_joint[i], defaults.T_device_joint[i]).angle_deg;
+    const double max_deg = max_mounting_change_deg(limits, r);
+    if (st.measured[i] && change_deg > max_deg) {
+      st.measured[i] = false;
+      st.refused.push_back(fmt::format("{}: roles.{}.rotation_xyzw is {:.0f} degrees from the default mounting, more "
+                                       "than the {:.0f} a calibration pose accepts: the default {} mounting is used ({})",
+                                       path.string(), name, change_deg, max_deg, name, kWhatToDo));
+    }
   }
   return st;
 }

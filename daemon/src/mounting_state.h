@@ -6,16 +6,19 @@
 //              "left_hand": {...}, "right_hand": {...}}}
 //
 // Read at start, with the rules of every persisted file (docs/reliability.md, "Persisted
-// files"): at most kMaxPersistedFileBytes, each field type-checked. Written atomically (a
-// temporary file renamed over it, mode 0600).
+// files"): at most kMaxPersistedFileBytes, each field type-checked, each measured mounting
+// within the calibration pose's limits of the default. Written atomically (a temporary file
+// renamed over it, mode 0600).
 #pragma once
 
+#include "bodyd/inference/calibration.h"
 #include "bodyd/motion/mounting.h"
 
 #include <array>
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace bodyd::daemon {
 
@@ -24,12 +27,19 @@ struct MountingState {
   std::array<bool, kRoleCount> measured{};  // roles whose mounting the calibration measured
   double head_height_m = 0.0;               // 0: none stored
   std::string calibrated;                   // when (UTC, ISO 8601)
+  // Read only: one line (file, field, what to do) per measured mounting that was refused because
+  // it lies further from the default than a calibration pose accepts; that role reads as not
+  // measured.
+  std::vector<std::string> refused;
 };
 
 // Reads `path`. nullopt with `error` empty when the file does not exist; nullopt with `error`
 // set (file, field, what to do) when it is too large, unreadable, not the format or holds a
-// value of a wrong type or out of range.
-[[nodiscard]] std::optional<MountingState> read_mounting_state(const std::filesystem::path& path, std::string& error);
+// value of a wrong type or out of range. A measured mounting further from `defaults` than
+// `limits` lets a calibration pose go (max_mounting_change_deg) is refused alone
+// (MountingState::refused).
+[[nodiscard]] std::optional<MountingState> read_mounting_state(const std::filesystem::path& path, const Mounting& defaults,
+                                                             const PoseCalibrationOptions& limits, std::string& error);
 // Writes `state` to `path` (creating its folder). Empty on success, otherwise what went wrong.
 [[nodiscard]] std::string write_mounting_state(const std::filesystem::path& path, const MountingState& state);
 

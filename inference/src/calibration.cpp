@@ -152,6 +152,10 @@ std::string validate(const PoseCalibrationOptions& o) {
   return validate(o.height);
 }
 
+double max_mounting_change_deg(const PoseCalibrationOptions& options, Role r) {
+  return r == Role::Head ? options.max_head_change_deg : options.max_grip_change_deg;
+}
+
 PoseCalibrator::PoseCalibrator(const BodyReference& reference, const Mounting& defaults,
                                const PoseCalibrationOptions& options)
     : reference_(reference), defaults_(defaults), options_(options) {
@@ -324,16 +328,18 @@ std::string PoseCalibrator::pose_problem(const PoseCalibration& c, const std::ar
     const double change = mounting_difference(c.mounting.T_device_joint[static_cast<size_t>(h)],
                                               defaults_.T_device_joint[static_cast<size_t>(h)])
                               .angle_deg;
-    if (change > options_.max_grip_change_deg) {
-      refusal_clear_ = change > options_.max_grip_change_deg + kClearTurnDeg;
+    const double limit = max_mounting_change_deg(options_, kRoles[static_cast<size_t>(h)]);
+    if (change > limit) {
+      refusal_clear_ = change > limit + kClearTurnDeg;
       return fmt::format("the {} controller is turned {:.0f} degrees from pointing ahead: hold each controller "
                          "naturally, pointing forward",
                          role_name(kRoles[static_cast<size_t>(h)]), change);
     }
   }
   const double head_change = mounting_difference(c.mounting.T_device_joint[0], defaults_.T_device_joint[0]).angle_deg;
-  if (head_change > options_.max_head_change_deg) {
-    refusal_clear_ = head_change > options_.max_head_change_deg + kClearTurnDeg;
+  const double head_limit = max_mounting_change_deg(options_, Role::Head);
+  if (head_change > head_limit) {
+    refusal_clear_ = head_change > head_limit + kClearTurnDeg;
     return fmt::format("the headset is tilted {:.0f} degrees from level: look straight ahead", head_change);
   }
   return {};

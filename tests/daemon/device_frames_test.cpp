@@ -490,6 +490,34 @@ TEST(MountingFile, AWrongTypeIsReportedWithItsFieldAndTheDefaultsAreUsed) {
   for (Role role : kRoles) EXPECT_EQ(origin(r.status, role), "file") << role_name(role);
 }
 
+// Item 9: the calibration pose's limits (25 degrees for the headset, 50 for a controller, from
+// the default) hold for what the file stores. An identity head rotation, natural to type by
+// hand, is 125 degrees from the default and tilted every Head joint.
+TEST(MountingFile, AMountingBeyondTheCalibrationLimitsIsIgnored) {
+  const Mounting defaults = default_mounting(reference());
+  Mounting m = defaults;
+  m.T_device_joint[0].rotation = Quat::Identity();
+  const auto turned = [&](int role, double angle_deg) {
+    return (quat_from_axis_angle(Vec3::UnitZ() * (angle_deg * M_PI / 180)) * defaults.T_device_joint[static_cast<size_t>(role)].rotation)
+        .normalized();
+  };
+  m.T_device_joint[1].rotation = turned(1, 60.0);  // over 50
+  m.T_device_joint[2].rotation = turned(2, 40.0);  // within
+  test::TempDir dir;
+  const StartWithFile r = start_with_mounting_file(dir, mounting_file_json(m).dump());
+  EXPECT_EQ(origin(r.status, Role::Head), "default");
+  EXPECT_EQ(origin(r.status, Role::LeftHand), "default");
+  EXPECT_EQ(origin(r.status, Role::RightHand), "file");
+  const std::string file = (dir.path / "mounting.json").string();
+  EXPECT_NE(r.log.find(file + ": roles.head.rotation_xyzw is 125 degrees"), std::string::npos) << r.log;
+  EXPECT_NE(r.log.find(file + ": roles.left_hand.rotation_xyzw is 60 degrees"), std::string::npos) << r.log;
+  EXPECT_EQ(r.log.find("roles.right_hand"), std::string::npos) << r.log;
+  // The headset 20 degrees off is what a calibration pose may measure: kept.
+  m.T_device_joint[0].rotation = turned(0, 20.0);
+  test::TempDir dir2;
+  EXPECT_EQ(origin(start_with_mounting_file(dir2, mounting_file_json(m).dump()).status, Role::Head), "file");
+}
+
 // Item 11: a 30 MB mounting file peaked at 641 MB of memory. Persisted files are read only up
 // to 1 MiB: over it, reported with the file and the limit, defaults used.
 TEST(MountingFile, AFileOverTheSizeLimitIsIgnored) {

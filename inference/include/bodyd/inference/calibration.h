@@ -144,6 +144,10 @@ struct PoseCalibrationOptions {
   StandingHeightOptions height;         // stance_ratio and the plausibility limits
 };
 [[nodiscard]] std::string validate(const PoseCalibrationOptions& options);
+// The furthest role `r`'s device mounting may turn from the default in a calibration pose:
+// max_head_change_deg for the headset, max_grip_change_deg for a controller. The mounting file
+// (daemon/src/mounting_state.h) holds what it stores to the same limits.
+[[nodiscard]] double max_mounting_change_deg(const PoseCalibrationOptions& options, Role r);
 
 struct PoseCalibration {
   Mounting mounting;                           // the defaults where a role was not measured
