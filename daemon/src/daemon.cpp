@@ -148,9 +148,15 @@ struct Daemon::Impl final : ControlTarget {
   ReconstructionSummary summary;
   json recentre_status = json{{"recentred", false}};
   json mounting_status = json::object();
-  // The calibration poses' replies by request id, handed to the control thread (at most two: one
+  // The calibration pose's reply, with the mounting to keep in config.mounting_file: the control
+  // thread writes the file (it may wait on the disk, and the poses must not), then replies.
+  struct PoseResult {
+    json reply;
+    std::optional<MountingState> to_keep;
+  };
+  // The calibration poses' results by request id, handed to the control thread (at most two: one
   // answered, not yet collected, and the next one's).
-  std::map<std::uint64_t, json> pose_results;
+  std::map<std::uint64_t, PoseResult> pose_results;
   std::uint64_t last_pose_id = 0;  // control thread
   bool offsets_configured = false;
 
@@ -390,15 +396,15 @@ struct Daemon::Impl final : ControlTarget {
   // Reconstruction thread: ends the calibration pose's wait with its reply.
   void finish_pose_wait(CalibrationPoseWait::Outcome outcome) {
     pose_wait.reset();
-    json reply;
+    PoseResult result;
     if (outcome.calibration) {
-      reply = apply_pose_calibration(*outcome.calibration);
+      result = apply_pose_calibration(*outcome.calibration);
     } else {
       spdlog::info("calibration pose refused: {}", outcome.refusal);
-      reply = control_error("calibrate from pose: " + outcome.refusal);
+      result.reply = control_error("calibrate from pose: " + outcome.refusal);
     }
     std::lock_guard lock(shared_mutex);
-    pose_results[pose_id] = std::move(reply);
+    pose_results[pose_id] = std::move(result);
   }
 
   // The auto calibration's refinement of the headset's mounting (its pitch) from a still
@@ -425,9 +431,9 @@ struct Daemon::Impl final : ControlTarget {
         fmt::format("t_ns {}: mounting head {} (auto)", c.t_ns, transform_text(conditioner.mounting().T_device_joint[0])));
   }
 
-  // Applies a calibration pose's result: mountings, the height, the mounting file. Returns the
-  // control reply.
-  json apply_pose_calibration(const PoseCalibration& c) {
+  // Applies a calibration pose's result: mountings, the height. Returns the control reply and
+  // what the mounting file is to keep (the control thread writes it).
+  PoseResult apply_pose_calibration(const PoseCalibration& c) {
     json roles = json::object();
     for (Role r : kRoles) {
       const int i = static_cast<int>(r);
@@ -454,15 +460,13 @@ struct Daemon::Impl final : ControlTarget {
                  height_error.empty() ? "" : " (the height was refused: " + height_error + ")", mounting_text(mounting));
     recorder.comment(fmt::format("t_ns {}: calibrate pose head_height_m {} mounting {}", c.t_ns, recon->head_height_m(),
                                  mounting_text(mounting)));
-    std::string file_error;
+    PoseResult result;
     if (!config.mounting_file.empty()) {
-      MountingState st;
+      MountingState& st = result.to_keep.emplace();
       st.mounting = mounting;
       for (Role r : kRoles) st.measured[static_cast<int>(r)] = mounting_origin[static_cast<int>(r)] != MountingOrigin::Default;
       st.head_height_m = height_error.empty() ? recon->head_height_m() : 0.0;
       st.calibrated = utc_now();
-      file_error = write_mounting_state(config.mounting_file, st);
-      if (!file_error.empty()) spdlog::warn("calibration pose: {} (the calibration holds until bodyd stops)", file_error);
     }
     std::lock_guard lock(shared_mutex);
     json reply{{"ok", height_error.empty()},
@@ -475,8 +479,8 @@ struct Daemon::Impl final : ControlTarget {
     if (!c.device_frames)
       reply["note"] = "the sources deliver joint poses: there is no device mounting to learn, only the height";
     if (!config.mounting_file.empty()) reply["mounting_file"] = config.mounting_file;
-    if (!file_error.empty()) reply["mounting_file_error"] = file_error;
-    return reply;
+    result.reply = std::move(reply);
+    return result;
   }
 
   static std::string utc_now() {
@@ -799,17 +803,32 @@ struct Daemon::Impl final : ControlTarget {
     // The reconstruction thread answers by the timeout; this is for a thread that stopped.
     const auto give_up = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s + 2.0);
     return ControlReply(LaterReply([this, id, give_up]() -> std::optional<json> {
-      std::lock_guard lock(shared_mutex);
-      if (auto it = pose_results.find(id); it != pose_results.end()) {
-        json r = std::move(it->second);
-        pose_results.erase(it);
-        return r;
-      }
+      if (std::optional<json> r = take_pose_result(id)) return r;
       if (stop_flag.load()) return control_error("calibrate from pose: bodyd is stopping");
       if (std::chrono::steady_clock::now() > give_up)
         return control_error("calibrate from pose: the reconstruction thread did not answer (a bug: see bodyd's log)");
       return std::nullopt;
     }));
+  }
+
+  // Control thread: the calibration pose's reply once the reconstruction thread has handed it
+  // over, after writing the mounting it measured to the mounting file.
+  std::optional<json> take_pose_result(std::uint64_t id) {
+    std::optional<PoseResult> result;
+    {
+      std::lock_guard lock(shared_mutex);
+      auto it = pose_results.find(id);
+      if (it == pose_results.end()) return std::nullopt;
+      result = std::move(it->second);
+      pose_results.erase(it);
+    }
+    if (result->to_keep) {
+      if (std::string e = write_mounting_state(config.mounting_file, *result->to_keep); !e.empty()) {
+        spdlog::warn("calibration pose: {} (the calibration holds until bodyd stops)", e);
+        result->reply["mounting_file_error"] = std::move(e);
+      }
+    }
+    return std::move(result->reply);
   }
 
   json shutdown() override {

@@ -8,8 +8,6 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
-#include <fstream>
-#include <sys/stat.h>
 
 namespace bodyd::daemon {
 
@@ -119,20 +117,8 @@ std::string write_mounting_state(const std::filesystem::path& path, const Mounti
         {"position_m", {T.position_m.x(), T.position_m.y(), T.position_m.z()}},
         {"rotation_xyzw", {T.rotation.x(), T.rotation.y(), T.rotation.z(), T.rotation.w()}}};
   }
-  const json j{{"format", "bodyd-mounting v1"}, {"calibrated", st.calibrated}, {"head_height_m", st.head_height_m}, {"roles", roles}};
-  std::error_code ec;
-  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path(), ec);
-  const std::filesystem::path tmp = path.string() + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::trunc);
-    out << j.dump(2) << "\n";
-    out.close();
-    if (!out) return fmt::format("{}: cannot write the mounting file (is its folder writable?)", tmp.string());
-  }
-  ::chmod(tmp.c_str(), 0600);
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) return fmt::format("{}: cannot replace it: {}", path.string(), ec.message());
-  return {};
+  const json j{{"format", kFormat}, {"calibrated", st.calibrated}, {"head_height_m", st.head_height_m}, {"roles", roles}};
+  return replace_persisted_file(path, j.dump(2) + "\n", 0600);
 }
 
 }  // namespace bodyd::daemon

@@ -7,8 +7,8 @@
 //
 // Read at start, with the rules of every persisted file (docs/reliability.md, "Persisted
 // files"): at most kMaxPersistedFileBytes, each field type-checked, each measured mounting
-// within the calibration pose's limits of the default. Written atomically (a temporary file
-// renamed over it, mode 0600).
+// within the calibration pose's limits of the default; written through a private temporary
+// file renamed over it (mode 0600), by the control thread (persisted_file.h).
 #pragma once
 
 #include "bodyd/inference/calibration.h"
@@ -41,6 +41,7 @@ struct MountingState {
 [[nodiscard]] std::optional<MountingState> read_mounting_state(const std::filesystem::path& path, const Mounting& defaults,
                                                              const PoseCalibrationOptions& limits, std::string& error);
 // Writes `state` to `path` (creating its folder). Empty on success, otherwise what went wrong.
+// Waits on the disk: never on the reconstruction thread.
 [[nodiscard]] std::string write_mounting_state(const std::filesystem::path& path, const MountingState& state);
 
 }  // namespace bodyd::daemon

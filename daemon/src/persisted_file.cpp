@@ -4,6 +4,7 @@
 
 #include <cerrno>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -61,6 +62,35 @@ std::optional<std::string> read_persisted_file(const std::filesystem::path& path
   if (used > max_bytes) return too_large();
   text.resize(used);
   return text;
+}
+
+std::string replace_persisted_file(const std::filesystem::path& path, std::string_view text, mode_t mode) {
+  std::error_code ec;
+  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path(), ec);
+  std::string tmp = path.string() + ".XXXXXX";
+  const ScopedFd file{::mkostemp(tmp.data(), O_CLOEXEC)};
+  if (file.fd < 0)
+    return fmt::format("{}: cannot create a temporary file beside it: {} (is its folder writable?)", path.string(),
+                       errno_text());
+  const auto fail = [&](const char* what) {
+    std::string e = fmt::format("{}: {}: {}", tmp, what, errno_text());
+    ::unlink(tmp.c_str());
+    return e;
+  };
+  for (std::size_t done = 0; done < text.size();) {
+    const ssize_t n = ::write(file.fd, text.data() + done, text.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) return fail("cannot write");
+    done += static_cast<std::size_t>(n);
+  }
+  if (::fchmod(file.fd, mode) != 0) return fail("cannot set its permissions");
+  if (::fsync(file.fd) != 0) return fail("cannot flush it to the disk");
+  if (::rename(tmp.c_str(), path.c_str()) != 0) {
+    const std::string e = fmt::format("{}: cannot replace it: {}", path.string(), errno_text());
+    ::unlink(tmp.c_str());
+    return e;
+  }
+  return {};
 }
 
 }  // namespace bodyd::daemon

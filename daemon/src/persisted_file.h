@@ -1,12 +1,14 @@
 // Files the daemon keeps for itself (the mounting file): read with a size limit and without
-// blocking (docs/reliability.md, "Persisted files"). Not for the reconstruction thread: it may
-// wait on the disk.
+// blocking, written through a private temporary file (docs/reliability.md, "Persisted files").
+// Neither is for the reconstruction thread: both may wait on the disk.
 #pragma once
 
 #include <cstddef>
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <string_view>
+#include <sys/types.h>
 
 namespace bodyd::daemon {
 
@@ -18,5 +20,12 @@ inline constexpr std::size_t kMaxPersistedFileBytes = std::size_t{1} << 20;
 // not a regular file (a FIFO is refused, never waited on), is larger or cannot be read.
 [[nodiscard]] std::optional<std::string> read_persisted_file(const std::filesystem::path& path, std::size_t max_bytes,
                                                              std::string& error);
+
+// Replaces `path` by `text` with permissions `mode`, creating its folder: the text goes to a new
+// file of a unique name beside it (mkostemp: O_CREAT | O_EXCL, mode 0600, so nothing already
+// there, a symbolic link or a FIFO, is followed or opened), is flushed to the disk (fsync) and
+// renamed over `path`. Empty on success, otherwise what went wrong (the path, the reason); the
+// temporary file is then removed.
+[[nodiscard]] std::string replace_persisted_file(const std::filesystem::path& path, std::string_view text, mode_t mode);
 
 }  // namespace bodyd::daemon

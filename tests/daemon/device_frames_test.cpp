@@ -22,10 +22,15 @@
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <cmath>
 #include <cstdio>
 #include <functional>
 #include <random>
+#include <set>
 #include <thread>
 
 namespace bodyd {
@@ -87,8 +92,9 @@ struct OneRequest {
   json status;
   json status_at_reply;  // asked right after the reply came
 };
+// `before_stop` runs after the reply, before the daemon is asked to stop.
 OneRequest replay_and_request(const DaemonConfig& c, const std::string& request, std::uint64_t min_samples = 30,
-                              int timeout_ms = 6000) {
+                              int timeout_ms = 6000, const std::function<void()>& before_stop = {}) {
   Daemon d(c, daemon::make_default_factory(test::source_dir() / "data" / "demo" / "skeleton.bvh"));
   OneRequest out;
   if (const std::string e = d.start(); !e.empty()) {
@@ -101,6 +107,7 @@ OneRequest replay_and_request(const DaemonConfig& c, const std::string& request,
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   out.reply = test::control_request(ctx, d.control_endpoint(), request, timeout_ms);
   out.status_at_reply = d.status();
+  if (before_stop) before_stop();
   d.request_stop();
   runner.join();
   out.status = d.status();
@@ -526,6 +533,47 @@ TEST(MountingFile, AFileOverTheSizeLimitIsIgnored) {
   const StartWithFile r = start_with_mounting_file(dir, good + std::string(std::size_t{1} << 21, ' '));
   for (Role role : kRoles) EXPECT_EQ(origin(r.status, role), "default") << role_name(role);
   EXPECT_NE(r.log.find((dir.path / "mounting.json").string() + ": larger than 1048576 bytes"), std::string::npos) << r.log;
+}
+
+// Item 10: the file was written through "mounting.json.tmp", opened with std::ofstream on the
+// reconstruction thread: a symbolic link there had its target overwritten, a FIFO there stopped
+// the poses for good (the request never got its reply, SIGTERM was ignored). Now the control
+// thread writes through a new file of its own.
+TEST(MountingFile, ALinkOrFifoAtTheOldTemporaryNameIsNeitherFollowedNorOpened) {
+  const BodyReference ref = reference();
+  for (const bool fifo : {false, true}) {
+    SCOPED_TRACE(fifo ? "FIFO" : "symbolic link");
+    test::TempDir dir;
+    write_device_log(dir.path / "still.csv",
+                     still_device_stream(calibration_pose_joints(ref, 1.5), known_mounting(default_mounting(ref)), 4.0));
+    DaemonConfig c = replay_config(dir.path / "still.csv", dir.path, "ik");
+    const std::filesystem::path state = dir.path / "state";
+    std::filesystem::create_directories(state);
+    c.mounting_file = (state / "mounting.json").string();
+    const std::filesystem::path tmp = state / "mounting.json.tmp", victim = dir.path / "victim";
+    ASSERT_TRUE(test::write_file(victim, "keep"));
+    if (fifo) ASSERT_EQ(::mkfifo(tmp.c_str(), 0600), 0);
+    else std::filesystem::create_symlink(victim, tmp);
+    // A writer blocked on the FIFO (the old code) gets a reader after the reply, so the test
+    // can end; the read end stays open until then (the writer must not get SIGPIPE).
+    int reader = -1;
+    const OneRequest r = replay_and_request(c, R"({"cmd":"calibrate","from":"pose","timeout_s":3})", 30, 20000, [&] {
+      if (fifo) reader = ::open(tmp.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+    });
+    if (reader >= 0) ::close(reader);
+    ASSERT_TRUE(r.reply);
+    EXPECT_EQ((*r.reply)["ok"], true) << r.reply->dump();
+    EXPECT_FALSE(r.reply->contains("mounting_file_error")) << r.reply->dump();
+    EXPECT_EQ(test::read_file(victim), "keep");
+    std::set<std::string> names;
+    for (const auto& e : std::filesystem::directory_iterator(state)) names.insert(e.path().filename().string());
+    EXPECT_EQ(names, (std::set<std::string>{"mounting.json", "mounting.json.tmp"}));  // no temporary file left
+    EXPECT_TRUE(std::filesystem::is_regular_file(std::filesystem::symlink_status(c.mounting_file)));
+    EXPECT_EQ((std::filesystem::status(c.mounting_file).permissions() & std::filesystem::perms::all),
+              std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
+    EXPECT_EQ(json::parse(test::read_file(c.mounting_file), nullptr, false).value("format", ""), "bodyd-mounting v1");
+    EXPECT_EQ(std::filesystem::is_fifo(std::filesystem::symlink_status(tmp)), fifo);
+  }
 }
 
 }  // namespace
