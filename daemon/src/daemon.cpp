@@ -20,6 +20,7 @@
 #include "command_channel.h"
 #include "control_server.h"
 #include "mounting_state.h"
+#include "persisted_file.h"
 #include "pose_wire.h"
 #include "sample_conditioning.h"
 #include "stats.h"
@@ -37,7 +38,6 @@
 #include <condition_variable>
 #include <cstring>
 #include <ctime>
-#include <fstream>
 #include <map>
 #include <mutex>
 #include <thread>
@@ -978,18 +978,12 @@ std::string Daemon::start() {
   }
   if (d.control.enabled()) spdlog::info("control socket on {}", d.control.bound());
   if (!d.config.endpoints_file.empty()) {
-    const std::filesystem::path path = d.config.endpoints_file;
-    const std::filesystem::path tmp = path.string() + ".tmp";
-    std::ofstream out(tmp);
-    out << json{{"pub", d.pub->bound()}, {"control", d.control.bound()}, {"curve_public_key", d.pub->curve_public_key()}}.dump()
-        << "\n";
-    out.close();
-    std::error_code ec;
-    std::filesystem::rename(tmp, path, ec);
-    if (!out || ec) {
+    // Readable by all, as before: it names endpoints and the public key only.
+    const json endpoints{{"pub", d.pub->bound()}, {"control", d.control.bound()}, {"curve_public_key", d.pub->curve_public_key()}};
+    if (std::string fe = replace_persisted_file(d.config.endpoints_file, endpoints.dump() + "\n", 0644); !fe.empty()) {
       d.control.stop();
       d.close_outputs();
-      return d.config.endpoints_file + ": cannot write the endpoints file";
+      return "cannot write the endpoints file: " + fe;
     }
   }
   d.started = true;

@@ -1,6 +1,7 @@
-// Files the daemon keeps for itself (the mounting file): read with a size limit and without
-// blocking, written through a private temporary file (docs/reliability.md, "Persisted files").
-// Neither is for the reconstruction thread: both may wait on the disk.
+// Files the daemon keeps for itself (the mounting file; the endpoints file it writes at start):
+// read with a size limit and without blocking, written through a private temporary file
+// (docs/reliability.md, "Persisted files"). Neither is for the reconstruction thread: both may
+// wait on the disk.
 #pragma once
 
 #include <cstddef>

@@ -10,7 +10,10 @@
 #include "pose_compare.h"
 #include "zmq_helpers.h"
 
+#include "bodyd/test/files.h"
+
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
 #include <thread>
@@ -187,6 +190,25 @@ TEST(Pipeline, AStalledSubscriberDoesNotSlowTheDaemon) {
   // Generous: this machine is shared (timings vary by 2x between runs); a publisher that
   // waited for the subscriber would not have finished at all.
   EXPECT_LT(stalled_s, 2.0 * reading_s + 0.5);
+}
+
+// The endpoints file goes through a private temporary file, as every file bodyd keeps
+// (docs/reliability.md, "Persisted files"): it was written through FILE.tmp with std::ofstream,
+// which followed a symbolic link there (and waited for ever on a FIFO there).
+TEST(Pipeline, TheEndpointsFileNeverFollowsALinkAtTheOldTemporaryName) {
+  test::TempDir dir;
+  DaemonConfig c = looping_config(dir.path);
+  c.endpoints_file = (dir.path / "endpoints.json").string();
+  ASSERT_TRUE(test::write_file(dir.path / "victim", "keep"));
+  std::filesystem::create_symlink(dir.path / "victim", dir.path / "endpoints.json.tmp");
+  Daemon d(c, fake_factory());
+  ASSERT_EQ(d.start(), "");
+  d.stop();
+  EXPECT_EQ(test::read_file(dir.path / "victim"), "keep");
+  EXPECT_TRUE(std::filesystem::is_symlink(dir.path / "endpoints.json.tmp"));
+  ASSERT_TRUE(std::filesystem::is_regular_file(std::filesystem::symlink_status(c.endpoints_file)));
+  const nlohmann::json endpoints = nlohmann::json::parse(test::read_file(c.endpoints_file), nullptr, false);
+  EXPECT_EQ(endpoints.value("pub", ""), d.pub_endpoint()) << endpoints.dump();
 }
 
 TEST(Pipeline, CurveClientWithTheServerKeyReceivesOthersDoNot) {
