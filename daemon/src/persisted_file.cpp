@@ -1,5 +1,7 @@
 #include "persisted_file.h"
 
+#include "bodyd/base/non_copyable.h"
+
 #include <fmt/format.h>
 
 #include <cerrno>
@@ -15,11 +17,12 @@ namespace bodyd::daemon {
 namespace {
 
 // Closes a descriptor at the end of its scope.
-struct ScopedFd {
-  int fd = -1;
+struct ScopedFd : NonCopyable {
+  explicit ScopedFd(int descriptor) : fd(descriptor) {}
   ~ScopedFd() {
     if (fd >= 0) ::close(fd);
   }
+  const int fd;
 };
 
 std::string errno_text() { return std::strerror(errno); }
