@@ -264,13 +264,24 @@ struct BridgeServer::Impl final : FramedHandler {
 
   // A device's sample toward the reconstruction: at once when its turn has come (or when it
   // changes between valid and lost, which must be seen at once), else held as the newest.
-  void forward(Device& d, const SourceSample& s) {
+  void forward(Connection& c, Device& d, const SourceSample& s) {
     if (sink == nullptr) return;
     const bool change = s.sample.valid != d.last_valid;
     d.last_valid = s.sample.valid;
     if (change || d.last_forward_ns == INT64_MIN || s.arrival_ns - d.last_forward_ns >= kForwardIntervalNs) {
       if (d.held) ++stats.coalesced;
       d.held.reset();
+      // A headset sample makes a pose: the other devices' newest samples go first, so the pose
+      // has hands at most one driver loop older than the headset (held, they lagged up to 10 ms).
+      if (d.bodyd == Role::Head)
+        for (auto& [id, other] : c.devices)
+          if (&other != &d && other.held) {
+            other.last_forward_ns = s.arrival_ns;
+            sink->push(*other.held);
+            ++stats.samples;
+            rate.count(s.arrival_ns);
+            other.held.reset();
+          }
       d.last_forward_ns = s.arrival_ns;
       sink->push(s);
       ++stats.samples;
@@ -491,13 +502,13 @@ struct BridgeServer::Impl final : FramedHandler {
       // Rotation only, or a status that says the position is not tracked: the reconstruction
       // treats the position as lost (as a hand out of the cameras' view) until FULL / OK again.
       ++stats.untrusted;
-      forward(d, s);
+      forward(c, d, s);
       return;
     }
     s.sample.valid = true;
     s.sample.position_m = p;
     s.sample.rotation = q.normalized();
-    forward(d, s);
+    forward(c, d, s);
   }
 
   void tracker_status(Connection& c, const Message& m, std::int64_t arrival_ns) {
@@ -509,7 +520,7 @@ struct BridgeServer::Impl final : FramedHandler {
     Device& d = it->second;
     d.status_ok = m.status == status::kOk;
     // Lost (disconnected, occluded, busy, in error): seen at once, not at the next Position.
-    if (!d.status_ok) forward(d, sample_of(d, arrival_ns));
+    if (!d.status_ok) forward(c, d, sample_of(d, arrival_ns));
   }
 
   void handle(Connection& c, const Message& m, std::int64_t arrival_ns) {
