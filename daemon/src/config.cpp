@@ -595,8 +595,14 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
       std::get<ConfigRef<std::vector<std::string>>>(row->field)(config) = values;
     }
   }
-  // The systemd unit's daemon keeps its calibration pose across restarts by default.
-  if (user_config && config.mounting_file.empty()) config.mounting_file = paths::user_state_file("mounting.json").string();
+  // Every bodyd keeps its calibration across restarts (issue 43 item 13: a plain `bodyd` forgot
+  // it): unless a mounting file is configured ("none": nowhere), the user's state file.
+  if (config.mounting_file.empty()) {
+    config.mounting_file = paths::user_state_file("mounting.json").string();
+    if (config.mounting_file.empty())
+      result.notes.push_back("mounting_file: neither XDG_STATE_HOME nor HOME is set: the calibration is not kept "
+                             "across restarts (--mounting-file FILE keeps it; docs/daemon.md, \"Device mounting\")");
+  }
   if (list_devices) {
     result.action = CliResult::Action::ListDevices;
     return result;

@@ -82,7 +82,8 @@ std::vector<ConfigKey> make_rows() {
   add({.name = "curve_allow", .field = &at<&DaemonConfig::curve_allow_dir>, .flag = "--curve-allow",
        .help = "only clients whose public key is in DIR (NAME.public files) may connect (needs --curve-secret-key)"});
   add({.name = "mounting_file", .field = &at<&DaemonConfig::mounting_file>, .flag = "--mounting-file",
-       .help = "keep the calibration pose's device mountings in this JSON file across restarts (docs/daemon.md)"});
+       .help = "keep the calibration (device mountings, head height) in this JSON file across restarts; default "
+               "$XDG_STATE_HOME/bodyd/mounting.json, \"none\": not kept (docs/daemon.md)"});
   add({.name = "record_trackers", .field = &at<&DaemonConfig::record_trackers_file>, .flag = "--record-trackers",
        .help = "write every tracker sample received to FILE (tracker log v1; replay it with --replay FILE --fast)"});
   add({.name = "overwrite", .field = &at<&DaemonConfig::record_trackers_overwrite>, .flag = "--overwrite",

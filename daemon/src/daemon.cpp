@@ -213,6 +213,7 @@ struct Daemon::Impl final : ControlTarget {
         rate_gate(config.rate_hz),
         conditioner(config.offsets) {
     for (const auto& o : config.offsets) offsets_configured |= o.has_value();
+    if (config.mounting_file == "none") config.mounting_file.clear();  // the calibration is not kept
   }
 
   // ---------------------------------------------------------------- outputs

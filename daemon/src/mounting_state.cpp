@@ -118,6 +118,9 @@ std::string write_mounting_state(const std::filesystem::path& path, const Mounti
         {"rotation_xyzw", {T.rotation.x(), T.rotation.y(), T.rotation.z(), T.rotation.w()}}};
   }
   const json j{{"format", kFormat}, {"calibrated", st.calibrated}, {"head_height_m", st.head_height_m}, {"roles", roles}};
+  if (path.has_parent_path()) {
+    if (std::string e = create_private_directories(path.parent_path()); !e.empty()) return e;
+  }
   return replace_persisted_file(path, j.dump(2) + "\n", 0600);
 }
 

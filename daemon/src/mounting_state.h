@@ -40,7 +40,8 @@ struct MountingState {
 // (MountingState::refused).
 [[nodiscard]] std::optional<MountingState> read_mounting_state(const std::filesystem::path& path, const Mounting& defaults,
                                                              const PoseCalibrationOptions& limits, std::string& error);
-// Writes `state` to `path` (creating its folder). Empty on success, otherwise what went wrong.
+// Writes `state` to `path`, creating its folders with mode 0700. Empty on success, otherwise what
+// went wrong.
 // Waits on the disk: never on the reconstruction thread.
 [[nodiscard]] std::string write_mounting_state(const std::filesystem::path& path, const MountingState& state);
 

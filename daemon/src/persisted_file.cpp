@@ -67,6 +67,20 @@ std::optional<std::string> read_persisted_file(const std::filesystem::path& path
   return text;
 }
 
+std::string create_private_directories(const std::filesystem::path& dir) {
+  std::filesystem::path made;
+  for (const std::filesystem::path& part : dir) {
+    made /= part;
+    if (part.empty() || part == made.root_path()) continue;
+    if (::mkdir(made.c_str(), 0700) == 0 || errno == EEXIST) continue;
+    const std::string e = errno_text();
+    struct stat st {};
+    if (::stat(made.c_str(), &st) == 0 && S_ISDIR(st.st_mode)) continue;  // e.g. EROFS for a folder that exists
+    return fmt::format("{}: cannot create the folder: {}", made.string(), e);
+  }
+  return {};
+}
+
 std::string replace_persisted_file(const std::filesystem::path& path, std::string_view text, mode_t mode) {
   std::error_code ec;
   if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path(), ec);

@@ -22,6 +22,11 @@ inline constexpr std::size_t kMaxPersistedFileBytes = std::size_t{1} << 20;
 [[nodiscard]] std::optional<std::string> read_persisted_file(const std::filesystem::path& path, std::size_t max_bytes,
                                                              std::string& error);
 
+// Creates `dir` and every missing folder above it with mode 0700 (the XDG Base Directory rule
+// for $XDG_STATE_HOME: the user's state is for the user alone); folders that exist are left as
+// they are. Empty on success, otherwise the folder and the reason.
+[[nodiscard]] std::string create_private_directories(const std::filesystem::path& dir);
+
 // Replaces `path` by `text` with permissions `mode`, creating its folder: the text goes to a new
 // file of a unique name beside it (mkostemp: O_CREAT | O_EXCL, mode 0600, so nothing already
 // there, a symbolic link or a FIFO, is followed or opened), is flushed to the disk (fsync) and

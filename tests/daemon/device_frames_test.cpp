@@ -187,6 +187,9 @@ TEST(CalibrationPose, RecoversAKnownMountingAndKeepsItAcrossARestart) {
     EXPECT_NEAR(status["head_height_m"].get<double>(), head_y_m / StandingHeightOptions{}.stance_ratio, 0.01);
     EXPECT_EQ(status["calibration_source"], "control");
     EXPECT_TRUE(std::filesystem::exists(c.mounting_file));
+    // Its folder is the user's alone, as XDG_STATE_HOME's (issue 43 item 13).
+    EXPECT_EQ(std::filesystem::status(dir.path / "state").permissions() & std::filesystem::perms::all,
+              std::filesystem::perms::owner_all);
   }
   // A restart keeps it (from the mounting file), the height too.
   Daemon again(c, daemon::make_default_factory(test::source_dir() / "data" / "demo" / "skeleton.bvh"));

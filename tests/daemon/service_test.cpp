@@ -18,6 +18,8 @@
 
 #include <chrono>
 #include <fstream>
+#include <map>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -216,6 +218,65 @@ TEST(UserConfig, TheSetupsTheExampleAndTheReadmeShowLoad) {
     ++commands;
   }
   EXPECT_GE(commands, 4) << "steamvr, monado, vrchat and hid";
+}
+
+// Issue 43 item 13: only `--user-config` (the systemd unit) kept the calibration; a plain
+// `bodyd ...`, as the docs show it, forgot it at every restart ("head default"). Now every way
+// of starting bodyd reads and writes $XDG_STATE_HOME/bodyd/mounting.json (by default
+// ~/.local/state/bodyd/mounting.json) unless a mounting file is configured; "none": nowhere.
+TEST(StateFile, EveryWayOfStartingBodydKeepsTheCalibration) {
+  TempDir dir;
+  // What a calibration pose of an earlier session kept: the head height (no device measured).
+  json roles = json::object();
+  for (const char* role : {"head", "left_hand", "right_hand"})
+    roles[role] = {{"measured", false}, {"position_m", {0, 0, 0}}, {"rotation_xyzw", {0, 0, 0, 1}}};
+  const std::string kept =
+      json{{"format", "bodyd-mounting v1"}, {"calibrated", "2026-12-02T10:00:00Z"}, {"head_height_m", 1.55}, {"roles", roles}}
+          .dump();
+  const fs::path state_home = dir.path / "state", home = dir.path / "home";
+  for (const fs::path& folder : {state_home / "bodyd", home / ".local/state/bodyd"}) {
+    fs::create_directories(folder);
+    ASSERT_TRUE(write_file(folder / "mounting.json", kept));
+  }
+  struct Way {
+    std::string name;
+    std::vector<std::string> flags;
+    std::map<std::string, std::string> env;
+    std::string file;  // status's mounting.file; "" for none
+  };
+  const std::map<std::string, std::string> xdg{{"XDG_STATE_HOME", state_home.string()},
+                                               {"XDG_CONFIG_HOME", (dir.path / "config").string()}};
+  const std::vector<Way> ways = {
+      {"plain bodyd", {}, xdg, (state_home / "bodyd/mounting.json").string()},
+      {"bodyd --user-config (the systemd unit)", {"--user-config"}, xdg, (state_home / "bodyd/mounting.json").string()},
+      {"XDG_STATE_HOME unset", {}, {{"XDG_STATE_HOME", kUnset}, {"HOME", home.string()}},
+       (home / ".local/state/bodyd/mounting.json").string()},
+      {"--mounting-file none", {"--mounting-file", "none"}, xdg, ""},
+  };
+  for (const Way& way : ways) {
+    SCOPED_TRACE(way.name);
+    std::vector<std::string> args = bodyd_args(dir.path);
+    args.insert(args.end(), way.flags.begin(), way.flags.end());
+    Process bodyd(args, {.env = way.env, .output_dir = dir.path, .name = "bodyd"});
+    zmq::context_t ctx;
+    const std::optional<std::string> reply = status_reply(ctx, "ipc://" + (dir.path / "control").string(), 20000);
+    ASSERT_TRUE(reply) << bodyd.log();
+    const json status = json::parse(*reply);
+    EXPECT_EQ(status["mounting"]["file"], way.file) << status["mounting"].dump();
+    if (way.file.empty()) {
+      EXPECT_NE(status["calibration_source"], "file");
+    } else {
+      EXPECT_EQ(status["calibration_source"], "file") << bodyd.log();
+      EXPECT_NEAR(status["head_height_m"].get<double>(), 1.55, 1e-9);
+    }
+    bodyd.signal(SIGTERM);
+    EXPECT_EQ(bodyd.wait(10000), 0) << bodyd.log();
+  }
+  // --print-config shows where (a config written from it keeps "none").
+  RunResult r = run({kBodyd, "--print-config"}, {.env = xdg, .output_dir = dir.path});
+  EXPECT_EQ(json::parse(r.out)["mounting_file"], (state_home / "bodyd/mounting.json").string());
+  r = run({kBodyd, "--mounting-file", "none", "--print-config"}, {.env = xdg, .output_dir = dir.path});
+  EXPECT_EQ(json::parse(r.out)["mounting_file"], "none");
 }
 
 }  // namespace

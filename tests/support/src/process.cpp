@@ -25,12 +25,19 @@ Process::Process(const std::vector<std::string>& args, const ProcessOptions& opt
     throw std::logic_error("Process: output_dir, or both stdout_path and stderr_path, are required");
   out_path_ = options.stdout_path.empty() ? options.output_dir / (options.name + ".stdout") : options.stdout_path;
   err_path_ = options.stderr_path.empty() ? options.output_dir / (options.name + ".stderr") : options.stderr_path;
+  std::map<std::string, std::string> env = options.env;
+  // A bodyd child keeps its calibration in $XDG_STATE_HOME/bodyd (docs/daemon.md, "Device
+  // mounting"): never the user's own, one folder per test's output folder.
+  if (!env.count("XDG_STATE_HOME")) {
+    const std::filesystem::path place = options.output_dir.empty() ? err_path_.parent_path() : options.output_dir;
+    env["XDG_STATE_HOME"] = (place.empty() || place == "/dev" ? std::filesystem::path("/nonexistent") : place) / "xdg-state";
+  }
   std::vector<std::string> env_strings;
   for (char** e = environ; *e; ++e) {
     const std::string entry = *e;
-    if (!options.env.count(entry.substr(0, entry.find('=')))) env_strings.push_back(entry);
+    if (!env.count(entry.substr(0, entry.find('=')))) env_strings.push_back(entry);
   }
-  for (const auto& [k, v] : options.env)
+  for (const auto& [k, v] : env)
     if (v != kUnset) env_strings.push_back(k + "=" + v);
   std::vector<char*> envp;
   for (auto& e : env_strings) envp.push_back(e.data());

@@ -69,8 +69,9 @@ struct DaemonConfig {
   std::string endpoints_file;         // write the bound endpoints as JSON here (tests, scripts)
   std::string record_trackers_file;   // set: every tracker sample received is written here (tracker log v1)
   // Where the calibration pose's device mountings are kept across restarts (docs/daemon.md,
-  // "Device mounting"): read at start when it exists, written by a calibration. Empty: nowhere;
-  // --user-config (the systemd unit) makes the default $XDG_STATE_HOME/bodyd/mounting.json.
+  // "Device mounting"): read at start when it exists, written by a calibration. "" or "none":
+  // nowhere. parse_command_line makes "" the default, $XDG_STATE_HOME/bodyd/mounting.json
+  // (~/.local/state/bodyd/mounting.json), whichever way bodyd is started.
   std::string mounting_file;
   bool record_trackers_overwrite = false;  // --overwrite: replace an existing record_trackers_file
   // Outputs besides --pub (docs/outputs.md): specs SCHEME:TARGET?KEY=VALUE&..., e.g.

@@ -20,7 +20,10 @@ namespace bodyd::test {
 inline constexpr const char* kUnset = "\x01unset";
 
 struct ProcessOptions {
-  std::map<std::string, std::string> env;  // set (or, with value kUnset, removed) in the child
+  // Set (or, with value kUnset, removed) in the child. XDG_STATE_HOME, unless named here, is
+  // <output_dir>/xdg-state (or beside stderr_path), so a bodyd child never reads or writes the
+  // user's calibration (~/.local/state/bodyd/mounting.json) and children of one test share one.
+  std::map<std::string, std::string> env;
   std::filesystem::path cwd;               // empty: the test's
   std::filesystem::path output_dir;        // stdout and stderr go to <output_dir>/<name>.stdout, .stderr
   std::string name = "child";              // file name stem
