@@ -262,14 +262,13 @@ void ConnectionGuard::on_event(std::uint16_t event, std::uint32_t value) {
   const int fd = static_cast<int>(value);
   if (event == ZMQ_EVENT_ACCEPTED) {
     peers_.push_back(fd);
-    if (peers_.size() <= max_) return;
-    if (!cap_logged_) {
+    if (peers_.size() >= max_ && !cap_logged_) {
       cap_logged_ = true;
       spdlog::warn("{}: {} connections, the most (a quarter of the free file descriptors, at most 64); more are "
-                   "refused while it is so (logged once)",
+                   "refused until one leaves (logged once)",
                    what_, max_);
     }
-    refuse(fd);
+    if (peers_.size() > max_) refuse(fd);
   } else if (event == ZMQ_EVENT_DISCONNECTED) {
     peers_.erase(std::remove(peers_.begin(), peers_.end(), fd), peers_.end());
   } else if (event == ZMQ_EVENT_ACCEPT_FAILED && (value == EMFILE || value == ENFILE)) {
