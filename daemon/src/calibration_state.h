@@ -56,7 +56,7 @@ class CalibrationState {
   // At start: a configured height (Config; the auto calibration, if on, Superseded), else the
   // auto calibration Waiting if on, else Off.
   void start(bool configured_height, bool auto_calibrate);
-  // The mounting file's stored height (only when none was configured).
+  // The mounting file's stored height: a measurement, so it supersedes a configured height too.
   void from_file() { supersede(HeightSource::File); }
   // A calibration from the control socket.
   void manual() { supersede(HeightSource::Control); }

@@ -894,7 +894,20 @@ std::string Daemon::start() {
       }
       spdlog::info("device mounting from {} (calibrated {}): {}", d.config.mounting_file, st->calibrated,
                    mounting_text(d.conditioner.mounting()));
-      if (st->head_height_m > 0.0 && !d.calibration.height_calibrated()) {
+      // The user measured in a calibration pose wins over a configured size (issue 43 item 13:
+      // a user_height_m in the config silently replaced it), and the log says so.
+      if (st->head_height_m > 0.0) {
+        if (d.calibration.source() == HeightSource::Config) {
+          const std::string configured =
+              d.config.head_height_m > 0.0
+                  ? fmt::format("head_height_m {}", d.config.head_height_m)
+                  : fmt::format("user_height_m {} (head height {:.3f} m)", d.config.user_height_m,
+                                configured_head_height_m(d.config));
+          spdlog::info("calibration: the measured head height {:.3f} m (mounting file {}, calibrated {}) is used instead "
+                       "of the configured {} (with --mounting-file none the configured one is used)",
+                       st->head_height_m, d.config.mounting_file, st->calibrated.empty() ? "at an unknown time" : st->calibrated,
+                       configured);
+        }
         d.recon->set_head_height_m(st->head_height_m);
         d.calibration.from_file();
       }

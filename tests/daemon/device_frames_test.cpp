@@ -451,11 +451,13 @@ struct StartWithFile {
   json status;
   std::string log;
 };
-StartWithFile start_with_mounting_file(const test::TempDir& dir, const std::string& text) {
+StartWithFile start_with_mounting_file(const test::TempDir& dir, const std::string& text,
+                                      const std::function<void(DaemonConfig&)>& configure = {}) {
   const BodyReference ref = reference();
   write_device_log(dir.path / "still.csv", still_device_stream(calibration_pose_joints(ref, 1.5), default_mounting(ref), 0.2));
   DaemonConfig c = replay_config(dir.path / "still.csv", dir.path, "ik");
   c.mounting_file = (dir.path / "mounting.json").string();
+  if (configure) configure(c);
   EXPECT_TRUE(test::write_file(c.mounting_file, text));
   StartWithFile out;
   test::LogCapture log;
@@ -526,6 +528,33 @@ TEST(MountingFile, AMountingBeyondTheCalibrationLimitsIsIgnored) {
   m.T_device_joint[0].rotation = turned(0, 20.0);
   test::TempDir dir2;
   EXPECT_EQ(origin(start_with_mounting_file(dir2, mounting_file_json(m).dump()).status, Role::Head), "file");
+}
+
+// Item 13: with --user-config, a configured user_height_m silently replaced the height the
+// calibration pose measured (1.622 -> 1.602 m, no log line). The measured height wins, and the
+// log says which height is used instead of which.
+TEST(MountingFile, TheMeasuredHeightWinsOverAConfiguredOneAndTheLogSaysSo) {
+  const std::string file = mounting_file_json(known_mounting(default_mounting(reference()))).dump();  // 1.55 m
+  const std::vector<std::pair<std::string, std::function<void(DaemonConfig&)>>> configured = {
+      {"user_height_m 1.8", [](DaemonConfig& c) { c.user_height_m = 1.8; }},
+      {"head_height_m 1.62", [](DaemonConfig& c) { c.head_height_m = 1.62; }},
+  };
+  for (const auto& [key, configure] : configured) {
+    SCOPED_TRACE(key);
+    test::TempDir dir;
+    const StartWithFile r = start_with_mounting_file(dir, file, configure);
+    EXPECT_NEAR(r.status["head_height_m"].get<double>(), 1.55, 1e-9);
+    EXPECT_EQ(r.status["calibration_source"], "file");
+    EXPECT_NE(r.log.find("the measured head height 1.550 m (mounting file " + (dir.path / "mounting.json").string() +
+                         ", calibrated 2026-12-02T10:00:00Z) is used instead of the configured " + key),
+              std::string::npos)
+        << r.log;
+  }
+  // Without a configured height nothing is replaced, and nothing said about it.
+  test::TempDir dir;
+  const StartWithFile r = start_with_mounting_file(dir, file);
+  EXPECT_NEAR(r.status["head_height_m"].get<double>(), 1.55, 1e-9);
+  EXPECT_EQ(r.log.find("instead of the configured"), std::string::npos) << r.log;
 }
 
 // Item 11: a 30 MB mounting file peaked at 641 MB of memory. Persisted files are read only up
