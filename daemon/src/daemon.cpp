@@ -274,7 +274,11 @@ struct Daemon::Impl final : ControlTarget {
     TrackerSample& s = in.sample;
     const TrackerSample as_received = s;  // before the mounting and offset (OutputFrame::head_as_received)
     feed_pose_calibrators(s, in.arrival_ns);
+    const bool first_device_pose = s.frame == PoseFrame::Device && !conditioner.device_frames_seen(s.role);
     conditioner.condition(s);
+    // status's device_frames per role (issue 43 item 13: after a restart with a kept mounting it
+    // said "no device poses yet" for good, nothing else republishing it); once per role.
+    if (first_device_pose) publish_mounting_status();
     // The log reader ends with the same normalisation (sample_conditioning.h), so a replay of the
     // recording is bit-identical (tracker_recorder.h).
     if (recorder.is_open()) recorder.record(s);

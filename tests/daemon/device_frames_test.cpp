@@ -136,6 +136,20 @@ RigidTransform transform_from_status(const json& role) {
   return {Vec3(p[0], p[1], p[2]), Quat(q[3].get<double>(), q[0].get<double>(), q[1].get<double>(), q[2].get<double>())};
 }
 
+// What `bodyd-ctl --control CONTROL ARGS` prints on its standard output; a non-zero exit fails
+// the test.
+std::string ctl_output(const std::string& control, const std::string& args) {
+  const std::string command = (test::bin_dir() / "bodyd-ctl").string() + " --control " + control + " " + args + " 2>/dev/null";
+  std::string out;
+  if (FILE* p = popen(command.c_str(), "r")) {
+    char buf[4096];
+    std::size_t n;
+    while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
+    EXPECT_EQ(pclose(p), 0) << command << ": " << out;
+  }
+  return out;
+}
+
 TEST(CalibrationPose, RecoversAKnownMountingAndKeepsItAcrossARestart) {
   test::TempDir dir;
   const BodyReference ref = reference();
@@ -155,15 +169,7 @@ TEST(CalibrationPose, RecoversAKnownMountingAndKeepsItAcrossARestart) {
     for (int i = 0; i < 200 && d.status()["samples_in"].get<std::uint64_t>() < 30; ++i)
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
     // What a user types: bodyd-ctl calibrate --pose (--json: the reply as bodyd sent it).
-    const std::string command = (test::bin_dir() / "bodyd-ctl").string() + " --control " + d.control_endpoint() +
-                                " --json calibrate --pose 2>/dev/null";
-    std::string out;
-    if (FILE* p = popen(command.c_str(), "r")) {
-      char buf[4096];
-      std::size_t n;
-      while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
-      EXPECT_EQ(pclose(p), 0) << out;
-    }
+    const std::string out = ctl_output(d.control_endpoint(), "--json calibrate --pose");
     d.request_stop();
     runner.join();
     const auto brace = out.find('{');
@@ -555,6 +561,31 @@ TEST(MountingFile, TheMeasuredHeightWinsOverAConfiguredOneAndTheLogSaysSo) {
   const StartWithFile r = start_with_mounting_file(dir, file);
   EXPECT_NEAR(r.status["head_height_m"].get<double>(), 1.55, 1e-9);
   EXPECT_EQ(r.log.find("instead of the configured"), std::string::npos) << r.log;
+}
+
+// Item 13: after a restart with a kept mounting, `bodyd-ctl status` said "no device poses yet"
+// while 766 samples had arrived: status's device_frames were taken when a mounting changed (a
+// calibration), never when a role's first device pose came.
+TEST(MountingFile, StatusSaysTheDevicePosesArrivedAfterARestartWithAKeptMounting) {
+  test::TempDir dir;
+  const BodyReference ref = reference();
+  const Mounting kept = known_mounting(default_mounting(ref));
+  write_device_log(dir.path / "still.csv", still_device_stream(calibration_pose_joints(ref, 1.5), kept, 4.0));
+  DaemonConfig c = replay_config(dir.path / "still.csv", dir.path, "ik");
+  c.mounting_file = (dir.path / "mounting.json").string();
+  ASSERT_TRUE(test::write_file(c.mounting_file, mounting_file_json(kept).dump()));
+  std::string ctl;
+  const OneRequest r = replay_and_request(c, R"({"cmd":"status"})", 30, 6000,
+                                          [&] { ctl = ctl_output("ipc://" + (dir.path / "control").string(), "status"); });
+  ASSERT_TRUE(r.reply);
+  EXPECT_GE((*r.reply)["samples_in"].get<std::uint64_t>(), 30u);
+  for (Role role : kRoles) {
+    const json& m = (*r.reply)["mounting"]["roles"][std::string(role_name(role))];
+    EXPECT_EQ(m["origin"], "file") << role_name(role);
+    EXPECT_EQ(m["device_frames"], true) << role_name(role) << ": " << m.dump();
+  }
+  EXPECT_NE(ctl.find("device mounting: head calibration pose (mounting file)"), std::string::npos) << ctl;
+  EXPECT_EQ(ctl.find("no device poses yet"), std::string::npos) << ctl;
 }
 
 // Item 11: a 30 MB mounting file peaked at 641 MB of memory. Persisted files are read only up
