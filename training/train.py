@@ -560,7 +560,9 @@ def main():
         obs = x0 + a.prefix_noise * prefix.unsqueeze(-1) * torch.randn(x0.shape, generator=g, device=dev)
         obs = obs + a.tracker_noise * torch.randn(x0.shape, generator=g, device=dev)
         if masker.extra and (a.extra_mount_cm > 0 or a.extra_mount_deg > 0):
-            obs = strapped(obs, g)
+            # Only the trackers' frames: a prefix frame is the emitted body, not a tracker's view of it.
+            pf = prefix.unsqueeze(-1)
+            obs = pf * obs + (1 - pf) * strapped(obs, g)
         if augment and a.self_prefix > 0:
             # The online loop's past is what it emitted: the model's own reconstruction, trackers exact. Here it
             # is approximated by one reconstruction of the whole window from its trackers (no past), by the EMA
