@@ -254,7 +254,7 @@ std::string read_sources(const json& j, const std::string& where, DaemonConfig& 
 
 json print_offsets(const DaemonConfig& c) {
   json offsets = json::object();
-  for (Role r : kRoles) {
+  for (Role r : kXrRoles) {
     const auto& o = c.offsets[static_cast<int>(r)];
     if (!o) continue;
     offsets[std::string(role_name(r))] = {
@@ -269,7 +269,8 @@ std::string read_offsets(const json& j, const std::string& where, DaemonConfig& 
   for (const auto& [key, value] : j.items()) {
     const std::string w = where + "." + key;
     const auto role = role_from_name(key);
-    if (!role) return w + ": unknown role (expected head, left_hand or right_hand)";
+    if (!role || !is_xr_role(*role))
+      return w + ": unknown role (expected head, left_hand or right_hand: offsets are for the headset and controllers)";
     if (!value.is_object()) return w + ": expected an object {\"position_m\": [x,y,z], \"rotation_xyzw\": [x,y,z,w]}";
     std::vector<double> values{0, 0, 0};
     std::string error;

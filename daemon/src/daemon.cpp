@@ -272,6 +272,18 @@ struct Daemon::Impl final : ControlTarget {
   // ---------------------------------------------------------------- reconstruction thread
   void handle_sample(drivers::SourceSample& in) {
     TrackerSample& s = in.sample;
+    if (!is_xr_role(s.role) && s.frame == PoseFrame::Device) {
+      // A body tracker's device pose: its mounting on the joint (a strap a few centimetres off
+      // and turned) is not measured yet, and a device pose is never used through an unknown
+      // offset at full weight. Joint poses (frames=joint, logs, the simulator) are used.
+      stats.body_device_samples_ignored.add();
+      if (const std::uint64_t n = stats.body_device_samples_ignored.get(); (n & (n - 1)) == 0)
+        spdlog::info("{} sample (a body tracker's device pose) not used: body trackers' mountings are not calibrated "
+                     "yet; give its source ?frames=joint if it sends the joint's own pose (docs/conventions.md, "
+                     "\"Tracker roles\"; logged at the 1st, 2nd, 4th, 8th...)",
+                     role_name(s.role));
+      return;
+    }
     const TrackerSample as_received = s;  // before the mounting and offset (OutputFrame::head_as_received)
     feed_pose_calibrators(s, in.arrival_ns);
     const bool first_device_pose = s.frame == PoseFrame::Device && !conditioner.device_frames_seen(s.role);
@@ -440,7 +452,7 @@ struct Daemon::Impl final : ControlTarget {
   // what the mounting file is to keep (the control thread writes it).
   PoseResult apply_pose_calibration(const PoseCalibration& c) {
     json roles = json::object();
-    for (Role r : kRoles) {
+    for (Role r : kXrRoles) {
       const int i = static_cast<int>(r);
       if (!c.measured[i]) continue;
       conditioner.set_mounting(r, c.mounting.T_device_joint[i]);
@@ -469,7 +481,7 @@ struct Daemon::Impl final : ControlTarget {
     if (!config.mounting_file.empty()) {
       MountingState& st = result.to_keep.emplace();
       st.mounting = mounting;
-      for (Role r : kRoles) st.measured[static_cast<int>(r)] = mounting_origin[static_cast<int>(r)] != MountingOrigin::Default;
+      for (Role r : kXrRoles) st.measured[static_cast<int>(r)] = mounting_origin[static_cast<int>(r)] != MountingOrigin::Default;
       st.head_height_m = height_error.empty() ? recon->head_height_m() : 0.0;
       st.calibrated = utc_now();
     }
@@ -890,7 +902,7 @@ std::string Daemon::start() {
     if (std::optional<MountingState> st =
             read_mounting_state(d.config.mounting_file, d.default_mount, PoseCalibrationOptions{}, merror)) {
       for (const std::string& refused : st->refused) spdlog::warn("{}", refused);
-      for (Role r : kRoles) {
+      for (Role r : kXrRoles) {
         const int i = static_cast<int>(r);
         if (!st->measured[i]) continue;
         d.conditioner.set_mounting(r, st->mounting.T_device_joint[i]);
@@ -953,7 +965,7 @@ std::string Daemon::start() {
   // --record-trackers: the header says what the recorded samples went through.
   if (!d.config.record_trackers_file.empty()) {
     std::string offsets;
-    for (Role r : kRoles) {
+    for (Role r : kXrRoles) {
       const auto& o = d.config.offsets[static_cast<int>(r)];
       if (!o) continue;
       offsets += fmt::format("{}{} position_m {},{},{} rotation_xyzw {},{},{},{}", offsets.empty() ? "" : "; ", role_name(r),

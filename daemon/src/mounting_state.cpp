@@ -75,7 +75,7 @@ std::optional<MountingState> read_mounting_state(const std::filesystem::path& pa
   }
   const json* roles = member(j, "roles");
   if (!roles || !roles->is_object()) return fail("\"roles\" is not an object");
-  for (Role r : kRoles) {
+  for (Role r : kXrRoles) {
     const auto i = static_cast<std::size_t>(r);
     const std::string name(role_name(r));
     const json* o = member(*roles, name.c_str());
@@ -110,7 +110,7 @@ std::optional<MountingState> read_mounting_state(const std::filesystem::path& pa
 
 std::string write_mounting_state(const std::filesystem::path& path, const MountingState& st) {
   json roles = json::object();
-  for (Role r : kRoles) {
+  for (Role r : kXrRoles) {
     const RigidTransform& T = st.mounting.T_device_joint[static_cast<std::size_t>(r)];
     roles[std::string(role_name(r))] = {
         {"measured", st.measured[static_cast<std::size_t>(r)]},

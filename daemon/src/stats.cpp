@@ -51,8 +51,13 @@ std::array<double, kRoleCount> RoleRateSink::rate_hz_by_role(std::int64_t now_ns
 
 void PipelineStats::to_json(nlohmann::json& j) const {
   j["samples_in"] = samples_in.get();
-  j["samples_by_role"] = {
-      {"head", role_samples[0].get()}, {"left_hand", role_samples[1].get()}, {"right_hand", role_samples[2].get()}};
+  // The headset's and controllers' always, a body tracker's once it has sent something.
+  nlohmann::json by_role = nlohmann::json::object();
+  for (Role r : kRoles)
+    if (is_xr_role(r) || role_samples[static_cast<std::size_t>(r)].get() > 0)
+      by_role[std::string(role_name(r))] = role_samples[static_cast<std::size_t>(r)].get();
+  j["samples_by_role"] = by_role;
+  j["body_device_samples_ignored"] = body_device_samples_ignored.get();
   j["frames_out"] = frames_out.get();
   j["frames_not_ready"] = not_ready.get();
   j["frames_skipped_by_rate"] = skipped_by_rate.get();

@@ -79,6 +79,7 @@ struct PipelineStats {
   // Issue 11: samples the reconstructor refused for absurd values (second wall), and restarts of
   // the reconstruction because head time went far back (a replay's time base started over).
   Counter samples_refused, time_restarts;
+  Counter body_device_samples_ignored;  // body trackers' device poses (no calibrated mounting yet)
   std::array<Counter, kRoleCount> role_samples;
   TimingRing reconstruct, latency;
 

@@ -48,7 +48,7 @@ json source_status_json(const drivers::SourceStatus& st, const std::array<double
 json mounting_status_json(const Mounting& mounting, const Mounting& defaults, const MountingOrigins& origins,
                           const SampleConditioner& conditioner, const std::string& mounting_file) {
   json roles = json::object();
-  for (Role r : kRoles) {
+  for (Role r : kXrRoles) {
     const int i = static_cast<int>(r);
     const RigidTransform& T = mounting.T_device_joint[i];
     const MountingDifference d = mounting_difference(T, defaults.T_device_joint[i]);

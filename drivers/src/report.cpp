@@ -77,7 +77,7 @@ ReportError decode_tracker_report(const std::uint8_t* data, std::size_t size, Tr
   if (data == nullptr || size != kTrackerReportSize) return ReportError::WrongSize;
   if (data[kOffReportId] != kTrackerReportId) return ReportError::WrongReportId;
   if (data[kOffVersion] != kTrackerReportVersion) return ReportError::UnsupportedVersion;
-  if (data[kOffRole] >= kRoleCount) return ReportError::BadRole;
+  if (data[kOffRole] >= kXrRoleCount) return ReportError::BadRole;  // docs/hid-tracker.md: head and hands
 
   TrackerReport r;
   r.role = static_cast<Role>(data[kOffRole]);
@@ -107,7 +107,7 @@ ReportError encode_tracker_report(const TrackerReport& report,
                                   std::array<std::uint8_t, kTrackerReportSize>& out_bytes) {
   std::array<std::uint8_t, kTrackerReportSize> b{};
   const auto role = static_cast<std::uint8_t>(report.role);
-  if (role >= kRoleCount) return ReportError::BadRole;
+  if (role >= kXrRoleCount) return ReportError::BadRole;
   b[kOffReportId] = kTrackerReportId;
   b[kOffVersion] = kTrackerReportVersion;
   b[kOffRole] = role;

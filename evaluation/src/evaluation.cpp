@@ -345,6 +345,7 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
   static constexpr std::array<const char*, 3> kCategories{"dataset", "content", "style"};
   std::array<std::map<std::string, GroupAcc>, 3> groups;
   double calibration_error_sum_cm = 0.0, scale_error_sum = 0.0, calibration_time_sum_s = 0.0;
+  report.trackers = options.trackers;
   report.device_frames = options.device_frames;
   report.calibrate_pose = options.device_frames && options.calibrate_pose;
   const Mounting defaults = default_mounting(options.body_reference);
@@ -555,6 +556,7 @@ nlohmann::ordered_json truth_fields(const MotionQuality& q) {
 
 std::string report_json(const EvalReport& report) {
   nlohmann::ordered_json doc;
+  doc["trackers"] = report.trackers;
   doc["clips"] = report.clips;
   doc["frames"] = report.frames;
   nlohmann::ordered_json methods = nlohmann::ordered_json::object();

@@ -247,17 +247,25 @@ bool DiffusionReconstructor::emitted_at(std::int64_t t_ns, GlobalPose& out, std:
 }
 
 bool DiffusionReconstructor::tracker_at(Role role, std::int64_t t_ns, std::int64_t now_ns, Vec3& p, Quat& q) const {
+  bool has_position = false;
+  return observed_at(role, t_ns, now_ns, p, q, has_position) && has_position;
+}
+
+bool DiffusionReconstructor::observed_at(Role role, std::int64_t t_ns, std::int64_t now_ns, Vec3& p, Quat& q,
+                                         bool& has_position) const {
   TrackerSample s;
   const TrackerSample* first = history_.first_valid(role);
   if (first != nullptr && t_ns < first->t_ns) {
     // Before the first observation: the window is padded with it (docs/conventions.md, online protocol).
     p = first->position_m;
     q = first->rotation;
+    has_position = first->has_position;
     return true;
   }
   if (!history_.query(role, t_ns, now_ns, s)) return false;
   p = s.position_m;
   q = s.rotation;
+  has_position = s.has_position;
   return true;
 }
 
@@ -428,10 +436,14 @@ void DiffusionReconstructor::build_window(std::int64_t t_ns, const HeadNow& head
       std::fill(m, m + features::kDim, 1.0f);
     }
     for (Role role : kRoles) {
-      Vec3 p;
+      Vec3 p = Vec3::Zero();
       Quat q;
+      // A body tracker may have a rotation only (an IMU tracker): then only its joint's rotation
+      // entries are observed. The headset and controllers need their positions.
+      bool has_position = true;
       const bool ok = (w == W_ - 1 && role == Role::Head) ? (p = head.p, q = head.q, head.valid)
-                                                           : tracker_at(role, tw, t_ns, p, q);
+                      : is_xr_role(role)                  ? tracker_at(role, tw, t_ns, p, q)
+                                                          : observed_at(role, tw, t_ns, p, q, has_position);
       if (w == W_ - 1) {
         trackers.valid[static_cast<size_t>(role)] = ok;
         trackers.p[static_cast<size_t>(role)] = p;
@@ -439,7 +451,8 @@ void DiffusionReconstructor::build_window(std::int64_t t_ns, const HeadNow& head
       }
       if (!ok) continue;
       features::encode_joint(features::tracker_joint(role), p, q, canon, frame);
-      for (int k : features::tracker_entries(role)) m[k] = 1.0f;
+      const auto entries = features::tracker_entries(role);
+      for (std::size_t k = has_position ? 0 : 3; k < entries.size(); ++k) m[entries[k]] = 1.0f;
     }
   }
   const auto mean = network_->norm_mean();

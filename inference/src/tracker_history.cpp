@@ -93,6 +93,7 @@ bool TrackerHistory::query(Role role, std::int64_t t_ns, std::int64_t now_ns, Tr
     const bool fresh = std::abs(t_ns - s.t_ns) <= options_.timeout_ns;
     if (!s.valid || !fresh) return false;
     out.valid = true;
+    out.has_position = s.has_position;
     out.position_m = s.position_m;
     out.rotation = s.rotation;
     return true;
@@ -102,6 +103,7 @@ bool TrackerHistory::query(Role role, std::int64_t t_ns, std::int64_t now_ns, Tr
   if (a.valid && b->valid && b->t_ns - a.t_ns <= options_.timeout_ns) {
     const double u = static_cast<double>(t_ns - a.t_ns) / static_cast<double>(b->t_ns - a.t_ns);
     out.valid = true;
+    out.has_position = a.has_position && b->has_position;
     out.position_m = a.position_m + u * (b->position_m - a.position_m);
     out.rotation = slerp(a.rotation, b->rotation, u);
     return true;

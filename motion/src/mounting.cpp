@@ -330,7 +330,7 @@ std::string transform_text(const RigidTransform& T) {
 
 std::string mounting_text(const Mounting& m) {
   std::string out;
-  for (Role r : kRoles)
+  for (Role r : kXrRoles)  // the devices with a default mounting (body trackers: issue 44, not yet)
     out += fmt::format("{}{} {}", out.empty() ? "" : "; ", role_name(r), transform_text(m.T_device_joint[static_cast<size_t>(r)]));
   return out;
 }

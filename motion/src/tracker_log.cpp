@@ -159,7 +159,7 @@ TrackerSample TrackerLogParser::parse_sample(std::string_view line) const {
                        s.t_ns, limits::kMaxAbsTimeNs));
   }
   const std::optional<Role> role = role_from_name(f[1]);
-  if (!role) fail(fmt::format("unknown role {} (expected head, left_hand or right_hand)", quote(f[1])));
+  if (!role) fail(fmt::format("unknown role {} (expected one of {})", quote(f[1]), role_names_list()));
   s.role = *role;
   if (f[2] == "1")
     s.valid = true;
@@ -169,16 +169,18 @@ TrackerSample TrackerLogParser::parse_sample(std::string_view line) const {
     fail(fmt::format("valid {} must be 0 or 1", quote(f[2])));
 
   std::array<double, 7> v{};
+  // A valid sample with px, py, pz all empty has a rotation only (an IMU tracker).
+  if (s.valid && f[3].empty() && f[4].empty() && f[5].empty()) s.has_position = false;
   for (size_t i = 0; i < v.size(); ++i) {
     const std::string_view field = f[3 + i];
     // Invalid samples carry no pose: the writer leaves these fields empty; numbers
     // (e.g. zeros from other tools) are accepted and ignored.
-    if (!s.valid && field.empty()) continue;
+    if ((!s.valid || (i < 3 && !s.has_position)) && field.empty()) continue;
     if (std::string err = parse_double(field, v[i]); !err.empty())
       fail(fmt::format("{} {}", kFieldNames[3 + i], err));
   }
   if (!s.valid) return s;
-  for (size_t i = 0; i < 3; ++i)
+  for (size_t i = 0; i < 3 && s.has_position; ++i)
     if (!limits::position_plausible(v[i]))
       fail(fmt::format("{} {} m is outside the plausible range +-{} m (docs/tracker-log.md \"Limits\"): is the "
                        "position in metres? Fix or drop the line, or mark the sample invalid (valid 0)",
@@ -298,8 +300,8 @@ void append_tracker_sample(std::string& out, const TrackerSample& s) {
   }
   const Vec3& p = s.position_m;
   const Quat& q = s.rotation;
-  if (!limits::position_plausible(p.x()) || !limits::position_plausible(p.y()) ||
-      !limits::position_plausible(p.z()))
+  if (s.has_position && (!limits::position_plausible(p.x()) || !limits::position_plausible(p.y()) ||
+                         !limits::position_plausible(p.z())))
     throw TrackerLogError(fmt::format("cannot write tracker log: {} sample at t_ns {} has position ({}, {}, {}) m, "
                                       "outside the plausible range +-{} m per coordinate",
                                       role_name(s.role), s.t_ns, p.x(), p.y(), p.z(), limits::kMaxAbsPositionM));
@@ -307,6 +309,10 @@ void append_tracker_sample(std::string& out, const TrackerSample& s) {
     throw TrackerLogError(fmt::format(
         "cannot write tracker log: {} sample at t_ns {} has a non-finite or non-unit quaternion",
         role_name(s.role), s.t_ns));
+  if (!s.has_position) {
+    fmt::format_to(it, "{},{},1,,,,{},{},{},{}\n", s.t_ns, role_name(s.role), q.x(), q.y(), q.z(), q.w());
+    return;
+  }
   fmt::format_to(it, "{},{},1,{},{},{},{},{},{},{}\n", s.t_ns, role_name(s.role), p.x(), p.y(), p.z(), q.x(), q.y(),
                  q.z(), q.w());
 }

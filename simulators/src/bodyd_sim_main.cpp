@@ -35,6 +35,12 @@ int main(int argc, char** argv) {
       "eyes in the XR axes, the controllers' grip poses), with a mounting drawn from the seed "
       "(docs/simulator.md)");
   app.add_option("--reference", reference_path, "body reference of the default mounting (default: the bundled data/body-reference.json)");
+  std::string trackers = "head,hands";
+  app.add_option("--trackers", trackers,
+                 "the tracked roles: a comma list of head, left_hand, right_hand, hips, chest, left_foot, right_foot, "
+                 "left_knee, right_knee, left_elbow, right_elbow or the groups hands, feet, knees, elbows, each "
+                 "optionally followed by :rot (rotation only, an IMU tracker); head required")
+      ->capture_default_str();
   app.add_flag("--quiet,-q", quiet, "print no summary");
   try {
     app.parse(argc, argv);
@@ -50,6 +56,16 @@ int main(int argc, char** argv) {
   if (std::string err = opt.validate(); !err.empty()) {
     fmt::print(stderr, "bodyd-sim: bad option: {}\n", err);
     return 2;
+  }
+  {
+    std::string err;
+    const std::optional<bodyd::TrackerSet> set = bodyd::parse_tracker_set(trackers, err);
+    if (!set) {
+      fmt::print(stderr, "bodyd-sim: --trackers: {}\n", err);
+      return 2;
+    }
+    opt.roles = set->roles;
+    opt.rotation_only = set->rotation_only;
   }
 
   try {
@@ -71,6 +87,8 @@ int main(int argc, char** argv) {
         {"dropout", fmt::format("rate_hz={} mean_ms={}", opt.dropout_rate_hz, opt.dropout_mean_ms)},
         {"seed", fmt::format("{}", opt.seed)},
     };
+    if (opt.roles.size() != bodyd::kXrRoles.size() || !opt.rotation_only.empty())
+      meta.emplace_back("trackers", bodyd::tracker_set_text({opt.roles, opt.rotation_only}));
     if (opt.device_mounting) {
       meta.emplace_back(std::string(bodyd::kTrackerLogPoseFrameKey), "device");
       meta.emplace_back("mounting_truth", bodyd::mounting_text(*opt.device_mounting));
@@ -91,7 +109,7 @@ int main(int argc, char** argv) {
       fmt::print(sink, "{}: {} frames at {:.6g} fps ({:.3f} s) -> {} samples in {}\n", bvh_path,
                  motion.frame_count(), motion.fps(), (motion.frame_count() - 1) * motion.frame_time_s,
                  samples.size(), out_path);
-      for (bodyd::Role r : bodyd::kRoles) {
+      for (bodyd::Role r : opt.roles) {
         size_t n = 0, invalid = 0;
         for (const auto& s : samples)
           if (s.role == r) {

@@ -237,6 +237,8 @@ std::vector<TrackerSample> simulate_trackers(const TrackerTrajectory& traj, cons
 
   std::vector<TrackerSample> out;
   for (Role role : kRoles) {
+    if (std::find(opt.roles.begin(), opt.roles.end(), role) == opt.roles.end()) continue;
+    const bool rotation_only = std::find(opt.rotation_only.begin(), opt.rotation_only.end(), role) != opt.rotation_only.end();
     const double rate = opt.rate_of(role);
     const double period_ns = 1e9 / rate;
     // Largest |jitter| that keeps consecutive timestamps of this role increasing.
@@ -280,6 +282,10 @@ std::vector<TrackerSample> simulate_trackers(const TrackerTrajectory& traj, cons
           s.position_m = Vec3::Zero();
           s.rotation = Quat::Identity();
         }
+      }
+      if (rotation_only && s.valid) {
+        s.has_position = false;
+        s.position_m = Vec3::Zero();
       }
       out.push_back(s);
     }

@@ -61,7 +61,7 @@ std::vector<TrackerSample> still_device_stream(const std::array<RigidTransform, 
   std::vector<TrackerSample> out;
   const int count = static_cast<int>(seconds * 90.0);
   for (int k = 0; k < count; ++k)
-    for (Role r : kRoles) {
+    for (Role r : kXrRoles) {
       const RigidTransform& J = joints[static_cast<size_t>(r)];
       TrackerSample s{static_cast<std::int64_t>(std::llround(k * 1e9 / 90.0)), r, true,
                       J.position_m + Vec3(n(g), n(g), n(g)), J.rotation, PoseFrame::Joint};
@@ -179,7 +179,7 @@ TEST(CalibrationPose, RecoversAKnownMountingAndKeepsItAcrossARestart) {
     ASSERT_EQ((*reply)["ok"], true) << reply->dump();
     EXPECT_EQ((*reply)["device_frames"], true);
     const json status = d.status();
-    for (Role r : kRoles) {
+    for (Role r : kXrRoles) {
       const json& role = status["mounting"]["roles"][std::string(role_name(r))];
       EXPECT_EQ(role["origin"], "pose") << role_name(r);
       const MountingDifference e = mounting_difference(transform_from_status(role), truth.T_device_joint[static_cast<size_t>(r)]);
@@ -201,7 +201,7 @@ TEST(CalibrationPose, RecoversAKnownMountingAndKeepsItAcrossARestart) {
   Daemon again(c, daemon::make_default_factory(test::source_dir() / "data" / "demo" / "skeleton.bvh"));
   ASSERT_EQ(again.start(), "");
   const json status = again.status();
-  for (Role r : kRoles) {
+  for (Role r : kXrRoles) {
     const json& role = status["mounting"]["roles"][std::string(role_name(r))];
     EXPECT_EQ(role["origin"], "file") << role_name(r);
     EXPECT_LT(mounting_difference(transform_from_status(role), truth.T_device_joint[static_cast<size_t>(r)]).angle_deg, 2.0);
@@ -328,7 +328,7 @@ TEST(DeviceFrames, AnIdentityHeadsetLookingAheadGivesAnUprightBodyFacingIt) {
   test::TempDir dir;
   std::vector<TrackerSample> samples;
   for (int k = 0; k < 180; ++k)
-    for (Role r : kRoles) {
+    for (Role r : kXrRoles) {
       const Vec3 p = r == Role::Head ? Vec3(0.0, 1.6, 0.0) : Vec3(r == Role::LeftHand ? -0.2 : 0.2, 0.9, 0.0);
       samples.push_back({static_cast<std::int64_t>(std::llround(k * 1e9 / 90.0)), r, true, p, Quat::Identity(), PoseFrame::Device});
     }

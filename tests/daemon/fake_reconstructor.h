@@ -73,7 +73,7 @@ inline std::vector<TrackerSample> synthetic_samples(int count, double rate_hz = 
   const auto period_ns = static_cast<std::int64_t>(1e9 / rate_hz);
   for (int i = 0; i < count; ++i) {
     const double a = i * 0.05;
-    for (Role r : kRoles) {
+    for (Role r : kXrRoles) {
       TrackerSample s;
       s.t_ns = t0_ns + i * period_ns + static_cast<int>(r) * 1000;
       s.role = r;

@@ -300,7 +300,7 @@ TEST(TrackerLineDecode, AcceptsLogLinesAndRejectsTheRest) {
               MessageUse::Ignore);
   const std::pair<std::string, InputReject> bad[] = {
       {"1,head,1,0,1.6,0,0,0,0", InputReject::BadLine},                           // 9 fields
-      {"1,hips,1,0,1.6,0,0,0,0,1", InputReject::BadLine},                         // unknown role
+      {"1,tail,1,0,1.6,0,0,0,0,1", InputReject::BadLine},                         // unknown role
       {"1,head,1,nan,1.6,0,0,0,0,1", InputReject::BadLine},                       // non-finite (the log reader's wall)
       {"1,head,1,0,1.6,0,0,0,0,1\n2,head,1,0,1.6,0,0,0,0,1", InputReject::BadLine},  // two lines
       {std::string(2000, '1'), InputReject::Oversized},
@@ -379,7 +379,7 @@ TEST(NetworkSpec, DefaultsOptionsAndErrors) {
   EXPECT_FALSE(parse_network_spec(NetworkKind::Udp, "udp:", "", error));
   EXPECT_NE(error.find("missing the port"), std::string::npos);
   EXPECT_FALSE(parse_network_spec(NetworkKind::Udp, "udp:70000", "70000", error));
-  EXPECT_FALSE(parse_network_spec(NetworkKind::Vmc, "vmc:1?hips=X", "1?hips=X", error));
+  EXPECT_FALSE(parse_network_spec(NetworkKind::Vmc, "vmc:1?tail=X", "1?tail=X", error));
   EXPECT_NE(error.find("unknown option"), std::string::npos);
   // Through open_source: the spec kinds are registered.
   SourceOptions options;

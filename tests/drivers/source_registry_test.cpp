@@ -156,7 +156,7 @@ TEST(SourceRegistry, CheckSourceSpec) {
   EXPECT_EQ(check_source_spec("vrchat:9001?oscquery=off&frames=joint"), "");
   EXPECT_EQ(check_source_spec("hid:1209:B0D1?frames=device"), "");
   EXPECT_NE(check_source_spec("hid:zz:1").find("is not VID:PID"), std::string::npos);
-  EXPECT_NE(check_source_spec("vmc:1?hips=X").find("unknown option"), std::string::npos);
+  EXPECT_NE(check_source_spec("vmc:1?tail=X").find("unknown option"), std::string::npos);
   EXPECT_NE(check_source_spec("replay:x?frames=sideways").find("is not joint or device"), std::string::npos);
   EXPECT_EQ(check_source_spec("replay:/no/such/file.csv"), "");  // found when opened
   EXPECT_NE(check_source_spec("bogus:x").find("unknown kind"), std::string::npos);
@@ -166,7 +166,7 @@ TEST(SourceRegistry, CheckSourceSpec) {
 // so an ESC, CR or LF in it cannot clear the terminal or forge a log line (issue 43 item 1).
 TEST(SourceRegistry, ErrorsQuoteTheSpecEscaped) {
   for (const char* spec : {"\x1b[2Jbogus:x\r\nINFO forged", "replay:x?frames=\x1b[2J", "hid:\x1b[31m:1",
-                           "vmc:1?hips=\x1b]0;t\x07", "vrchat:\x1b[2J", "udp:\n9"}) {
+                           "vmc:1?tail=\x1b]0;t\x07", "vrchat:\x1b[2J", "udp:\n9"}) {
     const std::string error = check_source_spec(spec);
     SCOPED_TRACE(error);
     EXPECT_FALSE(error.empty());

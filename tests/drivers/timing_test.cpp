@@ -97,7 +97,7 @@ TEST(Timing, ReconstructionDoesNotDependOnTheInterleavingOfRoles) {
     last[r] = s.t_ns;
     ++count[r];
   }
-  for (int n : count) EXPECT_GT(n, 20);
+  for (Role r : kXrRoles) EXPECT_GT(count[static_cast<std::size_t>(r)], 20);  // the devices: headset and hands
 
   // Orders: arrival; sorted by time; roles in blocks (right, left, head); a random
   // interleaving that keeps each role's own order (what any set of threads could produce).
@@ -118,14 +118,15 @@ TEST(Timing, ReconstructionDoesNotDependOnTheInterleavingOfRoles) {
     for (std::size_t i : arrival) queues[static_cast<std::size_t>(samples[i].role)].push_back(i);
     std::array<std::size_t, kRoleCount> next{};
     while (shuffled.size() < n) {
-      const std::size_t r = rng() % kRoleCount;
+      const std::size_t r = rng() % kXrRoleCount;  // the devices' roles: headset and hands
       if (next[r] < queues[r].size()) shuffled.push_back(queues[r][next[r]++]);
     }
   }
 
   std::vector<std::int64_t> queries;
-  const std::int64_t t0 = *std::min_element(last.begin(), last.end()) - 600'000'000;
-  for (std::int64_t q = t0; q < *std::min_element(last.begin(), last.end()); q += 33'333'333) queries.push_back(q);
+  const std::int64_t last_of_all = *std::min_element(last.begin(), last.begin() + kXrRoleCount);
+  const std::int64_t t0 = last_of_all - 600'000'000;
+  for (std::int64_t q = t0; q < last_of_all; q += 33'333'333) queries.push_back(q);
 
   const Motion skeleton_clip = read_bvh(test::source_dir() / "data" / "demo" / "skeleton.bvh");
   std::vector<std::pair<std::string, std::filesystem::path>> methods{{"ik", ""}};

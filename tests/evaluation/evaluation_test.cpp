@@ -220,8 +220,8 @@ TEST(Evaluation, JsonHasExactlyTheDocumentedKeys) {
       nlohmann::ordered_json::parse(report_json(evaluate_ik({kBow}, simulator(0.0, 0.0, 1))));
   std::vector<std::string> top;
   for (auto& [k, v] : j.items()) top.push_back(k);
-  EXPECT_EQ(top, (std::vector<std::string>{"clips", "frames", "methods", "ground_truth", "timing", "groups",
-                                           "body_scale", "calibration"}));
+  EXPECT_EQ(top, (std::vector<std::string>{"trackers", "clips", "frames", "methods", "ground_truth", "timing",
+                                           "groups", "body_scale", "calibration"}));
   for (const MetricKey& k : kExtraMetricKeys) EXPECT_TRUE(j["methods"]["ik"].contains(std::string(k.key))) << k.key;
   EXPECT_TRUE(j["groups"]["dataset"].contains("other"));
   for (const MetricKey& k : kMetricKeys) EXPECT_TRUE(j["methods"]["ik"][std::string(k.key)].is_number()) << k.key;

@@ -643,7 +643,7 @@ std::vector<TrackerSample> long_stream(int frames, std::int64_t dt_ns) {
   std::vector<TrackerSample> out;
   for (int f = 0; f < frames; ++f) {
     const double t = f * static_cast<double>(dt_ns) * 1e-9;
-    for (Role role : kRoles) {
+    for (Role role : kXrRoles) {
       TrackerSample s;
       s.t_ns = f * dt_ns;
       s.role = role;

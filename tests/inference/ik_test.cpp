@@ -50,7 +50,7 @@ TrackerSample tracker(const Skeleton& s, const GlobalPose& g, Role role, std::in
 }
 
 void push_all(Reconstructor& r, const Skeleton& s, const GlobalPose& g, std::int64_t t_ns) {
-  for (Role role : kRoles) r.push(tracker(s, g, role, t_ns));
+  for (Role role : kXrRoles) r.push(tracker(s, g, role, t_ns));
 }
 
 }  // namespace

@@ -207,7 +207,7 @@ TEST(TrackerLog, RejectsMissingOrWrongVersionAndHeader) {
 TEST(TrackerLog, RejectsBadRowsWithTheirLineNumber) {
   expect_error(with_line(5, "0,left_hand,1,-0.3,1.2,0.1,0,0,1"), 5, "expected 10 comma-separated fields");
   expect_error(with_line(5, "0,left_hand,1,-0.3,1.2,0.1,0,0,0,1,7"), 5, "found 11");
-  expect_error(with_line(5, "0,hips,1,-0.3,1.2,0.1,0,0,0,1"), 5, "unknown role 'hips'");
+  expect_error(with_line(5, "0,tail,1,-0.3,1.2,0.1,0,0,0,1"), 5, "unknown role 'tail'");
   expect_error(with_line(5, "0,Head,1,-0.3,1.2,0.1,0,0,0,1"), 5, "unknown role");
   expect_error(with_line(4, "0,head,2,0,1.6,0,0,0,0,1"), 4, "valid '2' must be 0 or 1");
   expect_error(with_line(4, "0.5,head,1,0,1.6,0,0,0,0,1"), 4, "t_ns '0.5' is not an integer");
@@ -285,7 +285,7 @@ TEST(TrackerLog, WriterRefusesWhatTheReaderWouldReject) {
   EXPECT_THROW((void)format_tracker_log({make(0, Role::Head, true, Vec3::Zero(), Quat(2, 0, 0, 0))}),
                TrackerLogError);
   EXPECT_THROW((void)format_tracker_log({make(5, Role::Head, true), make(5, Role::Head, true)}), TrackerLogError);
-  EXPECT_THROW((void)format_tracker_log({make(0, static_cast<Role>(9), true)}), TrackerLogError);
+  EXPECT_THROW((void)format_tracker_log({make(0, static_cast<Role>(kRoleCount), true)}), TrackerLogError);
   EXPECT_THROW((void)format_tracker_log({make(0, Role::Head, true, Vec3(9e292, 0, 0))}), TrackerLogError);
   EXPECT_THROW((void)format_tracker_log({make(0, Role::Head, true, Vec3(0, -100.5, 0))}), TrackerLogError);
   EXPECT_THROW((void)format_tracker_log({make(limits::kMaxAbsTimeNs + 1, Role::Head, false)}), TrackerLogError);

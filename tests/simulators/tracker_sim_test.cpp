@@ -79,7 +79,7 @@ MaxError max_error(const Motion& m, double rate_hz) {
   opt.rate_hz = rate_hz;
   const auto samples = simulate_trackers(m, opt);
   MaxError e;
-  for (Role r : kRoles) {
+  for (Role r : kXrRoles) {
     const int joint = m.skeleton.find(role_joint_name(r));
     std::vector<Global> fk;
     for (const Pose& pose : m.frames) fk.push_back(chain_fk(m.skeleton, pose, joint));
@@ -258,7 +258,7 @@ TEST(TrackerSim, LatencyShiftsAndJitterSpreadsTimestamps) {
   opt.jitter_ms = 1.0;
   const auto jit = simulate_trackers(m, opt);
   ASSERT_EQ(base.size(), jit.size());
-  for (Role r : kRoles) {
+  for (Role r : kXrRoles) {
     const auto b = of_role(base, r), j = of_role(jit, r);
     Stats d;
     for (size_t i = 0; i < b.size(); ++i) {
@@ -271,7 +271,7 @@ TEST(TrackerSim, LatencyShiftsAndJitterSpreadsTimestamps) {
   // Jitter larger than the period is clamped: time still increases within each role.
   opt.jitter_ms = 50;
   const auto wild = simulate_trackers(m, opt);
-  for (Role r : kRoles) {
+  for (Role r : kXrRoles) {
     const auto v = of_role(wild, r);
     for (size_t i = 1; i < v.size(); ++i) ASSERT_LT(v[i - 1].t_ns, v[i].t_ns) << role_name(r) << " " << i;
   }
@@ -286,7 +286,7 @@ TEST(TrackerSim, DropoutFractionAndEpisodeRateMatchTheModel) {
   const double expected = opt.dropout_fraction();
   EXPECT_NEAR(expected, 0.2 / 1.2, 1e-12);
   const auto samples = simulate_trackers(m, opt);
-  for (Role r : kRoles) {
+  for (Role r : kXrRoles) {
     const auto v = of_role(samples, r);
     size_t invalid = 0, episodes = 0;
     for (size_t i = 0; i < v.size(); ++i) {

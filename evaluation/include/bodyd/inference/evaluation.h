@@ -72,6 +72,7 @@ struct CausalityReport {
 using TrackerSource = std::function<std::vector<TrackerSample>(const Motion& clip, int clip_index)>;
 
 struct EvalOptions {
+  std::string trackers = "head,left_hand,right_hand";  // the tracker set the source simulates (reported)
   std::vector<std::string> methods{"diffusion", "ik"};
   std::filesystem::path model_path;         // for methods that need a model
   ReconstructorOptions reconstructor;       // method options (diffusion steps, guidance, seed)
@@ -134,6 +135,7 @@ struct GroupReport {
 [[nodiscard]] Motion scale_motion(const Motion& clip, double s);
 
 struct EvalReport {
+  std::string trackers;  // EvalOptions::trackers
   int clips = 0;
   std::int64_t frames = 0;
   std::vector<MethodReport> methods;  // in the order of EvalOptions::methods

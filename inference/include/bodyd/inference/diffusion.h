@@ -168,6 +168,8 @@ class DiffusionReconstructor final : public Reconstructor {
                   const Emitted** exact = nullptr) const;
   // The tracker pose of `role` at t_ns in model scale; pads with the first sample before it.
   bool tracker_at(Role role, std::int64_t t_ns, std::int64_t now_ns, Vec3& p, Quat& q) const;
+  // As tracker_at, for a tracker that may have a rotation only (has_position false: p unused).
+  bool observed_at(Role role, std::int64_t t_ns, std::int64_t now_ns, Vec3& p, Quat& q, bool& has_position) const;
   const Emitted& emitted(int i) const {
     return emitted_[static_cast<size_t>((emitted_head_ + i) % static_cast<int>(emitted_.size()))];
   }

@@ -46,7 +46,9 @@ using ConstFrame = std::span<const float, kDim>;
 [[nodiscard]] constexpr int joint_offset(int skeleton_joint) { return (skeleton_joint - 1) * kPerJoint; }
 // The skeleton joint a tracker role observes.
 [[nodiscard]] constexpr int tracker_joint(Role role) {
-  return role == Role::Head ? kHead : (role == Role::LeftHand ? kHandL : kHandR);
+  // kJointNames' indices of role_joint_name(role).
+  constexpr std::array<int, kRoleCount> kJoint{kHead, kHandL, kHandR, kHips, 3, 16, 20, 15, 19, 8, 12};
+  return kJoint[static_cast<std::size_t>(role)];
 }
 
 // Empty when `skeleton` has exactly the joints of kJointNames in that order with valid parents;

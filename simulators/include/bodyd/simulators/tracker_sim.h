@@ -35,7 +35,13 @@ struct SimOptions {
   // Sample rate of every role, Hz; role_rate_hz[r] > 0 overrides it for role r
   // (indexed by Role: head, left_hand, right_hand).
   double rate_hz = 90.0;
-  std::array<double, kRoleCount> role_rate_hz{0.0, 0.0, 0.0};
+  std::array<double, kRoleCount> role_rate_hz{};
+
+  // The roles simulated (issue 44: body trackers besides the headset and controllers), each at
+  // its joint (docs/conventions.md, "Tracker roles"); `rotation_only` ones carry rotations alone
+  // (IMU trackers: has_position false).
+  std::vector<Role> roles{kXrRoles.begin(), kXrRoles.end()};
+  std::vector<Role> rotation_only;
 
   // White Gaussian noise per sample: position noise is N(0, s^2) on each axis (mm);
   // rotation noise is a rotation exp(w) applied in the world frame (q' = exp(w) * q)
