@@ -30,7 +30,10 @@ json skeleton_reply(const protocol::SkeletonMessage& skeleton, double head_heigh
 
 json source_status_json(const drivers::SourceStatus& st, const std::array<double, kRoleCount>& rate_hz_by_role) {
   json by_role = json::object();
-  for (Role r : kRoles) by_role[std::string(role_name(r))] = rate_hz_by_role[static_cast<std::size_t>(r)];
+  // The headset's and controllers' always, a body tracker's while it sends.
+  for (Role r : kRoles)
+    if (is_xr_role(r) || rate_hz_by_role[static_cast<std::size_t>(r)] > 0.0)
+      by_role[std::string(role_name(r))] = rate_hz_by_role[static_cast<std::size_t>(r)];
   json j{{"name", st.name},
           {"connected", st.connected},
           {"finished", st.finished},
