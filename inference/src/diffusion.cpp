@@ -450,8 +450,14 @@ void DiffusionReconstructor::build_window(std::int64_t t_ns, const HeadNow& head
         trackers.q[static_cast<size_t>(role)] = q;
       }
       if (!ok) continue;
-      features::encode_joint(features::tracker_joint(role), p, q, canon, frame);
       const auto entries = features::tracker_entries(role);
+      // Without a position only the rotation entries are the tracker's: the position entries keep
+      // what they hold (an emitted frame's, observed as such; else nothing observed).
+      std::array<float, 3> kept{};
+      for (std::size_t k = 0; k < 3; ++k) kept[k] = frame[static_cast<std::size_t>(entries[k])];
+      features::encode_joint(features::tracker_joint(role), p, q, canon, frame);
+      if (!has_position)
+        for (std::size_t k = 0; k < 3; ++k) frame[static_cast<std::size_t>(entries[k])] = kept[k];
       for (std::size_t k = has_position ? 0 : 3; k < entries.size(); ++k) m[entries[k]] = 1.0f;
     }
   }

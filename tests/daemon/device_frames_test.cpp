@@ -253,7 +253,7 @@ std::vector<TrackerSample> swaying_head_stream(const BodyReference& ref, double 
   std::vector<TrackerSample> out;
   for (int k = 0; k < static_cast<int>(std::max(head_s, hands_s) * 90.0); ++k) {
     const double t = k / 90.0;
-    for (Role r : kRoles) {
+    for (Role r : kXrRoles) {
       if (t >= (r == Role::Head ? head_s : hands_s)) continue;
       RigidTransform J = joints[static_cast<size_t>(r)];
       if (r == Role::Head) J.position_m.x() += 0.1 * std::sin(2.0 * M_PI * 0.5 * t);
@@ -441,7 +441,7 @@ TEST(AutoCalibration, RefinesTheHeadsetsPitchFromAStillSecond) {
 // A mounting file as a calibration pose writes it: `mounting`, every role measured.
 json mounting_file_json(const Mounting& mounting) {
   json roles = json::object();
-  for (Role r : kRoles) {
+  for (Role r : kXrRoles) {
     const RigidTransform& T = mounting.T_device_joint[static_cast<size_t>(r)];
     roles[std::string(role_name(r))] = {
         {"measured", true},
@@ -496,7 +496,7 @@ TEST(MountingFile, AWrongTypeIsReportedWithItsFieldAndTheDefaultsAreUsed) {
     json j = good;
     spoil(j);
     const StartWithFile r = start_with_mounting_file(dir, j.dump());
-    for (Role role : kRoles) EXPECT_EQ(origin(r.status, role), "default") << role_name(role);
+    for (Role role : kXrRoles) EXPECT_EQ(origin(r.status, role), "default") << role_name(role);
     EXPECT_NE(r.status["calibration_source"], "file");
     const std::string where = (dir.path / "mounting.json").string() + ": " + field;
     EXPECT_NE(r.log.find(where), std::string::npos) << r.log;
@@ -505,7 +505,7 @@ TEST(MountingFile, AWrongTypeIsReportedWithItsFieldAndTheDefaultsAreUsed) {
   // The file as written is read (the cases above fail for their field alone).
   test::TempDir dir;
   const StartWithFile r = start_with_mounting_file(dir, good.dump());
-  for (Role role : kRoles) EXPECT_EQ(origin(r.status, role), "file") << role_name(role);
+  for (Role role : kXrRoles) EXPECT_EQ(origin(r.status, role), "file") << role_name(role);
 }
 
 // Item 9: the calibration pose's limits (25 degrees for the headset, 50 for a controller, from
@@ -579,7 +579,7 @@ TEST(MountingFile, StatusSaysTheDevicePosesArrivedAfterARestartWithAKeptMounting
                                           [&] { ctl = ctl_output("ipc://" + (dir.path / "control").string(), "status"); });
   ASSERT_TRUE(r.reply);
   EXPECT_GE((*r.reply)["samples_in"].get<std::uint64_t>(), 30u);
-  for (Role role : kRoles) {
+  for (Role role : kXrRoles) {
     const json& m = (*r.reply)["mounting"]["roles"][std::string(role_name(role))];
     EXPECT_EQ(m["origin"], "file") << role_name(role);
     EXPECT_EQ(m["device_frames"], true) << role_name(role) << ": " << m.dump();
@@ -594,7 +594,7 @@ TEST(MountingFile, AFileOverTheSizeLimitIsIgnored) {
   const std::string good = mounting_file_json(known_mounting(default_mounting(reference()))).dump();
   test::TempDir dir;
   const StartWithFile r = start_with_mounting_file(dir, good + std::string(std::size_t{1} << 21, ' '));
-  for (Role role : kRoles) EXPECT_EQ(origin(r.status, role), "default") << role_name(role);
+  for (Role role : kXrRoles) EXPECT_EQ(origin(r.status, role), "default") << role_name(role);
   EXPECT_NE(r.log.find((dir.path / "mounting.json").string() + ": larger than 1048576 bytes"), std::string::npos) << r.log;
 }
 

@@ -362,6 +362,44 @@ TEST_F(DefaultModel, ALostHeadFollowsTheHandsWhileTheUserWalks) {
   EXPECT_LE(in / n_in, 2.0 * out / n_out);
 }
 
+// Body trackers (issue 44): the model observes their joints' entries. With hips and feet tracked
+// the lower body is nearer the truth; rotation-only trackers (IMU) never make it worse (their
+// missing positions must not overwrite the emitted past's: a bug once made hips:rot 2.1x worse).
+TEST_F(DefaultModel, BodyTrackersAreUsedAndRotationOnlyOnesDoNoHarm) {
+  if (!test::have_bandai()) GTEST_SKIP() << "no " << test::bandai();
+  const Motion clip = read_bvh(test::bandai() / "dataset-2" / "dataset-2_walk_normal_002.bvh");
+  const auto times = frame_times(clip);
+  const auto error_cm = [&](const char* set_text) {
+    std::string e;
+    const std::optional<TrackerSet> set = parse_tracker_set(set_text, e);
+    EXPECT_TRUE(set) << e;
+    SimOptions o;
+    o.rate_hz = clip.fps();
+    o.roles = set->roles;
+    o.rotation_only = set->rotation_only;
+    DiffusionReconstructor r(model_);
+    const Outputs run = feed_and_reconstruct(r, simulate_trackers(clip, o), times);
+    double all = 0, lower = 0;
+    int n = 0;
+    for (size_t f = 60; f < times.size(); ++f, ++n) {
+      const GlobalPose truth = forward_kinematics(clip.skeleton, clip.frames[f]);
+      for (size_t j = 1; j < 22; ++j) {
+        const double d = (run.poses[f].global.positions[j] - truth.positions[j]).norm();
+        all += d;
+        if (j >= 14) lower += d;  // UpperLeg_L .. Toes_R
+      }
+    }
+    return std::pair{100 * all / (21.0 * n), 100 * lower / (8.0 * n)};
+  };
+  const auto [base_all, base_lower] = error_cm("head,hands");
+  const auto [hf_all, hf_lower] = error_cm("head,hands,hips,feet");
+  const auto [rot_all, rot_lower] = error_cm("head,hands,hips:rot,feet:rot");
+  std::cout << "mean joint / leg error, cm: head,hands " << base_all << " / " << base_lower << "; +hips,feet " << hf_all
+            << " / " << hf_lower << "; +hips:rot,feet:rot " << rot_all << " / " << rot_lower << "\n";
+  EXPECT_LT(hf_lower, 0.8 * base_lower);
+  EXPECT_LE(rot_all, 1.05 * base_all);
+}
+
 TEST_F(DefaultModel, UserHeightScalesTheBody) {
   const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
   const auto times = frame_times(clip);
