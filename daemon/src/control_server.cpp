@@ -5,7 +5,6 @@
 #include <spdlog/spdlog.h>
 #include <zmq.h>
 
-#include <dirent.h>
 #include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/un.h>
@@ -38,17 +37,6 @@ constexpr const char* kMonitorEndpoint = "inproc://bodyd-control-monitor";
 struct Frame {
   std::string data;
 };
-
-// Descriptors open in this process now (/proc/self/fd), or 0 when unknown.
-std::size_t open_descriptors() {
-  DIR* dir = ::opendir("/proc/self/fd");
-  if (!dir) return 0;
-  std::size_t n = 0;
-  while (const dirent* e = ::readdir(dir))
-    if (e->d_name[0] != '.') ++n;
-  ::closedir(dir);
-  return n > 0 ? n - 1 : 0;  // not the directory's own
-}
 
 // Reads the rest of one message (every part is there once the first is: ZeroMQ delivers whole
 // messages). Keeps at most kMaxFrames frames; returns false when there were more (the message
@@ -111,12 +99,7 @@ std::string ControlServer::open(const DaemonConfig& config) {
   if (!monitor_ || zmq_setsockopt(monitor_, ZMQ_RCVHWM, &unlimited, sizeof unlimited) != 0 ||
       zmq_setsockopt(monitor_, ZMQ_LINGER, &zero, sizeof zero) != 0 || zmq_connect(monitor_, kMonitorEndpoint) != 0)
     return "--control: cannot monitor the control socket: " + zmq_error_text();
-  rlimit limit{};
-  if (::getrlimit(RLIMIT_NOFILE, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY) {
-    const std::size_t open = open_descriptors();
-    const std::size_t free = limit.rlim_cur > open ? static_cast<std::size_t>(limit.rlim_cur) - open : 0;
-    max_peers_ = std::clamp(free / 4, kMinPeers, kMaxPeers);
-  }
+  max_peers_ = connection_cap(kMinPeers, kMaxPeers);
   if (std::string e = set_curve_server(router, config.curve_secret_key_file, curve_public_); !e.empty()) return e;
   if (!config.curve_allow_dir.empty() && !curve_public_.empty())
     if (std::string e = socket_.allow_only_keys_in(config.curve_allow_dir); !e.empty()) return e;
@@ -240,31 +223,8 @@ void ControlServer::loop(ControlTarget& target) {
     retry_listener();
     answer_waiting(/*stopping=*/false);
     if (ready <= 0) continue;
-    if (monitor_ && (items[1].revents & ZMQ_POLLIN)) {
-      // Events are two frames: 2 bytes event, 4 bytes value (descriptor or errno); the endpoint.
-      for (int n = 0; n < 1000; ++n) {
-        zmq_msg_t event, endpoint;
-        zmq_msg_init(&event);
-        if (zmq_msg_recv(&event, monitor_, ZMQ_DONTWAIT) < 0) {
-          zmq_msg_close(&event);
-          break;
-        }
-        std::uint16_t id = 0;
-        std::uint32_t value = 0;
-        if (zmq_msg_size(&event) >= 6) {
-          std::memcpy(&id, zmq_msg_data(&event), 2);
-          std::memcpy(&value, static_cast<const char*>(zmq_msg_data(&event)) + 2, 4);
-        }
-        const bool more = zmq_msg_more(&event);
-        zmq_msg_close(&event);
-        if (more) {
-          zmq_msg_init(&endpoint);
-          (void)zmq_msg_recv(&endpoint, monitor_, 0);
-          zmq_msg_close(&endpoint);
-        }
-        on_monitor_event(id, value);
-      }
-    }
+    if (monitor_ && (items[1].revents & ZMQ_POLLIN))
+      drain_monitor(monitor_, [this](std::uint16_t event, std::uint32_t value) { on_monitor_event(event, value); });
     if (!(items[0].revents & ZMQ_POLLIN)) continue;
     zmq_msg_t first;
     zmq_msg_init(&first);

@@ -190,6 +190,32 @@ namespace {
 std::atomic<int> guards{0};  // a unique inproc endpoint per guarded socket
 }
 
+void drain_monitor(void* pair, const std::function<void(std::uint16_t, std::uint32_t)>& on_event) {
+  // Events are two frames: 2 bytes event, 4 bytes value (descriptor or errno); the endpoint.
+  for (int n = 0; n < 1000; ++n) {
+    zmq_msg_t event, endpoint;
+    zmq_msg_init(&event);
+    if (zmq_msg_recv(&event, pair, ZMQ_DONTWAIT) < 0) {
+      zmq_msg_close(&event);
+      return;
+    }
+    std::uint16_t id = 0;
+    std::uint32_t value = 0;
+    if (zmq_msg_size(&event) >= 6) {
+      std::memcpy(&id, zmq_msg_data(&event), 2);
+      std::memcpy(&value, static_cast<const char*>(zmq_msg_data(&event)) + 2, 4);
+    }
+    const bool more = zmq_msg_more(&event);
+    zmq_msg_close(&event);
+    if (more) {
+      zmq_msg_init(&endpoint);
+      (void)zmq_msg_recv(&endpoint, pair, 0);
+      zmq_msg_close(&endpoint);
+    }
+    on_event(id, value);
+  }
+}
+
 ConnectionGuard::~ConnectionGuard() { stop(); }
 
 std::string ConnectionGuard::start(void* context, void* socket, const std::string& what, std::size_t max_connections) {
@@ -231,29 +257,7 @@ void ConnectionGuard::run() {
   while (!stop_.load()) {
     zmq_pollitem_t item{pair_, 0, ZMQ_POLLIN, 0};
     if (zmq_poll(&item, 1, 100) <= 0) continue;
-    // Events are two frames: 2 bytes event, 4 bytes value (descriptor or errno); the endpoint.
-    for (int n = 0; n < 1000; ++n) {
-      zmq_msg_t event, endpoint;
-      zmq_msg_init(&event);
-      if (zmq_msg_recv(&event, pair_, ZMQ_DONTWAIT) < 0) {
-        zmq_msg_close(&event);
-        break;
-      }
-      std::uint16_t id = 0;
-      std::uint32_t value = 0;
-      if (zmq_msg_size(&event) >= 6) {
-        std::memcpy(&id, zmq_msg_data(&event), 2);
-        std::memcpy(&value, static_cast<const char*>(zmq_msg_data(&event)) + 2, 4);
-      }
-      const bool more = zmq_msg_more(&event);
-      zmq_msg_close(&event);
-      if (more) {
-        zmq_msg_init(&endpoint);
-        (void)zmq_msg_recv(&endpoint, pair_, 0);
-        zmq_msg_close(&endpoint);
-      }
-      on_event(id, value);
-    }
+    drain_monitor(pair_, [this](std::uint16_t event, std::uint32_t value) { on_event(event, value); });
     gate();
   }
 }

@@ -7,6 +7,7 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -61,6 +62,10 @@ class ZmqSocket : NonCopyable {
 // Whether `fd` is still one of this socket's stream connections (not closed and reused by
 // another file since its event): a SOCK_STREAM of the bound endpoint's family.
 [[nodiscard]] bool is_connection_of(int fd, const std::string& bound_endpoint);
+
+// Reads every event waiting on a socket monitor's receiving end (at most 1000), without blocking:
+// on_event(ZMQ_EVENT_* id, value: a descriptor or errno).
+void drain_monitor(void* pair, const std::function<void(std::uint16_t event, std::uint32_t value)>& on_event);
 
 // Caps one ZeroMQ socket's connections, on a thread of its own that reads the socket's monitor
 // (zmq_socket_monitor: ACCEPTED, ACCEPT_FAILED, DISCONNECTED). libzmq 4.3 accepts every
