@@ -184,25 +184,10 @@ int main(int argc, char** argv) {
   app.add_flag("--head-roll", head_roll,
                "with a calibration pose: learn the headset's roll on the head too, not only its pitch (docs/evaluation.md)");
   app.add_option("--reference", reference_path, "body reference of the default mounting (default: data/body-reference.json)");
-  std::string trackers = "head,hands";
-  app.add_option("--trackers", trackers,
-                 "the tracked roles (issue 44): a comma list of head, left_hand, right_hand, hips, chest, left_foot, "
-                 "right_foot, left_knee, right_knee, left_elbow, right_elbow or the groups hands, feet, knees, elbows, "
-                 "each optionally followed by :rot (rotation only), e.g. head,hands,hips:rot,feet:rot; head required")
-      ->capture_default_str();
+  bodyd::add_trackers_flag(app, sim);
   app.add_option("--split", split, "split file: BVH paths relative to its folder's parent (e.g. splits/val.txt)");
   app.add_option("files", files, "BVH files (besides or instead of --split)");
   CLI11_PARSE(app, argc, argv);
-  {
-    std::string e;
-    const std::optional<bodyd::TrackerSet> set = bodyd::parse_tracker_set(trackers, e);
-    if (!set) {
-      fmt::print(stderr, "bodyd-eval: --trackers: {}\n", e);
-      return 2;
-    }
-    sim.roles = set->roles;
-    sim.rotation_only = set->rotation_only;
-  }
   {
     bodyd::SimOptions check = sim;
     if (check.rate_hz == 0.0) check.rate_hz = 90.0;  // each clip's frame rate, checked when it is read

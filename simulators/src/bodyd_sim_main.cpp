@@ -35,12 +35,7 @@ int main(int argc, char** argv) {
       "eyes in the XR axes, the controllers' grip poses), with a mounting drawn from the seed "
       "(docs/simulator.md)");
   app.add_option("--reference", reference_path, "body reference of the default mounting (default: the bundled data/body-reference.json)");
-  std::string trackers = "head,hands";
-  app.add_option("--trackers", trackers,
-                 "the tracked roles: a comma list of head, left_hand, right_hand, hips, chest, left_foot, right_foot, "
-                 "left_knee, right_knee, left_elbow, right_elbow or the groups hands, feet, knees, elbows, each "
-                 "optionally followed by :rot (rotation only, an IMU tracker); head required")
-      ->capture_default_str();
+  bodyd::add_trackers_flag(app, opt);
   app.add_flag("--quiet,-q", quiet, "print no summary");
   try {
     app.parse(argc, argv);
@@ -56,16 +51,6 @@ int main(int argc, char** argv) {
   if (std::string err = opt.validate(); !err.empty()) {
     fmt::print(stderr, "bodyd-sim: bad option: {}\n", err);
     return 2;
-  }
-  {
-    std::string err;
-    const std::optional<bodyd::TrackerSet> set = bodyd::parse_tracker_set(trackers, err);
-    if (!set) {
-      fmt::print(stderr, "bodyd-sim: --trackers: {}\n", err);
-      return 2;
-    }
-    opt.roles = set->roles;
-    opt.rotation_only = set->rotation_only;
   }
 
   try {

@@ -280,6 +280,31 @@ TEST(TrackerLog, ReaderNamesTheFileAndLine) {
   EXPECT_THROW(TrackerLogReader(dir.path / "no_header.csv"), TrackerLogError);
 }
 
+// Body trackers (issue 44): their roles by name, and a rotation-only sample written with empty
+// px, py, pz and read back without a position; the three old roles' rows are unchanged.
+TEST(TrackerLog, BodyRolesAndRotationOnlySamplesRoundTrip) {
+  TrackerSample hips = make(0, Role::Hips, true, Vec3::Zero(), Quat(0.9238795, 0.0, 0.3826834, 0.0));
+  hips.has_position = false;
+  const TrackerSample foot = make(0, Role::LeftFoot, true, Vec3(0.1, 0.08, 0.2));
+  const TrackerSample head = make(0, Role::Head, true, Vec3(0.0, 1.6, 0.0));
+  const std::string text = format_tracker_log({head, hips, foot});
+  EXPECT_NE(text.find("0,hips,1,,,,"), std::string::npos) << text;
+  EXPECT_NE(text.find("0,left_foot,1,0.1,0.08,0.2,"), std::string::npos) << text;
+  const TrackerLog log = parse_tracker_log(text, "test");
+  ASSERT_EQ(log.samples.size(), 3u);
+  EXPECT_TRUE(log.samples[0].has_position);
+  EXPECT_EQ(log.samples[1].role, Role::Hips);
+  EXPECT_FALSE(log.samples[1].has_position);
+  EXPECT_LT(log.samples[1].rotation.angularDistance(hips.rotation), 1e-6);
+  EXPECT_EQ(log.samples[2].role, Role::LeftFoot);
+  EXPECT_TRUE(log.samples[2].has_position);
+  // A position given only in part is an error, not a rotation-only sample.
+  EXPECT_THROW((void)parse_tracker_log("# bodyd-tracker-log v1\nt_ns,role,valid,px,py,pz,qx,qy,qz,qw\n"
+                                       "0,hips,1,0.1,,,0,0,0,1\n",
+                                       "test"),
+               TrackerLogError);
+}
+
 TEST(TrackerLog, WriterRefusesWhatTheReaderWouldReject) {
   EXPECT_THROW((void)format_tracker_log({make(0, Role::Head, true, Vec3(NAN, 0, 0))}), TrackerLogError);
   EXPECT_THROW((void)format_tracker_log({make(0, Role::Head, true, Vec3::Zero(), Quat(2, 0, 0, 0))}),

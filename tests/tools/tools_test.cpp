@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <fstream>
+#include <map>
 #include <regex>
 #include <sstream>
 #include <sys/wait.h>
@@ -205,6 +206,28 @@ TEST_F(ToolsTest, BvhOnEveryBandaiFile) {
     EXPECT_EQ(arr[i]["joints"].get<int>(), 22);
     EXPECT_NEAR(arr[i]["fps"].get<double>(), 30.0, 0.01);
   }
+}
+
+// --trackers (issue 44): body trackers' rows, rotation-only ones without a position, the set in
+// the metadata; a set without the head is a usage error naming what is accepted.
+TEST_F(ToolsTest, SimTrackersSimulatesBodyTrackers) {
+  const fs::path out = dir_ / "body.csv";
+  const ProcessResult r = run("bodyd-sim", {"--bvh", kWalk, "--out", out.string(), "--trackers", "head,hands,hips:rot,feet"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const TrackerLog log = read_tracker_log(out);
+  std::map<Role, int> n;
+  for (const TrackerSample& s : log.samples) {
+    ++n[s.role];
+    if (s.role == Role::Hips) EXPECT_FALSE(s.has_position);
+    if (s.role == Role::LeftFoot) EXPECT_TRUE(s.has_position);
+  }
+  EXPECT_EQ(n.size(), 6u);
+  EXPECT_GT(n[Role::Hips], 100);
+  EXPECT_EQ(n[Role::Chest], 0);
+  EXPECT_NE(read_file(out).find("# trackers: head,left_hand,right_hand,hips:rot,left_foot,right_foot"), std::string::npos);
+  const ProcessResult bad = run("bodyd-sim", {"--bvh", kWalk, "--out", (dir_ / "x.csv").string(), "--trackers", "hands,tail"});
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.err.find("unknown tracker \"tail\""), std::string::npos) << bad.err;
 }
 
 TEST_F(ToolsTest, SimWritesTheSameLogAsTheLibrary) {

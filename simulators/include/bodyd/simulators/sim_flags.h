@@ -5,10 +5,12 @@
 #pragma once
 
 #include "bodyd/simulators/sim_option_keys.h"
+#include "bodyd/simulators/tracker_sim.h"
 
 #include <CLI/CLI.hpp>
 
 #include <string>
+#include <optional>
 #include <string_view>
 
 namespace bodyd {
@@ -41,6 +43,25 @@ inline void add_sim_flags(CLI::App& app, SimOptions& options, const SimFlagStyle
 // `help` says what the tool does with each.
 inline void add_device_frames_flag(CLI::App& app, std::string& device_frames, const std::string& help) {
   app.add_option("--device-frames", device_frames, help)->check(CLI::IsMember({"joint", "xr"}))->capture_default_str();
+}
+
+// --trackers SET (default head,hands): the simulated roles, parse_tracker_set's syntax
+// (docs/conventions.md, "Tracker roles"), into opt.roles and opt.rotation_only; a bad set is a
+// usage error naming what is accepted.
+inline void add_trackers_flag(CLI::App& app, SimOptions& opt) {
+  app.add_option_function<std::string>(
+         "--trackers",
+         [&opt](const std::string& text) {
+           std::string error;
+           const std::optional<TrackerSet> set = parse_tracker_set(text, error);
+           if (!set) throw CLI::ValidationError("--trackers", error);
+           opt.roles = set->roles;
+           opt.rotation_only = set->rotation_only;
+         },
+         "the tracked roles (default head,hands): a comma list of head, left_hand, right_hand, hips, chest, "
+         "left_foot, right_foot, left_knee, right_knee, left_elbow, right_elbow or the groups hands, feet, knees, "
+         "elbows, each optionally followed by :rot (rotation only, an IMU tracker), e.g. head,hands,hips:rot,feet:rot; "
+         "head required");
 }
 
 }  // namespace bodyd
