@@ -19,6 +19,9 @@
 #include <mutex>
 #include <thread>
 #include <cstdio>
+#include <sys/resource.h>
+
+#include <algorithm>
 #include <iostream>
 
 namespace {
@@ -83,6 +86,25 @@ class WatchdogThread {
 
 }  // namespace
 
+namespace {
+
+// The soft descriptor limit raised to the hard one (at most kWantedDescriptors): desktop sessions
+// and services start with 1,024 under a hard limit in the hundreds of thousands, and libzmq 4.3's
+// ipc:// listener aborts the process when accept() meets EMFILE (docs/reliability.md), so the
+// servers' caps are a quarter of a generous limit. A hard limit as low as the soft one stays.
+void raise_descriptor_limit() {
+  constexpr rlim_t kWantedDescriptors = 65536;
+  rlimit limit{};
+  if (::getrlimit(RLIMIT_NOFILE, &limit) != 0 || limit.rlim_cur >= kWantedDescriptors) return;
+  const rlim_t before = limit.rlim_cur;
+  limit.rlim_cur = limit.rlim_max == RLIM_INFINITY ? kWantedDescriptors : std::min(limit.rlim_max, kWantedDescriptors);
+  if (limit.rlim_cur > before && ::setrlimit(RLIMIT_NOFILE, &limit) == 0)
+    spdlog::debug("file descriptor limit raised from {} to {}", static_cast<unsigned long long>(before),
+                  static_cast<unsigned long long>(limit.rlim_cur));
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   using namespace bodyd::daemon;
   DaemonConfig config;
@@ -128,6 +150,7 @@ int main(int argc, char** argv) {
   }
   spdlog::set_level(spdlog::level::from_str(config.log_level));
   for (const auto& note : cli.notes) spdlog::info("{}", note);
+  raise_descriptor_limit();
   install_signal_handlers();
   const ServiceNotifier notifier;
 

@@ -175,5 +175,25 @@ TEST(DescriptorLimit, IdleSubscribersOnIpcNeverAbortBodyd) {
   EXPECT_EQ(child.wait(10000), 0) << child.log();
 }
 
+// A soft descriptor limit under a high hard one (a desktop session's 1,024) is raised at start,
+// so the servers' caps (a quarter of the free descriptors) are a quarter of a generous limit.
+TEST(DescriptorLimit, TheSoftLimitIsRaisedToTheHardOne) {
+  if (::access("/usr/bin/prlimit", X_OK) != 0) GTEST_SKIP() << "prlimit (util-linux) is not installed";
+  test::TempDir dir;
+  const auto endpoints_file = dir.path / "endpoints.json";
+  test::Child child({"/usr/bin/prlimit", "--nofile=64:4096", "--", (test::bin_dir() / "bodyd").string(), "--replay",
+                     (test::source_dir() / "data/demo/walk.csv").string(), "--method", "ik", "--loop", "--pub",
+                     "tcp://127.0.0.1:*", "--control", "none", "--endpoints-file", endpoints_file.string()},
+                    dir.path / "stderr.txt");
+  ASSERT_TRUE(test::wait_endpoints(endpoints_file, 10000)) << child.log();
+  std::ifstream in("/proc/" + std::to_string(child.pid()) + "/limits");
+  std::string line, open_files;
+  while (std::getline(in, line))
+    if (line.rfind("Max open files", 0) == 0) open_files = line;
+  EXPECT_NE(open_files.find("4096                 4096"), std::string::npos) << open_files;
+  child.signal(SIGTERM);
+  EXPECT_EQ(child.wait(10000), 0) << child.log();
+}
+
 }  // namespace
 }  // namespace bodyd

@@ -37,6 +37,7 @@
 #include "bodyd/motion/tracker.h"
 
 #include <array>
+#include <utility>
 #include <cstdint>
 #include <string>
 #include <string_view>
@@ -158,11 +159,11 @@ class OneEuroFilter {
   double position_gain_ = 0.0, rotation_gain_ = 0.0;
 };
 
-// The filters of the three tracker roles.
+// The filters of the tracker roles, one per role, all with the same options.
 class TrackerFilter {
  public:
   explicit TrackerFilter(const OneEuroOptions& options = {})
-      : filters_{OneEuroFilter(options), OneEuroFilter(options), OneEuroFilter(options)}, enabled_(options.enabled) {}
+      : filters_(filled(options, std::make_index_sequence<kRoleCount>{})), enabled_(options.enabled) {}
   [[nodiscard]] TrackerSample filter(const TrackerSample& in) {
     return enabled_ ? filters_[static_cast<size_t>(in.role)].filter(in) : in;
   }
@@ -172,6 +173,11 @@ class TrackerFilter {
   [[nodiscard]] const OneEuroFilter& of(Role role) const { return filters_[static_cast<size_t>(role)]; }
 
  private:
+  template <std::size_t... I>
+  static std::array<OneEuroFilter, kRoleCount> filled(const OneEuroOptions& options, std::index_sequence<I...>) {
+    return {((void)I, OneEuroFilter(options))...};
+  }
+
   std::array<OneEuroFilter, kRoleCount> filters_;
   bool enabled_ = true;
 };
