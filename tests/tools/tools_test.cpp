@@ -218,8 +218,12 @@ TEST_F(ToolsTest, SimTrackersSimulatesBodyTrackers) {
   std::map<Role, int> n;
   for (const TrackerSample& s : log.samples) {
     ++n[s.role];
-    if (s.role == Role::Hips) EXPECT_FALSE(s.has_position);
-    if (s.role == Role::LeftFoot) EXPECT_TRUE(s.has_position);
+    if (s.role == Role::Hips) {
+      EXPECT_FALSE(s.has_position);
+    }
+    if (s.role == Role::LeftFoot) {
+      EXPECT_TRUE(s.has_position);
+    }
   }
   EXPECT_EQ(n.size(), 6u);
   EXPECT_GT(n[Role::Hips], 100);
