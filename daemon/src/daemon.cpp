@@ -163,6 +163,7 @@ struct Daemon::Impl final : ControlTarget {
   // Reconstruction-thread state.
   std::uint64_t seq = 0;
   std::int64_t last_pose_t_ns = INT64_MIN;
+  RoleArrivals role_arrivals{};  // OutputFrame::role_arrivals: every sample's, before anything may drop it
   RateGate rate_gate;  // config.rate_hz: how often to reconstruct at all
   BodyPose body;
   protocol::PoseMessage pose_msg;
@@ -272,6 +273,7 @@ struct Daemon::Impl final : ControlTarget {
   // ---------------------------------------------------------------- reconstruction thread
   void handle_sample(drivers::SourceSample& in) {
     TrackerSample& s = in.sample;
+    role_arrivals[static_cast<std::size_t>(s.role)] = {in.arrival_ns, in.source_index};
     if (!is_xr_role(s.role) && s.frame == PoseFrame::Device) {
       // A body tracker's device pose: its mounting on the joint (a strap a few centimetres off
       // and turned) is not measured yet, and a device pose is never used through an unknown
@@ -355,7 +357,7 @@ struct Daemon::Impl final : ControlTarget {
 
     const OutputFrame frame{seq,        s.t_ns,           in.arrival_ns,     body,
                             recon->skeleton(), pose_msg,  pose_bytes,        as_received,
-                            conditioner.recentre_rotation(), conditioner.recentre_translation_m()};
+                            conditioner.recentre_rotation(), conditioner.recentre_translation_m(), role_arrivals};
     std::string error;
     for (auto& slot_ptr : outputs) {
       OutputSlot& slot = *slot_ptr;

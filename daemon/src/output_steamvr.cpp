@@ -8,7 +8,9 @@
 #include <spdlog/spdlog.h>
 
 #include <array>
+#include <atomic>
 #include <memory>
+#include <optional>
 
 namespace bodyd::daemon {
 
@@ -23,6 +25,11 @@ constexpr std::array<std::int32_t, kBodyTrackers.size()> kRoles{sv::role::kWaist
                                                                sv::role::kRightFoot, sv::role::kChest,
                                                                sv::role::kLeftKnee,  sv::role::kRightKnee,
                                                                sv::role::kLeftElbow, sv::role::kRightElbow};
+// bodyd's role of each of kBodyTrackers: a real tracker of that role in SteamVR leaves the
+// virtual one out.
+constexpr std::array<Role, kBodyTrackers.size()> kTrackerRoles{Role::Hips,     Role::LeftFoot,  Role::RightFoot,
+                                                              Role::Chest,    Role::LeftKnee,  Role::RightKnee,
+                                                              Role::LeftElbow, Role::RightElbow};
 
 class SteamvrOutput final : public Output {
  public:
@@ -52,6 +59,7 @@ class SteamvrOutput final : public Output {
 
   bool send(const OutputFrame& frame, std::string& out_error) override {
     if (!joints_.complete(out_error)) return false;
+    leave_out_real_trackers(frame);
     const GlobalPose& g = frame.body.global;
     // Back to the driver's space (the one the headset's samples came in): undo the re-centring.
     const Quat undo = frame.recentre_rotation.conjugate();
@@ -75,6 +83,7 @@ class SteamvrOutput final : public Output {
   nlohmann::json status() const override {
     const sv::BridgeStats b = server_->stats();
     return {{"trackers", names_},
+            {"trackers_left_out", place_names(kBodyTrackers, left_out_.load())},
             {"socket", path_},
             {"clients", b.clients},
             {"connections", b.connections},
@@ -95,6 +104,33 @@ class SteamvrOutput final : public Output {
   }
 
  private:
+  // A role the user tracks is not replaced by a guess: where SteamVR's driver (the steamvr:
+  // source on this socket) sent a sample of a tracker's role within kRealTrackerHoldNs (output.h),
+  // SteamVR has the real tracker, and the virtual one is left out (not announced, or OCCLUDED
+  // where it was) until the real one has been gone that long (docs/outputs.md, "Tracked roles").
+  void leave_out_real_trackers(const OutputFrame& frame) {
+    const std::optional<std::uint16_t> runtime = server_->source_index();
+    PlaceMask out = 0;
+    for (std::size_t i = 0; runtime && i < kBodyTrackers.size(); ++i) {
+      const RoleArrival& a = frame.role_arrivals[static_cast<std::size_t>(kTrackerRoles[i])];
+      if ((mask_ & (1u << i)) && a.source_index == *runtime && real_tracker_recent(a, frame.arrival_ns))
+        out |= static_cast<PlaceMask>(1u << i);
+    }
+    const PlaceMask was = left_out_.load();
+    if (out == was) return;
+    std::vector<std::int32_t> ids;
+    for (std::size_t i = 0; i < kBodyTrackers.size(); ++i)
+      if (out & (1u << i)) ids.push_back(kRoles[i]);
+    server_->set_left_out(std::move(ids));
+    left_out_.store(out);
+    if (const auto gone = static_cast<PlaceMask>(out & ~was))
+      spdlog::info("{}: {} left out: SteamVR has real trackers for them (their samples reach bodyd)", name(),
+                   place_names(kBodyTrackers, gone));
+    if (const auto back = static_cast<PlaceMask>(was & ~out))
+      spdlog::info("{}: {} back: their real trackers sent nothing for {} s", name(), place_names(kBodyTrackers, back),
+                   kRealTrackerHoldNs / 1'000'000'000);
+  }
+
   std::string path_;
   PlaceMask mask_;
   std::shared_ptr<sv::BridgeServer> server_;
@@ -102,6 +138,7 @@ class SteamvrOutput final : public Output {
   std::string names_;
   PlaceJoints joints_;
   std::array<sv::TrackerPoseOut, kBodyTrackers.size()> poses_{};
+  std::atomic<PlaceMask> left_out_{0};  // the reconstruction thread's; status reads it
   bool open_ = false;
 };
 

@@ -16,12 +16,14 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <set>
 
 namespace bodyd::drivers::slimevr {
 
@@ -56,14 +58,29 @@ std::string prepare_dir(const std::filesystem::path& dir) {
 
 std::int64_t now_ns() { return monotonic_ns(); }
 
-// Which of bodyd's roles a SlimeVR role feeds: the headset, and the controllers, which the
-// driver announces as LEFT_HAND / RIGHT_HAND (11 / 12, from Prop_ControllerRoleHint_Int32:
-// VRDriver.cpp, GetRoleForDevice) and other clients as LEFT_CONTROLLER / RIGHT_CONTROLLER.
+// Which of bodyd's roles a SlimeVR role feeds: the headset; the controllers, which the driver
+// announces as LEFT_HAND / RIGHT_HAND (11 / 12, from Prop_ControllerRoleHint_Int32:
+// VRDriver.cpp, GetRoleForDevice) and other clients as LEFT_CONTROLLER / RIGHT_CONTROLLER; and
+// the body trackers, which the driver announces with the role their Prop_ControllerType_String
+// names (vive_tracker_waist 1, ...). Shoulders, SlimeVR's HEAD (not the headset), neck and the
+// others have no bodyd role: not used.
 std::optional<Role> bodyd_role(std::int32_t r) {
-  if (r == role::kHmd) return Role::Head;
-  if (r == role::kLeftHand || r == role::kLeftController) return Role::LeftHand;
-  if (r == role::kRightHand || r == role::kRightController) return Role::RightHand;
-  return std::nullopt;
+  switch (r) {
+    case role::kHmd: return Role::Head;
+    case role::kLeftHand:
+    case role::kLeftController: return Role::LeftHand;
+    case role::kRightHand:
+    case role::kRightController: return Role::RightHand;
+    case role::kWaist: return Role::Hips;
+    case role::kChest: return Role::Chest;
+    case role::kLeftFoot: return Role::LeftFoot;
+    case role::kRightFoot: return Role::RightFoot;
+    case role::kLeftKnee: return Role::LeftKnee;
+    case role::kRightKnee: return Role::RightKnee;
+    case role::kLeftElbow: return Role::LeftElbow;
+    case role::kRightElbow: return Role::RightElbow;
+    default: return std::nullopt;
+  }
 }
 
 // SlimeVR's role names (the driver's TrackerRole.hpp), for status and logs.
@@ -189,6 +206,7 @@ struct BridgeServer::Impl final : FramedHandler {
     std::optional<Role> wanted;  // the role it announces (bodyd_role)
     std::optional<Role> bodyd;   // the role it feeds: `wanted` while this device owns it
     bool status_ok = true;      // its last TrackerStatus was OK (none yet counts as OK)
+    std::int32_t status = status::kOk;  // its last TrackerStatus
     bool imu_only = false;      // its last Position had data_source IMU
     bool last_valid = false;    // the last sample forwarded (or held) was valid
     std::int64_t last_forward_ns = INT64_MIN;
@@ -198,6 +216,7 @@ struct BridgeServer::Impl final : FramedHandler {
     std::map<std::int32_t, Device> devices;  // by tracker_id
     std::size_t listed = 0;                  // devices in the stats and the log (kMaxDevicesListed)
     bool version_answered = false;
+    std::set<std::int32_t> announced;        // the virtual trackers (ids) a TrackerAdded was sent for
   };
 
   explicit Impl(std::string p) : path(std::move(p)), server(path, FramedServerLimits{}, *this) { stats.path = path; }
@@ -209,6 +228,7 @@ struct BridgeServer::Impl final : FramedHandler {
   SampleSink* sink = nullptr;
   std::uint16_t source_index = 0;
   std::vector<AnnouncedTracker> trackers;
+  std::set<std::int32_t> left_out;  // trackers the runtime has real ones for (set_left_out)
   Encoder encoder;
   BridgeStats stats;
   RateMeter rate;  // samples forwarded to the sink
@@ -228,11 +248,16 @@ struct BridgeServer::Impl final : FramedHandler {
       spdlog::warn("bridge {}: {} ({}; {} so far, logged at the 1st, 2nd, 4th, 8th...)", path, detail, reason, n);
   }
 
-  // The virtual trackers' status (OK while they have a body, else OCCLUDED) to one connection.
-  void send_status(FramedConnection& c) {
-    const std::int32_t st = stats.trackers_tracked ? status::kOk : status::kOccluded;
-    for (const AnnouncedTracker& t : trackers) encoder.tracker_status(c.out, t.id, st);
-    stats.statuses_out += trackers.size();
+  // The status of the virtual trackers announced on one connection: OK while they have a body
+  // and are not left out, else OCCLUDED.
+  void send_status(FramedConnection& fc) {
+    auto& c = static_cast<Connection&>(fc);
+    for (const AnnouncedTracker& t : trackers) {
+      if (!c.announced.count(t.id)) continue;
+      const bool ok = stats.trackers_tracked && !left_out.count(t.id);
+      encoder.tracker_status(c.out, t.id, ok ? status::kOk : status::kOccluded);
+      ++stats.statuses_out;
+    }
   }
   void send_status_to_all(std::int64_t now) {
     for (const auto& c : server.connections())
@@ -240,10 +265,14 @@ struct BridgeServer::Impl final : FramedHandler {
     last_status_ns = now;
   }
 
-  // TrackerAdded for each virtual tracker, then its status. No Version: the driver sends its
-  // own and this server answers it.
-  void announce(FramedConnection& c) {
-    for (const AnnouncedTracker& t : trackers) encoder.tracker_added(c.out, t.id, t.serial, t.name, t.role, "bodyd");
+  // TrackerAdded for each virtual tracker not announced on this connection yet and not left
+  // out, then the status of every one announced. No Version: the driver sends its own and this
+  // server answers it.
+  void announce(FramedConnection& fc) {
+    auto& c = static_cast<Connection&>(fc);
+    for (const AnnouncedTracker& t : trackers)
+      if (!left_out.count(t.id) && c.announced.insert(t.id).second)
+        encoder.tracker_added(c.out, t.id, t.serial, t.name, t.role, "bodyd");
     send_status(c);
   }
 
@@ -442,9 +471,14 @@ struct BridgeServer::Impl final : FramedHandler {
     }
     Device& d = c.devices[m.tracker_id];
     d.role = m.role;
-    d.wanted = bodyd_role(m.role);
+    // One of bodyd's own virtual trackers fed back (a driver that does not skip the trackers it
+    // created for this server) is never taken for a real one: it would leave itself out.
+    const bool own = std::any_of(trackers.begin(), trackers.end(),
+                                 [&](const AnnouncedTracker& t) { return !m.serial.empty() && t.serial == m.serial; });
+    d.wanted = own ? std::nullopt : bodyd_role(m.role);
     d.bodyd = d.wanted;
-    std::string use = d.bodyd ? std::string(role_name(*d.bodyd)) : std::string("not used");
+    std::string use = d.bodyd ? std::string(role_name(*d.bodyd))
+                              : std::string(own ? "not used (bodyd's own)" : "not used");
     if (d.bodyd) {
       const auto [it, added] = owners.try_emplace(*d.bodyd, c.number, m.tracker_id);
       if (!added && it->second != std::pair{c.number, m.tracker_id}) {
@@ -499,9 +533,21 @@ struct BridgeServer::Impl final : FramedHandler {
     if (m.has_data_source) d.imu_only = m.data_source == data_source::kImu;
     SourceSample s = sample_of(d, arrival_ns);
     if (!m.has_position || d.imu_only || !d.status_ok) {
-      // Rotation only, or a status that says the position is not tracked: the reconstruction
-      // treats the position as lost (as a hand out of the cameras' view) until FULL / OK again.
+      // Rotation only (data_source IMU, no x, y, z), or a status that says the position is not
+      // tracked (the driver's OCCLUDED of a device SteamVR tracks by rotation only).
       ++stats.untrusted;
+      if (is_xr_role(*d.bodyd) || (!d.status_ok && d.status != status::kOccluded)) {
+        // The headset and controllers: the reconstruction treats the position as lost (as a
+        // hand out of the cameras' view) until FULL / OK again. Any device whose status is
+        // DISCONNECTED, BUSY or ERROR: lost too.
+        forward(c, d, s);
+        return;
+      }
+      // A body tracker: its rotation is still observed (TrackerSample::has_position false, as
+      // an IMU tracker's), its position not used (docs/conventions.md, "Tracker roles").
+      s.sample.valid = true;
+      s.sample.has_position = false;
+      s.sample.rotation = q.normalized();
       forward(c, d, s);
       return;
     }
@@ -518,6 +564,7 @@ struct BridgeServer::Impl final : FramedHandler {
       return;
     }
     Device& d = it->second;
+    d.status = m.status;
     d.status_ok = m.status == status::kOk;
     // Lost (disconnected, occluded, busy, in error): seen at once, not at the next Position.
     if (!d.status_ok) forward(c, d, sample_of(d, arrival_ns));
@@ -589,6 +636,25 @@ void BridgeServer::set_trackers(std::vector<AnnouncedTracker> trackers) {
   impl_->server.wake();
 }
 
+void BridgeServer::set_left_out(std::vector<std::int32_t> ids) {
+  std::lock_guard lock(impl_->mutex());
+  std::set<std::int32_t> next(ids.begin(), ids.end());
+  if (next == impl_->left_out) return;
+  impl_->left_out = std::move(next);
+  for (const auto& c : impl_->server.connections()) {
+    if (c->drop) continue;
+    impl_->announce(*c);
+    impl_->server.flush(*c);
+  }
+  impl_->server.wake();
+}
+
+std::optional<std::uint16_t> BridgeServer::source_index() const {
+  std::lock_guard lock(impl_->mutex());
+  if (impl_->sink == nullptr) return std::nullopt;
+  return impl_->source_index;
+}
+
 bool BridgeServer::publish(const TrackerPoseOut* poses, std::size_t count, bool tracked, std::string& out_error) {
   std::lock_guard lock(impl_->mutex());
   Impl& im = *impl_;
@@ -610,8 +676,12 @@ bool BridgeServer::publish(const TrackerPoseOut* poses, std::size_t count, bool 
     any = true;
     if (status_change) im.send_status(*c);
     if (tracked) {
-      for (std::size_t i = 0; i < count; ++i) im.encoder.position(c->out, poses[i].id, poses[i].position_m, poses[i].rotation);
-      im.stats.frames_out += count;
+      const auto& announced = static_cast<const Impl::Connection&>(*c).announced;
+      for (std::size_t i = 0; i < count; ++i) {
+        if (im.left_out.count(poses[i].id) || !announced.count(poses[i].id)) continue;
+        im.encoder.position(c->out, poses[i].id, poses[i].position_m, poses[i].rotation);
+        ++im.stats.frames_out;
+      }
     }
     im.server.flush(*c);
     dropped |= c->drop;

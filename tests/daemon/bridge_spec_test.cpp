@@ -4,10 +4,20 @@
 #include "bodyd/daemon/output.h"
 #include "bodyd/drivers/open_source.h"
 #include "bodyd/drivers/slimevr_bridge.h"
+#include "bodyd/test/temp_dir.h"
 
 #include <gtest/gtest.h>
 
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <chrono>
 #include <cstdlib>
+#include <cstring>
+#include <mutex>
+#include <thread>
+#include <vector>
 
 namespace bodyd {
 namespace {
@@ -114,6 +124,126 @@ TEST(BridgeSpecs, FramesCountTheirOwnLength) {
   EXPECT_TRUE(m.has_position);
   EXPECT_EQ(m.z, -0.75f);
   EXPECT_EQ(m.qw, 1.0f);
+}
+
+// What the bridge pushes, kept for the test.
+struct SamplesKept final : drivers::SampleSink {
+  std::mutex mutex;
+  std::vector<drivers::SourceSample> samples;
+  void push(const drivers::SourceSample& s) override {
+    std::lock_guard lock(mutex);
+    samples.push_back(s);
+  }
+  bool push_wait(const drivers::SourceSample& s, std::chrono::nanoseconds) override {
+    push(s);
+    return true;
+  }
+  // The samples once `n` have come (or after 2 s: fewer).
+  std::vector<drivers::SourceSample> wait_for(std::size_t n) {
+    for (int i = 0; i < 200; ++i) {
+      {
+        std::lock_guard lock(mutex);
+        if (samples.size() >= n) return samples;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    std::lock_guard lock(mutex);
+    return samples;
+  }
+};
+
+// Body trackers by their SlimeVR roles (issue 44): the waist (1) feeds the hips as a device pose;
+// a Position that is not tracked (data_source IMU, SteamVR's rotation-only fallback, status
+// OCCLUDED) gives a body tracker its rotation alone (has_position false) where it makes the
+// headset's sample invalid; a status of ERROR makes it lost; shoulders (9) are not used, nor is
+// one of bodyd's own virtual trackers fed back.
+TEST(BridgeSource, BodyTrackersByRoleAndRotationOnlyWhenNotTracked) {
+  namespace sv = drivers::slimevr;
+  test::TempDir dir;
+  const std::string path = (dir.path / "run" / "SlimeVRDriver").string();
+  sv::BridgeServer server(path);
+  SamplesKept sink;
+  server.attach_sink(&sink, 3);
+  server.set_trackers({{1, "bodyd-waist", "bodyd waist", sv::role::kWaist}});  // the steamvr output's
+  ASSERT_EQ(server.start(), "");
+  EXPECT_EQ(server.source_index(), std::optional<std::uint16_t>(3));
+
+  const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  std::strncpy(addr.sun_path, path.c_str(), sizeof addr.sun_path - 1);
+  ASSERT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+  sv::Encoder enc;
+  // Sends, then waits until the bridge has pushed `samples` in all: each sample is out before
+  // the next message arrives, so none is coalesced away on a loaded machine.
+  const auto send = [&](const std::vector<std::uint8_t>& bytes, std::size_t samples) {
+    ASSERT_EQ(::send(fd, bytes.data(), bytes.size(), MSG_NOSIGNAL), static_cast<ssize_t>(bytes.size()));
+    if (samples > 0) {
+      ASSERT_GE(sink.wait_for(samples).size(), samples);
+    }
+  };
+  const Vec3 p(0.1, 0.9, -0.2);
+  const Quat q = Quat(Eigen::AngleAxisd(0.7, Vec3(0.3, 1.0, 0.2).normalized()));
+  // A Position with data_source IMU: the encoder's (FULL, the last field) with that byte changed.
+  const auto position = [&](std::int32_t id, bool imu) {
+    std::vector<std::uint8_t> out;
+    enc.position(out, id, p, q);
+    EXPECT_EQ(out[out.size() - 2], 0x48);  // field 9, varint
+    EXPECT_EQ(out.back(), sv::data_source::kFull);
+    if (imu) out.back() = static_cast<std::uint8_t>(sv::data_source::kImu);
+    return out;
+  };
+  const auto status = [&](std::int32_t id, std::int32_t st) {
+    std::vector<std::uint8_t> out;
+    enc.tracker_status(out, id, st);
+    return out;
+  };
+  std::vector<std::uint8_t> added;
+  enc.tracker_added(added, 0, "hmd", "hmd", sv::role::kHmd, "test");
+  enc.tracker_added(added, 3, "waist", "waist", sv::role::kWaist, "test");
+  enc.tracker_added(added, 4, "shoulder", "shoulder", sv::role::kLeftShoulder, "test");
+  enc.tracker_added(added, 5, "bodyd-waist", "bodyd waist", sv::role::kWaist, "slimevr");  // bodyd's own, fed back
+  send(added, 0);
+  send(position(3, false), 1);                  // tracked
+  send(position(3, true), 2);                   // IMU: rotation only
+  send(status(3, sv::status::kOccluded), 3);    // lost at once
+  send(position(3, true), 4);                   // rotation only (SteamVR's rotation-only fallback)
+  send(status(3, sv::status::kError), 5);       // lost
+  send(position(3, true), 6);                   // still lost
+  send(position(4, false), 0);                  // the shoulder: not used
+  send(position(0, true), 7);                   // the headset's IMU Position: lost
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  const auto got = sink.wait_for(7);
+  const sv::BridgeStats st = server.stats();  // while connected (its devices are listed until it closes)
+  ::close(fd);
+  ASSERT_EQ(got.size(), 7u);
+  for (std::size_t i = 0; i < 6; ++i) {
+    SCOPED_TRACE(i);
+    EXPECT_EQ(got[i].sample.role, Role::Hips);
+    EXPECT_EQ(got[i].sample.frame, PoseFrame::Device);
+    EXPECT_EQ(got[i].source_index, 3);
+  }
+  EXPECT_TRUE(got[0].sample.valid);
+  EXPECT_TRUE(got[0].sample.has_position);
+  EXPECT_LT((got[0].sample.position_m - p).norm(), 1e-6);
+  for (std::size_t i : {1, 3}) {
+    SCOPED_TRACE(i);
+    EXPECT_TRUE(got[i].sample.valid);
+    EXPECT_FALSE(got[i].sample.has_position);
+    EXPECT_LT(got[i].sample.rotation.angularDistance(q), 1e-6);
+  }
+  EXPECT_FALSE(got[2].sample.valid);
+  EXPECT_FALSE(got[4].sample.valid);
+  EXPECT_FALSE(got[5].sample.valid);
+  EXPECT_EQ(got[6].sample.role, Role::Head);
+  EXPECT_FALSE(got[6].sample.valid);
+  EXPECT_EQ(st.roles_use.count("waist") ? st.roles_use.at("waist") : "", "hips");
+  EXPECT_EQ(st.roles_use.count("shoulder") ? st.roles_use.at("shoulder") : "", "not used");
+  EXPECT_EQ(st.roles_use.count("bodyd-waist") ? st.roles_use.at("bodyd-waist") : "", "not used (bodyd's own)");
+  EXPECT_GE(st.untrusted, 4u);
+  server.attach_sink(nullptr, 0);
+  EXPECT_FALSE(server.source_index());
+  server.stop();
 }
 
 }  // namespace

@@ -16,7 +16,7 @@ upstream schema), with Debian's python3-protobuf and the test's own .proto
       server sends is written to OUT, one JSON object per line. With --reconnect-after N the
       connection is closed after N frames and opened again (a driver that restarts).
   driver_client.py PB_DIR driver SOCKET POSES OUT [--seconds S] [--generic N]
-                   [--imu-head T0 T1] [--lost-head T0 T1]
+                   [--imu-head T0 T1] [--lost-head T0 T1] [--generic-off T] [--reconnect-at T]
       Behaves as SlimeVR's OpenVR driver (dcc0f56, VRDriver.cpp) does inside SteamVR: Version 2
       once connected, TrackerAdded per device (headset 19, controllers 11 / 12, N generic
       trackers: waist 1, left_foot 2, right_foot 3, chest 4), then on every turn of a 2 ms loop
@@ -24,7 +24,9 @@ upstream schema), with Debian's python3-protobuf and the test's own .proto
       and a Battery per device every 100 ms; TrackerStatus when a device's status changes.
       From T0 to T1 seconds the headset is tracked by rotation only (--imu-head: status
       OCCLUDED, Positions with data_source IMU) or lost (--lost-head: status OCCLUDED, no
-      Position). When the connection fails it connects again after a second. Every message
+      Position). From T seconds on (--generic-off) the generic trackers are switched off: status
+      DISCONNECTED, no Position. At T seconds (--reconnect-at) the connection is closed, as by a
+      driver that restarts. When the connection fails it connects again after a second. Every message
       from bodyd is written to OUT with its time ("t", seconds since the start) and the run's
       counts at the end ({"kind": "summary", ...}).
   driver_client.py PB_DIR bad SOCKET KIND OUT
@@ -257,6 +259,7 @@ def driver(args):
     path, poses, out_path = args[0], args[1], args[2]
     seconds, generic = 10.0, 0
     imu, lost = None, None
+    generic_off, reconnect_at = None, None
     i = 3
     while i < len(args):
         if args[i] == "--seconds":
@@ -267,6 +270,10 @@ def driver(args):
             imu = (float(args[i + 1]), float(args[i + 2])); i += 3
         elif args[i] == "--lost-head":
             lost = (float(args[i + 1]), float(args[i + 2])); i += 3
+        elif args[i] == "--generic-off":
+            generic_off = float(args[i + 1]); i += 2
+        elif args[i] == "--reconnect-at":
+            reconnect_at = float(args[i + 1]); i += 2
         else:
             raise SystemExit("unknown option " + args[i])
     roles = ["head", "left_hand", "right_hand"] + GENERIC[:generic]
@@ -295,6 +302,10 @@ def driver(args):
                 announce(s, roles)
                 last_status, battery_at = {r: 1 for r in roles}, {}
                 continue
+            if reconnect_at is not None and now >= reconnect_at:
+                reconnect_at = None
+                reader.closed = True  # closed above, connected again a second later
+                continue
             # The newest pose at this time (the clip looped).
             tc = now % clip_s
             while k + 1 < len(timed) and timed[k + 1][0] <= tc:
@@ -318,6 +329,8 @@ def driver(args):
                     st, ds = 4, 1
                 if role == "head" and lost and lost[0] <= now < lost[1]:
                     st, send = 4, False
+                if role in GENERIC and generic_off is not None and now >= generic_off:
+                    st, send = 0, False
                 if last_status.get(role) != st:
                     data += status(role, st)
                     last_status[role] = st
@@ -364,8 +377,9 @@ def bad(args):
         s.sendall(position("head", 0.0, 1.6, 0.0, 0.0, 0.0, 0.0, 5.0))
     elif kind == "unknown_role":
         # Serials and names with terminal escapes, CR and LF (log injection): one with a known
-        # role (logged), one with an unknown one (rejected, quoted in the reason).
-        for tid, role in ((8, 1), (7, 99)):
+        # role (logged; left shoulder, which bodyd does not use, so this client takes no role of
+        # the good driver's session), one with an unknown one (rejected, quoted in the reason).
+        for tid, role in ((8, 9), (7, 99)):
             a = pb.ProtobufMessage()
             a.tracker_added.tracker_id = tid
             a.tracker_added.tracker_serial = "weird\x1b[2J\r\n[info] forged line"

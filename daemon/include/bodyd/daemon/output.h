@@ -33,6 +33,7 @@
 
 #include <nlohmann/json_fwd.hpp>
 
+#include <array>
 #include <cstdint>
 #include <map>
 #include <memory>
@@ -43,6 +44,24 @@
 namespace bodyd::daemon {
 
 struct DaemonConfig;
+
+// The newest sample of one role that reached the daemon (the reconstruction thread, first
+// thing), valid or not, used or not: a body tracker's device pose that the reconstruction cannot
+// use yet (its mounting not calibrated) counts, since the runtime that sent it has the tracker.
+struct RoleArrival {
+  std::int64_t arrival_ns = INT64_MIN;  // its SourceSample::arrival_ns (host monotonic); INT64_MIN: none yet
+  std::uint16_t source_index = 0;       // its source (SourceSample::source_index)
+};
+using RoleArrivals = std::array<RoleArrival, kRoleCount>;  // by static_cast<int>(Role)
+
+// The rule, defined here only (docs/outputs.md, "Tracked roles"): the user has a real tracker
+// for a role while a sample of it arrived within this long. Long enough to span a tracker's
+// short losses and a driver's reconnection (a second), short enough that a tracker switched off
+// gives its role back soon.
+inline constexpr std::int64_t kRealTrackerHoldNs = 5'000'000'000;
+[[nodiscard]] constexpr bool real_tracker_recent(const RoleArrival& a, std::int64_t now_ns) {
+  return a.arrival_ns != INT64_MIN && now_ns - a.arrival_ns <= kRealTrackerHoldNs;
+}
 
 // One pose, as every output receives it. All references stay valid only during send().
 struct OutputFrame {
@@ -62,6 +81,11 @@ struct OutputFrame {
   // back (steamvr, monado) undo it, so their trackers stay where the headset is.
   Quat recentre_rotation = Quat::Identity();
   Vec3 recentre_translation_m = Vec3::Zero();
+  // Per role, its newest sample's arrival and source (above; the head's is this pose's own).
+  // Where the user tracks a role: the steamvr output leaves out its virtual tracker for a role
+  // SteamVR's driver sent a sample of within kRealTrackerHoldNs; the other outputs send every
+  // role, following the body (docs/outputs.md, "Tracked roles").
+  RoleArrivals role_arrivals{};
 };
 
 // A parsed output spec: SCHEME:TARGET?KEY=VALUE&... (docs/outputs.md).

@@ -5,9 +5,9 @@
 //     length that counts its own 4 bytes, then one protobuf ProtobufMessage, at most
 //     kMaxFrameBytes in all) and their messages; fuzzed (tests/drivers/fuzz_slimevr.cpp).
 //   - BridgeServer: one listening socket, its connections and one thread. The steamvr: source
-//     (headset and controllers in, as device poses) and the steamvr output (virtual trackers
-//     out, daemon/src/output_steamvr.cpp) on the same socket share one server, found with
-//     shared_bridge(path). The monado: source is a server on $DIR/SlimeVRInput (Monado's feeder
+//     (headset, controllers and body trackers in, as device poses) and the steamvr output
+//     (virtual trackers out, daemon/src/output_steamvr.cpp) on the same socket share one
+//     server, found with shared_bridge(path). The monado: source is a server on $DIR/SlimeVRInput (Monado's feeder
 //     speaks the same protocol).
 //
 // Threading: the server's thread accepts, reads, decodes and pushes samples; publish() (the
@@ -213,7 +213,7 @@ struct BridgeStats {
   std::uint64_t samples = 0;       // pushed to the sink
   double rate_hz = 0.0;            // samples pushed per second (the last full second)
   std::uint64_t coalesced = 0;     // superseded by a newer sample of the same device before their turn
-  std::uint64_t untrusted = 0;     // positions not used: data_source IMU, or the device's status not OK
+  std::uint64_t untrusted = 0;     // positions not used: data_source IMU, no x, y, z, or the device's status not OK
   std::uint64_t devices_not_listed = 0;  // TrackerAdded beyond kMaxDevicesListed on one connection
   std::uint64_t statuses_out = 0;  // TrackerStatus sent for the virtual trackers
   bool trackers_tracked = false;   // the virtual trackers' status is OK (else OCCLUDED)
@@ -226,7 +226,7 @@ struct BridgeStats {
   // tracker serial -> role of the devices that announced themselves on the open connections
   // (at most kMaxDevicesListed per connection), and what bodyd does with each.
   std::map<std::string, std::int32_t> roles_in;
-  std::map<std::string, std::string> roles_use;  // serial -> "head", "left_hand", ..., or "not used"
+  std::map<std::string, std::string> roles_use;  // serial -> "head", "left_hand", "hips", ..., or "not used"
   std::string last_error;
 };
 
@@ -242,17 +242,27 @@ class BridgeServer : NonCopyable {
   // Undoes one start(); the last closes the socket, removes its file and joins the thread.
   void stop();
 
-  // The source side: samples of the announced headset and controllers go to `sink` (nullptr:
-  // nowhere). `name` is the source's status name.
+  // The source side: samples of the announced headset, controllers and body trackers go to
+  // `sink` (nullptr: nowhere).
   void attach_sink(SampleSink* sink, std::uint16_t source_index);
 
+  // The source index of the source attached (attach_sink), nullopt when none is: which samples
+  // came from this socket's driver (the steamvr output leaves out the trackers SteamVR has).
+  [[nodiscard]] std::optional<std::uint16_t> source_index() const;
+
   // The output side: announced (TrackerAdded, TrackerStatus OK) to every connection now and to
-  // each new one.
+  // each new one, except those left out (set_left_out).
   void set_trackers(std::vector<AnnouncedTracker> trackers);
-  // One Position per pose to every connection when `tracked` (the pose's headset is tracked);
-  // otherwise the trackers are reported OCCLUDED and no Position is sent (the driver would mark
-  // them valid again). Never blocks. False (and `out_error`) when a connection had to be
-  // dropped; no client connected is not a failure (counted).
+  // The trackers (by id) the runtime already has real ones for: not announced to a connection
+  // that was not announced them yet, reported OCCLUDED (and sent no Position) on one that was;
+  // a tracker no longer left out is announced where it was not and reported as the others.
+  // Takes effect at once on every connection.
+  void set_left_out(std::vector<std::int32_t> ids);
+  // One Position per pose and tracker (the trackers announced on that connection and not left
+  // out) to every connection when `tracked` (the pose's headset is tracked); otherwise the
+  // trackers are reported OCCLUDED and no Position is sent (the driver would mark them valid
+  // again). Never blocks. False (and `out_error`) when a connection had to be dropped; no client
+  // connected is not a failure (counted).
   [[nodiscard]] bool publish(const TrackerPoseOut* poses, std::size_t count, bool tracked, std::string& out_error);
 
   [[nodiscard]] BridgeStats stats() const;
