@@ -204,7 +204,9 @@ std::string calibration_text(const json& r) {
 std::string mounting_text(const json& m) {
   if (!m.is_object() || !m.contains("roles")) return "none";
   std::string s;
-  for (const char* role : {"head", "left_hand", "right_hand"}) {
+  // The headset and controllers, then the body trackers bodyd lists (those measured).
+  for (const char* role : {"head", "left_hand", "right_hand", "hips", "chest", "left_foot", "right_foot", "left_knee",
+                           "right_knee", "left_elbow", "right_elbow"}) {
     if (!m["roles"].contains(role)) continue;
     const json& r = m["roles"][role];
     const std::string origin = r.value("origin", std::string("?"));
@@ -214,7 +216,9 @@ std::string mounting_text(const json& m) {
                      : origin == "file"  ? std::string("calibration pose (mounting file)")
                      : origin == "auto"  ? std::string("auto (a still second)")
                                          : origin);
-    if (origin != "default")
+    if (r.contains("offset_cm"))  // a body tracker: no default
+      s += fmt::format(" ({:.1f} cm from its joint)", r.value("offset_cm", 0.0));
+    else if (origin != "default")
       s += fmt::format(" ({:.1f} deg, {:.1f} cm from the default)", r.value("from_default_deg", 0.0), r.value("from_default_cm", 0.0));
     if (!r.value("device_frames", false)) s += ", no device poses yet";
   }

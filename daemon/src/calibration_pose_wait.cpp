@@ -8,8 +8,8 @@
 namespace bodyd::daemon {
 
 CalibrationPoseWait::CalibrationPoseWait(const BodyReference& reference, const Mounting& defaults,
-                                         std::int64_t start_ns, double timeout_s)
-    : calibrator_(reference, defaults, PoseCalibrationOptions{}),
+                                         std::int64_t start_ns, double timeout_s, const BodyJointsInPose& body_joints)
+    : calibrator_(reference, defaults, PoseCalibrationOptions{}, body_joints),
       start_ns_(start_ns),
       deadline_ns_(start_ns + static_cast<std::int64_t>(std::llround(timeout_s * 1e9))),
       timeout_s_(timeout_s),
@@ -49,16 +49,17 @@ std::optional<CalibrationPoseWait::Outcome> CalibrationPoseWait::tick(std::int64
       return Outcome{std::nullopt, stopped_at(last_tracked_head_ns_) +
                                        "the headset lost tracking (its samples say it is not tracked, for 0.5 s): "
                                        "is the play space lit and in view? Then retry"};
-    // A controller whose newest sample was tracked and then stopped holds the still second up for
-    // ever (the calibrator waits for its second to complete). One that reported itself lost is
-    // left out of the calibration instead, as before.
-    for (Role hand : {Role::LeftHand, Role::RightHand}) {
-      const auto h = static_cast<std::size_t>(hand);
+    // A controller or body tracker whose newest sample was tracked and then stopped holds the
+    // still second up for ever (the calibrator waits for its second to complete). One that
+    // reported itself lost is left out of the calibration instead, as before.
+    for (Role r : kRoles) {
+      const auto h = static_cast<std::size_t>(r);
+      if (r == Role::Head) continue;
       if (last_arrival_ns_[h] != 0 && last_valid_[h] && now_ns - last_arrival_ns_[h] > kStoppedNs)
         return Outcome{std::nullopt, stopped_at(last_arrival_ns_[h]) +
-                                         fmt::format("the {} controller's samples stopped (none for 0.5 s): is it "
+                                         fmt::format("the {} {}'s samples stopped (none for 0.5 s): is it "
                                                      "switched on and tracking? Then retry",
-                                                     role_name(hand))};
+                                                     role_name(r), is_xr_role(r) ? "controller" : "tracker")};
     }
   }
   if (now_ns <= deadline_ns_) return std::nullopt;

@@ -31,8 +31,9 @@ class CalibrationPoseWait {
   };
 
   // Starts at `start_ns`, when the headset was tracking (the daemon checks that first).
+  // `body_joints`: where body trackers' joints sit in the pose (PoseCalibrator).
   CalibrationPoseWait(const BodyReference& reference, const Mounting& defaults, std::int64_t start_ns,
-                      double timeout_s);
+                      double timeout_s, const BodyJointsInPose& body_joints = {});
 
   // A sample as the device sent it (before any mounting) and when it arrived. The outcome when it
   // completes the still second, or ends a still second that is clearly not the pose.

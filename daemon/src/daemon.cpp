@@ -157,6 +157,8 @@ struct Daemon::Impl final : ControlTarget {
   // The calibration poses' results by request id, handed to the control thread (at most two: one
   // answered, not yet collected, and the next one's).
   std::map<std::uint64_t, PoseResult> pose_results;
+  // The auto calibration's body-tracker mountings to keep: the main thread (Daemon::run) writes it.
+  std::optional<MountingState> auto_to_keep;
   std::uint64_t last_pose_id = 0;  // control thread
   bool offsets_configured = false;
 
@@ -196,6 +198,7 @@ struct Daemon::Impl final : ControlTarget {
   // Reconstruction thread; status reads mounting_status (shared_mutex).
   BodyReference body_reference;
   Mounting default_mount;
+  BodyJointsInPose body_joints;  // where body trackers' joints sit in the calibration pose
   MountingOrigins mounting_origin{MountingOrigin::Default, MountingOrigin::Default, MountingOrigin::Default};
   // The calibration pose: started by the control thread (calibrate_pose), fed raw samples and
   // ticked here, its reply handed back through pose_results (shared_mutex).
@@ -205,6 +208,8 @@ struct Daemon::Impl final : ControlTarget {
   // first kAutoHeadRefineWindowNs of head samples.
   std::optional<PoseCalibrator> auto_pose;
   std::int64_t auto_pose_first_ns = INT64_MIN;  // arrival of its first head sample
+  std::array<bool, kRoleCount> body_device_unused{};  // body roles whose device poses were not used (uncalibrated)
+  bool auto_refine_head = false;                 // it refines the head (auto height calibration, default head)
   static constexpr std::int64_t kAutoHeadRefineWindowNs = 10'000'000'000;
 
   Impl(DaemonConfig c, ReconstructorFactory f)
@@ -274,20 +279,25 @@ struct Daemon::Impl final : ControlTarget {
   void handle_sample(drivers::SourceSample& in) {
     TrackerSample& s = in.sample;
     role_arrivals[static_cast<std::size_t>(s.role)] = {in.arrival_ns, in.source_index};
-    if (!is_xr_role(s.role) && s.frame == PoseFrame::Device) {
-      // A body tracker's device pose: its mounting on the joint (a strap a few centimetres off
-      // and turned) is not measured yet, and a device pose is never used through an unknown
+    // The raw sample (before mounting, offsets, re-centring) to the calibrations, body trackers'
+    // device poses included: the calibration pose measures their mountings.
+    feed_pose_calibrators(s, in.arrival_ns);
+    if (!is_xr_role(s.role) && s.frame == PoseFrame::Device &&
+        mounting_origin[static_cast<std::size_t>(s.role)] == MountingOrigin::Default) {
+      // A body tracker's device pose before its mounting is measured (a calibration pose, the
+      // auto calibration's still second, or the mounting file): its strap sits a few centimetres
+      // off the joint and turned any way, and a device pose is never used through an unknown
       // offset at full weight. Joint poses (frames=joint, logs, the simulator) are used.
       stats.body_device_samples_ignored.add();
+      body_device_unused[static_cast<std::size_t>(s.role)] = true;
       if (const std::uint64_t n = stats.body_device_samples_ignored.get(); (n & (n - 1)) == 0)
-        spdlog::info("{} sample (a body tracker's device pose) not used: body trackers' mountings are not calibrated "
-                     "yet; give its source ?frames=joint if it sends the joint's own pose (docs/conventions.md, "
-                     "\"Tracker roles\"; logged at the 1st, 2nd, 4th, 8th...)",
+        spdlog::info("{} sample (a body tracker's device pose) not used: its mounting is not calibrated yet: stand in "
+                     "the calibration pose (`bodyd-ctl calibrate --pose`), or give its source ?frames=joint if it "
+                     "sends the joint's own pose (docs/conventions.md, \"Tracker roles\"; logged at the 1st, 2nd, 4th, 8th...)",
                      role_name(s.role));
       return;
     }
     const TrackerSample as_received = s;  // before the mounting and offset (OutputFrame::head_as_received)
-    feed_pose_calibrators(s, in.arrival_ns);
     const bool first_device_pose = s.frame == PoseFrame::Device && !conditioner.device_frames_seen(s.role);
     conditioner.condition(s);
     // status's device_frames per role (issue 43 item 13: after a restart with a kept mounting it
@@ -404,9 +414,14 @@ struct Daemon::Impl final : ControlTarget {
         if (auto_pose_first_ns == INT64_MIN) auto_pose_first_ns = arrival_ns;
         else if (arrival_ns - auto_pose_first_ns > kAutoHeadRefineWindowNs) {
           auto_pose.reset();
-          spdlog::info("auto calibration: no still second of the headset and controllers in the first {} s: the default "
-                       "head mounting stays (`bodyd-ctl calibrate --pose` measures it)",
-                       kAutoHeadRefineWindowNs / 1'000'000'000);
+          if (auto_refine_head)
+            spdlog::info("auto calibration: no still second of the headset and controllers in the first {} s: the "
+                         "default head mounting stays (`bodyd-ctl calibrate --pose` measures it)",
+                         kAutoHeadRefineWindowNs / 1'000'000'000);
+          if (any_body_tracker_unmeasured())
+            spdlog::info("auto calibration: no still second in the first {} s: body trackers not measured yet stay "
+                         "unused until `bodyd-ctl calibrate --pose`",
+                         kAutoHeadRefineWindowNs / 1'000'000'000);
         }
       }
     }
@@ -433,7 +448,9 @@ struct Daemon::Impl final : ControlTarget {
   // calibrate --from-head: a standing head sways at a few cm/s; a slow walk moves at 0.5 m/s.
   static constexpr double kMaxStandingHeadSpeedMS = 0.2;
   void refine_head_mounting(const PoseCalibration& c) {
-    if (!c.device_frames || mounting_origin[0] != MountingOrigin::Default) return;
+    if (!c.device_frames) return;
+    apply_auto_body_mountings(c);
+    if (mounting_origin[0] != MountingOrigin::Default || !auto_refine_head) return;
     const RigidTransform& T = c.mounting.T_device_joint[0];
     const double change_deg = mounting_difference(T, default_mount.T_device_joint[0]).angle_deg;
     if (change_deg > kMaxAutoHeadChangeDeg) {
@@ -450,15 +467,78 @@ struct Daemon::Impl final : ControlTarget {
         fmt::format("t_ns {}: mounting head {} (auto)", c.t_ns, transform_text(conditioner.mounting().T_device_joint[0])));
   }
 
+  // The auto calibration's still second also measures the body trackers it saw (the pose passed
+  // the calibration pose's checks: arms hanging, every tracker near its joint and on its side).
+  // Without it an uncalibrated body tracker is not used at all. Kept in the mounting file.
+  void apply_auto_body_mountings(const PoseCalibration& c) {
+    std::string measured;
+    for (Role r : kRoles) {
+      const auto i = static_cast<std::size_t>(r);
+      if (is_xr_role(r) || !c.measured[i] || mounting_origin[i] != MountingOrigin::Default) continue;
+      conditioner.set_mounting(r, c.mounting.T_device_joint[i]);
+      mounting_origin[i] = MountingOrigin::Auto;
+      measured += fmt::format("{}{} ({:.0f} cm from its joint in the pose)", measured.empty() ? "" : ", ", role_name(r), c.offset_cm[i]);
+    }
+    if (measured.empty()) return;
+    recon->reset();  // the inputs jumped
+    publish_mounting_status();
+    spdlog::info("auto calibration: body trackers measured from a still second: {}", measured);
+    recorder.comment(fmt::format("t_ns {}: mounting {} (auto)", c.t_ns, mounting_text(conditioner.mounting())));
+    if (!config.mounting_file.empty()) {
+      MountingState st = mounting_state_to_keep();
+      std::lock_guard lock(shared_mutex);
+      auto_to_keep = std::move(st);
+    }
+  }
+
+  // Main thread: writes what the auto calibration measured to the mounting file, off the
+  // reconstruction thread (the disk may wait).
+  void keep_auto_mounting() {
+    std::optional<MountingState> st;
+    {
+      std::lock_guard lock(shared_mutex);
+      st.swap(auto_to_keep);
+    }
+    if (!st) return;
+    if (std::string e = write_mounting_state(config.mounting_file, *st); !e.empty())
+      spdlog::warn("auto calibration: {} (the body trackers' mountings hold until bodyd stops)", e);
+  }
+
+  // A body tracker has sent device poses that cannot be used until its mounting is measured.
+  [[nodiscard]] bool any_body_tracker_unmeasured() const {
+    for (Role r : kRoles)
+      if (!is_xr_role(r) && body_device_unused[static_cast<int>(r)] && mounting_origin[static_cast<int>(r)] == MountingOrigin::Default)
+        return true;
+    return false;
+  }
+
+  // What the mounting file is to keep now.
+  MountingState mounting_state_to_keep() {
+    MountingState st;
+    st.mounting = conditioner.mounting();
+    for (Role r : kRoles) st.measured[static_cast<int>(r)] = mounting_origin[static_cast<int>(r)] != MountingOrigin::Default;
+    st.head_height_m = calibration.height_calibrated() ? recon->head_height_m() : 0.0;
+    st.calibrated = utc_now();
+    return st;
+  }
+
   // Applies a calibration pose's result: mountings, the height. Returns the control reply and
   // what the mounting file is to keep (the control thread writes it).
   PoseResult apply_pose_calibration(const PoseCalibration& c) {
     json roles = json::object();
-    for (Role r : kXrRoles) {
+    for (Role r : kRoles) {
       const int i = static_cast<int>(r);
       if (!c.measured[i]) continue;
       conditioner.set_mounting(r, c.mounting.T_device_joint[i]);
       mounting_origin[i] = MountingOrigin::Pose;
+      if (!is_xr_role(r)) {
+        // A body tracker has no default to compare with: how far it sits from its joint.
+        roles[std::string(role_name(r))] = {{"offset_cm", 100.0 * c.mounting.T_device_joint[i].position_m.norm()},
+                                            {"from_pose_joint_cm", c.offset_cm[i]},
+                                            {"sd_deg", c.rotation_sd_deg[i]},
+                                            {"motion_deg", c.motion_deg[i]}};
+        continue;
+      }
       const MountingDifference d = mounting_difference(conditioner.mounting().T_device_joint[i], default_mount.T_device_joint[i]);
       roles[std::string(role_name(r))] = {{"from_default_deg", d.angle_deg},
                                           {"from_default_cm", d.position_cm},
@@ -481,11 +561,8 @@ struct Daemon::Impl final : ControlTarget {
                                  mounting_text(mounting)));
     PoseResult result;
     if (!config.mounting_file.empty()) {
-      MountingState& st = result.to_keep.emplace();
-      st.mounting = mounting;
-      for (Role r : kXrRoles) st.measured[static_cast<int>(r)] = mounting_origin[static_cast<int>(r)] != MountingOrigin::Default;
+      MountingState& st = result.to_keep.emplace(mounting_state_to_keep());
       st.head_height_m = height_error.empty() ? recon->head_height_m() : 0.0;
-      st.calibrated = utc_now();
     }
     std::lock_guard lock(shared_mutex);
     json reply{{"ok", height_error.empty()},
@@ -613,7 +690,7 @@ struct Daemon::Impl final : ControlTarget {
         if (!latest_head.fresh(now_ns))
           return control_error(
               "calibrate from pose: no valid head sample in the last 2 s: wear the headset (is it tracking?) and retry");
-        pose_wait.emplace(body_reference, default_mount, now_ns, c.height_m);
+        pose_wait.emplace(body_reference, default_mount, now_ns, c.height_m, body_joints);
         pose_id = c.pose_id;
         spdlog::info("calibration pose: waiting up to {:.0f} s for a still second (stand straight, look ahead, arms "
                      "relaxed at the sides)",
@@ -898,13 +975,20 @@ std::string Daemon::start() {
     return std::string("device mounting: ") + e.what();
   }
   d.default_mount = default_mounting(d.body_reference);
+  try {
+    d.body_joints = body_joints_in_pose(d.recon->skeleton());
+  } catch (const std::invalid_argument& e) {
+    // A skeleton without the reference's joints (a reduced test rig): no body tracker can be
+    // placed in the pose, so none is measured and their device poses stay unused.
+    spdlog::info("body trackers' mountings cannot be measured with this skeleton ({})", e.what());
+  }
   d.conditioner.set_mounting(d.default_mount);
   if (!d.config.mounting_file.empty()) {
     std::string merror;
     if (std::optional<MountingState> st =
             read_mounting_state(d.config.mounting_file, d.default_mount, PoseCalibrationOptions{}, merror)) {
       for (const std::string& refused : st->refused) spdlog::warn("{}", refused);
-      for (Role r : kXrRoles) {
+      for (Role r : kRoles) {
         const int i = static_cast<int>(r);
         if (!st->measured[i]) continue;
         d.conditioner.set_mounting(r, st->mounting.T_device_joint[i]);
@@ -933,8 +1017,13 @@ std::string Daemon::start() {
       spdlog::warn("{}: the default device mounting is used", merror);
     }
   }
-  if (d.calibration.auto_waiting() && d.mounting_origin[0] == MountingOrigin::Default)
-    d.auto_pose.emplace(d.body_reference, d.default_mount, PoseCalibrationOptions{});
+  // The first still second of the session refines the headset's default mounting (with the auto
+  // height calibration) and measures the body trackers not measured yet (auto_calibrate on).
+  bool body_unmeasured = false;
+  for (Role r : kRoles) body_unmeasured |= !is_xr_role(r) && d.mounting_origin[static_cast<int>(r)] == MountingOrigin::Default;
+  d.auto_refine_head = d.calibration.auto_waiting() && d.mounting_origin[0] == MountingOrigin::Default;
+  if (d.auto_refine_head || (body_unmeasured && d.config.auto_calibrate))
+    d.auto_pose.emplace(d.body_reference, d.default_mount, PoseCalibrationOptions{}, d.body_joints);
   d.publish_calibration();
   d.publish_mounting_status();
   d.refresh_skeleton();
@@ -1043,10 +1132,12 @@ int Daemon::run(const volatile std::sig_atomic_t* signal_flag) {
     if (d.stop_flag.load() || d.shutdown_requested.load()) break;
     if (d.fatal.load()) break;
     if (d.config.exit_at_end && d.drained.load()) break;
+    d.keep_auto_mounting();
     std::unique_lock lock(d.wake_mutex);
     d.wake.wait_for(lock, std::chrono::milliseconds(50));
   }
   stop();
+  d.keep_auto_mounting();
   if (d.fatal.load()) return 1;
   if (d.config.exit_at_end && d.drained.load() && !d.head_seen) {
     // Not a success: nothing was published (issue 11). Documented in docs/daemon.md.

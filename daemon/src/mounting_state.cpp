@@ -75,10 +75,12 @@ std::optional<MountingState> read_mounting_state(const std::filesystem::path& pa
   }
   const json* roles = member(j, "roles");
   if (!roles || !roles->is_object()) return fail("\"roles\" is not an object");
-  for (Role r : kXrRoles) {
+  for (Role r : kRoles) {
     const auto i = static_cast<std::size_t>(r);
     const std::string name(role_name(r));
     const json* o = member(*roles, name.c_str());
+    // Body trackers' roles are there only once one was measured (and not in files written before).
+    if (!o && !is_xr_role(r)) continue;
     if (!o || !o->is_object()) return fail(fmt::format("roles.{} is not an object", name));
     if (const json* measured = member(*o, "measured")) {
       if (!measured->is_boolean()) return fail(fmt::format("roles.{}.measured is not true or false", name));
@@ -89,7 +91,9 @@ std::optional<MountingState> read_mounting_state(const std::filesystem::path& pa
     if (!finite_numbers(*o, "rotation_xyzw", 4, q))
       return fail(fmt::format("roles.{}.rotation_xyzw is not 4 finite numbers", name));
     const Vec3 pos(p[0], p[1], p[2]);
-    if (pos.norm() > kMaxOffsetM) return fail(fmt::format("roles.{}.position_m is more than {} m from the joint", name, kMaxOffsetM));
+    const double max_offset_m = is_xr_role(r) ? kMaxOffsetM : kMaxBodyTrackerOffsetM;  // as the calibration pose
+    if (pos.norm() > max_offset_m)
+      return fail(fmt::format("roles.{}.position_m is more than {} m from the joint", name, max_offset_m));
     const Quat rot(q[3], q[0], q[1], q[2]);
     if (std::abs(rot.norm() - 1.0) > limits::kQuatNormTolerance)
       return fail(fmt::format("roles.{}.rotation_xyzw is not a unit quaternion", name));
@@ -97,8 +101,9 @@ std::optional<MountingState> read_mounting_state(const std::filesystem::path& pa
     // The limits of the calibration pose that wrote it: a rotation typed by hand (identity is
     // 125 degrees from the headset's default) would tilt every pose.
     const double change_deg = mounting_difference(st.mounting.T_device_joint[i], defaults.T_device_joint[i]).angle_deg;
+    // A body tracker may be strapped turned any way: only its offset is limited (above).
     const double max_deg = max_mounting_change_deg(limits, r);
-    if (st.measured[i] && change_deg > max_deg) {
+    if (is_xr_role(r) && st.measured[i] && change_deg > max_deg) {
       st.measured[i] = false;
       st.refused.push_back(fmt::format("{}: roles.{}.rotation_xyzw is {:.0f} degrees from the default mounting, more "
                                        "than the {:.0f} a calibration pose accepts: the default {} mounting is used ({})",
@@ -110,7 +115,8 @@ std::optional<MountingState> read_mounting_state(const std::filesystem::path& pa
 
 std::string write_mounting_state(const std::filesystem::path& path, const MountingState& st) {
   json roles = json::object();
-  for (Role r : kXrRoles) {
+  for (Role r : kRoles) {
+    if (!is_xr_role(r) && !st.measured[static_cast<std::size_t>(r)]) continue;
     const RigidTransform& T = st.mounting.T_device_joint[static_cast<std::size_t>(r)];
     roles[std::string(role_name(r))] = {
         {"measured", st.measured[static_cast<std::size_t>(r)]},

@@ -3,11 +3,13 @@
 //
 //   {"format": "bodyd-mounting v1", "calibrated": "2026-12-02T10:00:00Z", "head_height_m": 1.52,
 //    "roles": {"head": {"measured": true, "position_m": [0, -0.1, 0.08], "rotation_xyzw": [...]},
-//              "left_hand": {...}, "right_hand": {...}}}
+//              "left_hand": {...}, "right_hand": {...},
+//              "hips": {...}, ... only the body trackers measured (issue 44)}}
 //
 // Read at start, with the rules of every persisted file (docs/reliability.md, "Persisted
-// files"): at most kMaxPersistedFileBytes, each field type-checked, each measured mounting
-// within the calibration pose's limits of the default; written through a private temporary
+// files"): at most kMaxPersistedFileBytes, each field type-checked, each measured headset or
+// controller mounting within the calibration pose's limits of the default (a body tracker's
+// within kMaxOffsetM of its joint, turned any way); written through a private temporary
 // file renamed over it (mode 0600), by the control thread (persisted_file.h).
 #pragma once
 

@@ -51,8 +51,10 @@ json source_status_json(const drivers::SourceStatus& st, const std::array<double
 json mounting_status_json(const Mounting& mounting, const Mounting& defaults, const MountingOrigins& origins,
                           const SampleConditioner& conditioner, const std::string& mounting_file) {
   json roles = json::object();
-  for (Role r : kXrRoles) {
+  for (Role r : kRoles) {
     const int i = static_cast<int>(r);
+    // Body trackers: listed once measured (their device poses are not used before).
+    if (!is_xr_role(r) && origins[i] == MountingOrigin::Default) continue;
     const RigidTransform& T = mounting.T_device_joint[i];
     const MountingDifference d = mounting_difference(T, defaults.T_device_joint[i]);
     roles[std::string(role_name(r))] = {{"origin", std::string(name(origins[i]))},
@@ -61,6 +63,12 @@ json mounting_status_json(const Mounting& mounting, const Mounting& defaults, co
                                         {"rotation_xyzw", {T.rotation.x(), T.rotation.y(), T.rotation.z(), T.rotation.w()}},
                                         {"from_default_deg", d.angle_deg},
                                         {"from_default_cm", d.position_cm}};
+    if (!is_xr_role(r)) {  // no default to compare with: how far the device sits from its joint
+      json& o = roles[std::string(role_name(r))];
+      o.erase("from_default_deg");
+      o.erase("from_default_cm");
+      o["offset_cm"] = 100.0 * T.position_m.norm();
+    }
   }
   return json{{"roles", roles}, {"file", mounting_file}};
 }

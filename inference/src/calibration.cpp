@@ -1,4 +1,5 @@
 #include "bodyd/inference/calibration.h"
+#include "bodyd/inference/ik.h"
 
 #include "bodyd/motion/limits.h"
 
@@ -156,9 +157,27 @@ double max_mounting_change_deg(const PoseCalibrationOptions& options, Role r) {
   return r == Role::Head ? options.max_head_change_deg : options.max_grip_change_deg;
 }
 
+BodyJointsInPose body_joints_in_pose(const Skeleton& skeleton) {
+  const StandingReference ref = standing_reference(skeleton);
+  const int head = skeleton.find("Head");
+  if (head < 0 || !(ref.head_height_m > 0.0)) throw std::invalid_argument("body_joints_in_pose: the skeleton has no Head joint");
+  BodyJointsInPose b;
+  const Vec3 head_p = ref.global.positions[static_cast<std::size_t>(head)];
+  for (Role r : kRoles) {
+    if (is_xr_role(r)) continue;
+    const int j = skeleton.find(role_joint_name(r));
+    if (j < 0) continue;
+    const auto i = static_cast<std::size_t>(r);
+    b.known[i] = true;
+    b.from_head[i] = (ref.global.positions[static_cast<std::size_t>(j)] - head_p) / ref.head_height_m;
+    b.in_facing[i] = ref.global.rotations[static_cast<std::size_t>(j)].normalized();
+  }
+  return b;
+}
+
 PoseCalibrator::PoseCalibrator(const BodyReference& reference, const Mounting& defaults,
-                               const PoseCalibrationOptions& options)
-    : reference_(reference), defaults_(defaults), options_(options) {
+                               const PoseCalibrationOptions& options, const BodyJointsInPose& body_joints)
+    : reference_(reference), defaults_(defaults), options_(options), body_joints_(body_joints) {
   if (std::string e = validate(options_); !e.empty()) throw std::invalid_argument("PoseCalibrationOptions: " + e);
   // Up to 1000 samples a second per role (headsets report 72 to 120 Hz; more are thinned).
   for (auto& w : window_) w.reserve(static_cast<std::size_t>(options_.still_s * 1000.0) + 4);
@@ -250,6 +269,17 @@ std::optional<PoseCalibration> PoseCalibrator::try_estimate(std::int64_t t_ns) c
     if (tracked && !hs.still) return std::nullopt;   // a moving hand: not the calibration pose
     hand_used[static_cast<size_t>(h)] = tracked;
   }
+  // Body trackers with device poses: each that is tracked must complete a still second too.
+  std::array<bool, kRoleCount> body_used{};
+  for (Role r : kRoles) {
+    const auto i = static_cast<std::size_t>(r);
+    if (is_xr_role(r) || !body_joints_.known[i] || window_[i].empty() || window_[i].front().frame != PoseFrame::Device)
+      continue;
+    if (any_invalid_[i] && t_ns - last_invalid_ns_[i] < still_ns) continue;  // lost in the second: left out
+    st[i] = window_stats(window_[i], t_ns, still_ns, options_);
+    if (!st[i].covers || !st[i].still) return std::nullopt;
+    body_used[i] = true;
+  }
   PoseCalibration c;
   c.t_ns = t_ns;
   c.mounting = defaults_;
@@ -298,8 +328,31 @@ std::optional<PoseCalibration> PoseCalibrator::try_estimate(std::int64_t t_ns) c
       Th.position_m = head.mean_q.conjugate() * (F * h - head.mean_p);
       c.eye_offset_sd_cm = 100.0 * std::hypot(reference_.head_over_wrist_height_sd * mid.y(), reference_.head_ahead_sd_m);
     }
-    c.measured_head_y_m = (head.mean_p + head.mean_q * Th.position_m).y();
-    const std::array<Vec3, kRoleCount> device_p{head.mean_p, st[1].mean_p, st[2].mean_p};
+    const Vec3 head_joint = head.mean_p + head.mean_q * Th.position_m;
+    c.measured_head_y_m = head_joint.y();
+    // Body trackers: the joint as in the reference standing pose under the Head joint, at the
+    // user's standing height, turned to the headset's heading.
+    const double standing_m = standing_height_from_head(c.measured_head_y_m, options_.height);
+    for (Role r : kRoles) {
+      const auto i = static_cast<std::size_t>(r);
+      if (!body_used[i]) continue;
+      const Vec3 joint_p = head_joint + F * (body_joints_.from_head[i] * standing_m);
+      RigidTransform& T = c.mounting.T_device_joint[i];
+      T.rotation = (st[i].mean_q.conjugate() * F * body_joints_.in_facing[i]).normalized();
+      const bool has_position = window_[i].back().has_position;
+      // Only the height difference is kept: a person's stance moves the hips and feet sideways and
+      // ahead of the reference's by more than a strap's offset, while the joints' heights under
+      // the head hold (docs/evaluation.md, "Body trackers' mountings": offset error 4.6 cm this
+      // way against 8.8 cm with the reference's whole offset). The whole offset still says
+      // whether the tracker is near its joint at all (pose_problem).
+      const Vec3 off = joint_p - st[i].mean_p;
+      T.position_m = has_position ? Vec3(st[i].mean_q.conjugate() * Vec3(0.0, off.y(), 0.0)) : Vec3::Zero();
+      c.measured[i] = true;
+      c.rotation_sd_deg[i] = kBodyTrackerPoseSdDeg;
+      c.offset_cm[i] = has_position ? 100.0 * off.norm() : 0.0;
+    }
+    std::array<Vec3, kRoleCount> device_p{};
+    for (std::size_t i = 0; i < kRoleCount; ++i) device_p[i] = st[i].mean_p;
     if (std::string why = pose_problem(c, device_p); !why.empty()) {
       refusal_ = std::move(why);
       return std::nullopt;
@@ -334,6 +387,29 @@ std::string PoseCalibrator::pose_problem(const PoseCalibration& c, const std::ar
       return fmt::format("the {} controller is turned {:.0f} degrees from pointing ahead: hold each controller "
                          "naturally, pointing forward",
                          role_name(kRoles[static_cast<size_t>(h)]), change);
+    }
+  }
+  for (Role r : kRoles) {
+    const auto i = static_cast<std::size_t>(r);
+    if (is_xr_role(r) || !c.measured[i]) continue;
+    if (c.offset_cm[i] > 100.0 * kMaxBodyTrackerOffsetM) {
+      refusal_clear_ = true;  // the next still second finds the tracker where it is
+      return fmt::format("the {} tracker is {:.0f} cm from your {} in the calibration pose (at most {:.0f}): is it "
+                         "strapped there, and is its role in SteamVR or the sender the right one?",
+                         role_name(r), c.offset_cm[i], role_joint_name(r), 100.0 * kMaxBodyTrackerOffsetM);
+    }
+    const std::string_view name = role_name(r);
+    const bool left = name.rfind("left_", 0) == 0, right = name.rfind("right_", 0) == 0;
+    if ((left || right) && window_[i].back().has_position) {
+      // Its side of the headset in the facing frame (+X is the body's left).
+      const Quat F = facing_from_device(window_[0].back().rotation);
+      const double lateral = (F.conjugate() * (device_p[i] - device_p[0])).x();
+      if ((left && lateral < -kMaxBodyTrackerWrongSideM) || (right && lateral > kMaxBodyTrackerWrongSideM)) {
+        refusal_clear_ = true;
+        return fmt::format("the {} tracker is on your {} side ({:.0f} cm from the headset's centre line): are the left "
+                           "and right trackers' roles swapped?",
+                           name, left ? "right" : "left", 100.0 * std::abs(lateral));
+      }
     }
   }
   const double head_change = mounting_difference(c.mounting.T_device_joint[0], defaults_.T_device_joint[0]).angle_deg;

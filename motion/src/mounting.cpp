@@ -330,8 +330,12 @@ std::string transform_text(const RigidTransform& T) {
 
 std::string mounting_text(const Mounting& m) {
   std::string out;
-  for (Role r : kXrRoles)  // the devices with a default mounting (body trackers: issue 44, not yet)
-    out += fmt::format("{}{} {}", out.empty() ? "" : "; ", role_name(r), transform_text(m.T_device_joint[static_cast<size_t>(r)]));
+  for (Role r : kRoles) {
+    const RigidTransform& T = m.T_device_joint[static_cast<size_t>(r)];
+    // A body tracker's only when it has one (measured, or a simulated strap).
+    if (!is_xr_role(r) && T.position_m.isZero(0.0) && T.rotation.coeffs().isApprox(Quat::Identity().coeffs(), 0.0)) continue;
+    out += fmt::format("{}{} {}", out.empty() ? "" : "; ", role_name(r), transform_text(T));
+  }
   return out;
 }
 

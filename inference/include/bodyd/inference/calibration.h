@@ -120,9 +120,42 @@ class StandingHeightDetector {
 //    height and its depth from the wrists' (the reference's ratios); otherwise the default;
 //  - the standing head height: the Head joint's height through the new mounting, with the
 //    stance correction of standing_height_from_head().
+//  - each body tracker's mounting (hips, chest, feet, knees, elbows; device poses): its joint is
+//    taken to sit as in the reference standing pose under the measured head (BodyJointsInPose);
+//    a rotation-only tracker gets its rotation only. A tracker far from its joint or on the wrong
+//    side refuses the pose.
 // Joint-frame samples (PoseFrame::Joint) have no mounting to learn: only the height is measured.
 
 namespace bodyd {
+
+// Body trackers (issue 44): where each body role's joint sits in the calibration pose, from the
+// reference standing pose (ik.h, standing_reference) on the reconstructor's skeleton: its position
+// from the Head joint per metre of standing head height and its rotation, both in the facing frame
+// (+Z ahead, +Y up, +X the body's left). In the pose, a body tracker's mounting is
+// T_device_joint = T_world_device^-1 * (this joint placed under the measured head, turned to the
+// headset's heading).
+struct BodyJointsInPose {
+  std::array<bool, kRoleCount> known{};        // body roles whose joint the skeleton has
+  std::array<Vec3, kRoleCount> from_head{};    // (joint - Head joint) / standing head height
+  std::array<Quat, kRoleCount> in_facing{};
+};
+// Throws std::invalid_argument when the skeleton lacks a joint of the standing reference.
+[[nodiscard]] BodyJointsInPose body_joints_in_pose(const Skeleton& skeleton);
+
+// A body tracker further than this from its joint in the calibration pose is not where its role
+// says (another joint, or a swapped role): the pose is refused, naming it. Strapped trackers sit
+// a few centimetres off the joint; a person's stance moves a foot or a knee by up to ~10 cm from
+// the reference's.
+inline constexpr double kMaxBodyTrackerOffsetM = 0.30;
+// A left-side body tracker (left_foot, left_knee, left_elbow) more than this on the body's right
+// of the headset in the pose (or a right one on the left) has the other side's role.
+inline constexpr double kMaxBodyTrackerWrongSideM = 0.03;
+// The certainty reported for a body tracker's measured mounting rotation: the joints' rotations
+// in people's standing poses differ from the reference's by this much on average (feet turned
+// out, hips turned from the head): 17.1 deg on style-held-out set A's standing starts, 7.6 on set
+// B's (bodyd-eval --device-frames xr --calibration-pose 0 --trackers head,hands,hips,feet;
+// docs/evaluation.md, "Body trackers' mountings"), about 12 over both.
+inline constexpr double kBodyTrackerPoseSdDeg = 12.0;
 
 struct PoseCalibrationOptions {
   double still_s = 1.0;                 // how long every tracked device must hold still
@@ -160,12 +193,18 @@ struct PoseCalibration {
   std::array<double, kRoleCount> rotation_sd_deg{};
   double eye_offset_sd_cm = 0.0;
   std::array<double, kRoleCount> motion_deg{};  // largest rotation from the mean in the window
+  // Body trackers: the device's distance from where the reference pose puts its joint (the
+  // refusal's measure; the mounting keeps only its vertical part).
+  std::array<double, kRoleCount> offset_cm{};
   std::int64_t t_ns = 0;                        // the sample that completed the still second
 };
 
 class PoseCalibrator {
  public:
-  PoseCalibrator(const BodyReference& reference, const Mounting& defaults, const PoseCalibrationOptions& options = {});
+  // `body_joints`: where body trackers' joints sit in the pose (body_joints_in_pose of the
+  // reconstructor's skeleton); without one (all unknown) body trackers are not measured.
+  PoseCalibrator(const BodyReference& reference, const Mounting& defaults, const PoseCalibrationOptions& options = {},
+                 const BodyJointsInPose& body_joints = {});
   // Feeds a sample as the device sent it (before any mounting). Returns the result once: at the
   // sample that completes a still second of the head and of every hand that is tracked in it.
   [[nodiscard]] std::optional<PoseCalibration> push(const TrackerSample& sample);
@@ -188,6 +227,7 @@ class PoseCalibrator {
   BodyReference reference_;
   Mounting defaults_;
   PoseCalibrationOptions options_;
+  BodyJointsInPose body_joints_;
   std::array<std::vector<TrackerSample>, kRoleCount> window_;  // valid samples of the last still_s
   std::array<std::int64_t, kRoleCount> last_invalid_ns_{};      // newest invalid sample per role
   std::array<bool, kRoleCount> any_invalid_{};

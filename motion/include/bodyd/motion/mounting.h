@@ -107,7 +107,8 @@ inline constexpr std::string_view kBodyReferenceFile = "data/body-reference.json
 // The default mounting from a reference (the header comment; docs/conventions.md).
 [[nodiscard]] Mounting default_mounting(const BodyReference& reference);
 
-// "head position_m x,y,z rotation_xyzw x,y,z,w; left_hand ...; right_hand ..." (logs, headers).
+// "head position_m x,y,z rotation_xyzw x,y,z,w; left_hand ...; right_hand ..." (logs, headers),
+// then each body tracker's that is not the identity ("; hips ...").
 [[nodiscard]] std::string mounting_text(const Mounting& mounting);
 [[nodiscard]] std::string transform_text(const RigidTransform& T);
 
