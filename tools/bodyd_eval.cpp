@@ -273,7 +273,7 @@ int main(int argc, char** argv) {
         const std::int64_t t_frame = std::llround(*hold_frame * clip.frame_time_s * 1e9);
         std::array<bodyd::RigidTransform, bodyd::kRoleCount> joints;
         for (bodyd::Role r : bodyd::kRoles) joints[static_cast<std::size_t>(r)] = bodyd::pose_of(trajectory.pose_at(r, t_frame));
-        samples = bodyd::with_held_pose(samples, joints, *o.device_mounting, o.rate_hz, 1.2);
+        samples = bodyd::with_held_pose(samples, joints, *o.device_mounting, o.rate_hz, 1.2, /*body_roles=*/true);
       }
       return samples;
     };

@@ -195,22 +195,31 @@ class Calibrating final : public Reconstructor {
 // through the measured one; with `calibrate_height` its height is applied too.
 class Mounted final : public Reconstructor {
  public:
+  // `known`: the roles whose mounting `defaults` holds for sure (an oracle); body trackers not
+  // known wait for the calibration pose.
   Mounted(std::unique_ptr<Reconstructor> inner, const Mounting& defaults, std::optional<PoseCalibrator> calibrator,
-          bool calibrate_height)
-      : inner_(std::move(inner)), mounting_(defaults), calibrator_(std::move(calibrator)), calibrate_height_(calibrate_height) {}
+          bool calibrate_height, bool oracle)
+      : inner_(std::move(inner)), mounting_(defaults), calibrator_(std::move(calibrator)), calibrate_height_(calibrate_height) {
+    known_.fill(oracle);
+  }
   std::string_view name() const override { return inner_->name(); }
   const Skeleton& skeleton() const override { return inner_->skeleton(); }
   void push(const TrackerSample& s) override {
     if (calibrator_) {
       if (std::optional<PoseCalibration> c = calibrator_->push(s)) {
         for (Role r : kRoles)
-          if (c->measured[static_cast<size_t>(r)])
+          if (c->measured[static_cast<size_t>(r)]) {
             mounting_.T_device_joint[static_cast<size_t>(r)] = c->mounting.T_device_joint[static_cast<size_t>(r)];
+            known_[static_cast<size_t>(r)] = true;
+          }
         inner_->reset();  // the inputs jumped, as in the daemon
         if (calibrate_height_) (void)calibrate_from_head_height(*inner_, c->head_height_m);
         found_ = std::move(c);
       }
     }
+    // A body tracker's device pose is not used before its mounting is known (the daemon's rule,
+    // daemon.cpp handle_sample).
+    if (!is_xr_role(s.role) && s.frame == PoseFrame::Device && !known_[static_cast<size_t>(s.role)]) return;
     inner_->push(device_to_joint(s, mounting_.T_device_joint[static_cast<size_t>(s.role)]));
   }
   bool reconstruct(std::int64_t t_ns, BodyPose& out) override { return inner_->reconstruct(t_ns, out); }
@@ -226,13 +235,30 @@ class Mounted final : public Reconstructor {
  private:
   std::unique_ptr<Reconstructor> inner_;
   Mounting mounting_;
+  std::array<bool, kRoleCount> known_{};
   std::optional<PoseCalibrator> calibrator_;
   bool calibrate_height_;
   std::optional<PoseCalibration> found_;
 };
 
-EvalReport::MountingError mounting_error(const Mounting& est, const Mounting& truth) {
+EvalReport::MountingError mounting_error(const Mounting& est, const Mounting& truth,
+                                         const std::array<bool, kRoleCount>& body_roles,
+                                         const std::array<bool, kRoleCount>& rotation_only) {
   EvalReport::MountingError e;
+  // Body trackers: the mean over `body_roles` (those tracked, or those measured). A rotation-only
+  // tracker's offset is not used, so not scored.
+  double n = 0.0, n_offset = 0.0;
+  for (Role r : kRoles) {
+    const auto i = static_cast<size_t>(r);
+    if (is_xr_role(r) || !body_roles[i]) continue;
+    e.body_deg += geodesic_angle(est.T_device_joint[i].rotation, truth.T_device_joint[i].rotation) * 180.0 / M_PI;
+    n += 1.0;
+    if (rotation_only[i]) continue;
+    e.body_offset_cm += 100.0 * (est.T_device_joint[i].position_m - truth.T_device_joint[i].position_m).norm();
+    n_offset += 1.0;
+  }
+  e.body_n = n;  // sums here; divide_error makes them means over role-clips
+  e.body_offset_n = n_offset;
   const RigidTransform& h = est.T_device_joint[0];
   const RigidTransform& ht = truth.T_device_joint[0];
   e.head_deg = geodesic_angle(h.rotation, ht.rotation) * 180.0 / M_PI;
@@ -255,6 +281,10 @@ void add_error(EvalReport::MountingError& sum, const EvalReport::MountingError& 
   sum.grip_deg += e.grip_deg;
   sum.eye_offset_cm += e.eye_offset_cm;
   sum.grip_offset_cm += e.grip_offset_cm;
+  sum.body_deg += e.body_deg;
+  sum.body_offset_cm += e.body_offset_cm;
+  sum.body_n += e.body_n;
+  sum.body_offset_n += e.body_offset_n;
 }
 
 void divide_error(EvalReport::MountingError& e, double n) {
@@ -264,6 +294,8 @@ void divide_error(EvalReport::MountingError& e, double n) {
   e.grip_deg *= k;
   e.eye_offset_cm *= k;
   e.grip_offset_cm *= k;
+  e.body_deg = e.body_n > 0 ? e.body_deg / e.body_n : std::numeric_limits<double>::quiet_NaN();
+  e.body_offset_cm = e.body_offset_n > 0 ? e.body_offset_cm / e.body_offset_n : std::numeric_limits<double>::quiet_NaN();
 }
 
 // Whether each hand's tracker is valid at each frame time (the newest sample at or before it).
@@ -346,6 +378,15 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
   std::array<std::map<std::string, GroupAcc>, 3> groups;
   double calibration_error_sum_cm = 0.0, scale_error_sum = 0.0, calibration_time_sum_s = 0.0;
   report.trackers = options.trackers;
+  // The body trackers of the set (their mountings are scored with --device-frames xr).
+  std::array<bool, kRoleCount> tracked_body{}, rotation_only{};
+  {
+    std::string set_error;
+    if (const std::optional<TrackerSet> set = parse_tracker_set(options.trackers, set_error)) {
+      for (Role r : set->roles) tracked_body[static_cast<size_t>(r)] = !is_xr_role(r);
+      for (Role r : set->rotation_only) rotation_only[static_cast<size_t>(r)] = true;
+    }
+  }
   report.device_frames = options.device_frames;
   report.calibrate_pose = options.device_frames && options.calibrate_pose;
   const Mounting defaults = default_mounting(options.body_reference);
@@ -395,10 +436,13 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
         Mounted* mounted = nullptr;
         if (options.device_frames) {
           std::optional<PoseCalibrator> calibrator;
-          if (options.calibrate_pose) calibrator.emplace(options.body_reference, defaults, options.pose_calibration);
-          const Mounting start = options.oracle_mounting && options.true_mounting ? options.true_mounting(index) : defaults;
+          if (options.calibrate_pose)
+            calibrator.emplace(options.body_reference, defaults, options.pose_calibration,
+                               body_joints_in_pose(reconstructor->skeleton()));
+          const bool oracle = options.oracle_mounting && options.true_mounting;
+          const Mounting start = oracle ? options.true_mounting(index) : defaults;
           auto wrapped = std::make_unique<Mounted>(std::move(reconstructor), start, std::move(calibrator),
-                                                   options.calibrate && method != "ik");
+                                                   options.calibrate && method != "ik", oracle);
           mounted = wrapped.get();
           reconstructor = std::move(wrapped);
         } else if (options.calibrate && method != "ik") {
@@ -409,10 +453,16 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
         const OnlineRun run = run_online(*reconstructor, samples, frame_times);
         if (mounted != nullptr && m == 0) {
           const Mounting truth = options.true_mounting ? options.true_mounting(index) : defaults;
-          add_error(report.default_mounting_error, mounting_error(defaults, truth));
+          add_error(report.default_mounting_error, mounting_error(defaults, truth, tracked_body, rotation_only));
           if (mounted->found()) {
             ++report.pose_calibrated_clips;
-            add_error(report.calibrated_mounting_error, mounting_error(mounted->found()->mounting, truth));
+            std::array<bool, kRoleCount> measured_body{};
+            for (Role r : kRoles)
+              measured_body[static_cast<size_t>(r)] = tracked_body[static_cast<size_t>(r)] && mounted->found()->measured[static_cast<size_t>(r)];
+            add_error(report.calibrated_mounting_error,
+                      mounting_error(mounted->found()->mounting, truth, measured_body, rotation_only));
+            for (Role r : kRoles)
+              if (tracked_body[static_cast<size_t>(r)] && !measured_body[static_cast<size_t>(r)]) ++report.body_trackers_unmeasured;
             pose_time_sum_s += static_cast<double>(mounted->found()->t_ns - samples.front().t_ns) * 1e-9;
             if (options.calibrate) {
               const PoseCalibration& c = *mounted->found();
@@ -602,7 +652,9 @@ std::string report_json(const EvalReport& report) {
                                     {"head_pitch_deg", number(e.head_pitch_deg)},
                                     {"grip_deg", number(e.grip_deg)},
                                     {"eye_offset_cm", number(e.eye_offset_cm)},
-                                    {"grip_offset_cm", number(e.grip_offset_cm)}};
+                                    {"grip_offset_cm", number(e.grip_offset_cm)},
+                                    {"body_deg", number(e.body_deg)},
+                                    {"body_offset_cm", number(e.body_offset_cm)}};
     };
     nlohmann::ordered_json d;
     d["pose_calibration"] = report.calibrate_pose;
@@ -610,6 +662,7 @@ std::string report_json(const EvalReport& report) {
     d["pose_calibration_time_s"] = report.calibrate_pose ? number(report.pose_calibration_time_s) : nullptr;
     d["default_mounting_error"] = err(report.default_mounting_error);
     d["calibrated_mounting_error"] = report.calibrate_pose ? err(report.calibrated_mounting_error) : nullptr;
+    d["body_trackers_unmeasured"] = report.body_trackers_unmeasured;
     doc["device_frames"] = d;
   }
   return doc.dump(2) + "\n";
@@ -655,6 +708,11 @@ std::string report_table(const EvalReport& report) {
                          what, e.head_deg, e.head_pitch_deg, e.grip_deg, e.eye_offset_cm, e.grip_offset_cm);
     };
     out += "device frames: " + line("default", report.default_mounting_error);
+    if (report.calibrate_pose && report.calibrated_mounting_error.body_n > 0)
+      out += fmt::format("device frames: body trackers' calibrated mountings: {:.2f} deg, offset {:.2f} cm (mean over {} "
+                         "tracker-clips; {} not measured, so not used)\n",
+                         report.calibrated_mounting_error.body_deg, report.calibrated_mounting_error.body_offset_cm,
+                         static_cast<long>(report.calibrated_mounting_error.body_n), report.body_trackers_unmeasured);
     if (report.calibrate_pose)
       out += fmt::format("device frames: calibration pose on {} of {} clips ({:.2f} s after the first sample); ",
                          report.pose_calibrated_clips, report.clips, report.pose_calibration_time_s) +

@@ -163,6 +163,19 @@ Mounting draw_session_mounting(const Mounting& base, const MountingSpread& sprea
     T.rotation = (g.conjugate() * T.rotation).normalized();
     T.position_m = g.conjugate() * T.position_m;
   }
+  std::normal_distribution<double> normal(0.0, 1.0);
+  for (Role r : kRoles) {
+    if (is_xr_role(r)) continue;
+    // Any rotation (a normalised 4-D Gaussian is uniform on the sphere of unit quaternions), an
+    // offset of a uniform length in a uniform direction, in the joint's frame; T_device_joint is
+    // the inverse of the device's pose on the joint.
+    const double a = normal(gen), b = normal(gen), c = normal(gen), d = normal(gen);
+    const Quat turn = Quat(a, b, c, d).normalized();
+    const Vec3 dir = Vec3(normal(gen), normal(gen), normal(gen)).normalized();
+    const double length = spread.strap_min_m + (spread.strap_max_m - spread.strap_min_m) * (uniform(0.5) + 0.5);
+    const RigidTransform T_joint_device{dir * length, turn};
+    m.T_device_joint[static_cast<size_t>(r)] = inverse(T_joint_device);
+  }
   return m;
 }
 
@@ -203,8 +216,19 @@ std::vector<TrackerSample> with_calibration_pose(const std::vector<TrackerSample
 
 std::vector<TrackerSample> with_held_pose(const std::vector<TrackerSample>& samples,
                                           const std::array<RigidTransform, kRoleCount>& joints, const Mounting& mounting,
-                                          double rate_hz, double seconds) {
+                                          double rate_hz, double seconds, bool body_roles) {
   if (samples.empty()) throw SimError("no samples to hold a pose before");
+  // The roles held: the body trackers first (as the hands, before the head), then the hands, the head.
+  std::array<bool, kRoleCount> carried{}, with_position{};
+  for (const TrackerSample& s : samples) {
+    carried[static_cast<std::size_t>(s.role)] = true;
+    with_position[static_cast<std::size_t>(s.role)] |= s.has_position;
+  }
+  std::vector<Role> held;
+  if (body_roles)
+    for (Role r : kRoles)
+      if (!is_xr_role(r) && carried[static_cast<std::size_t>(r)]) held.push_back(r);
+  held.insert(held.end(), {Role::LeftHand, Role::RightHand, Role::Head});
   const double period_ns = 1e9 / rate_hz;
   const auto n = static_cast<std::int64_t>(seconds * 1e9 / period_ns);
   std::vector<TrackerSample> out;
@@ -212,11 +236,16 @@ std::vector<TrackerSample> with_held_pose(const std::vector<TrackerSample>& samp
   // Each instant's hands before its head, so the last head sample (which completes the still
   // second) follows every sample of the pose: nothing of the pose is left after the calibration.
   for (std::int64_t k = n; k >= 1; --k)
-    for (Role r : {Role::LeftHand, Role::RightHand, Role::Head}) {
+    for (Role r : held) {
       const RigidTransform& J = joints[static_cast<std::size_t>(r)];
       const TrackerSample j{samples.front().t_ns - std::llround(static_cast<double>(k) * period_ns), r, true, J.position_m,
                             J.rotation, PoseFrame::Joint};
-      out.push_back(joint_to_device(j, mounting.T_device_joint[static_cast<std::size_t>(r)]));
+      TrackerSample d = joint_to_device(j, mounting.T_device_joint[static_cast<std::size_t>(r)]);
+      if (!is_xr_role(r) && !with_position[static_cast<std::size_t>(r)]) {
+        d.has_position = false;  // an IMU tracker: as its samples in the clip
+        d.position_m = Vec3::Zero();
+      }
+      out.push_back(d);
     }
   out.insert(out.end(), samples.begin(), samples.end());
   return out;

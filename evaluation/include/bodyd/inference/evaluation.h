@@ -165,9 +165,14 @@ struct EvalReport {
     double grip_deg = 0.0;        // controllers' grip rotation (mean of both hands)
     double eye_offset_cm = 0.0;   // the head's T_device_joint position
     double grip_offset_cm = 0.0;  // the hands' T_device_joint position (mean of both)
+    // Body trackers of the set (issue 44): rotation and offset, means over tracker-clips (NaN
+    // without any; a rotation-only tracker's offset is not scored), and how many were scored.
+    double body_deg = 0.0, body_offset_cm = 0.0;
+    double body_n = 0.0, body_offset_n = 0.0;
   };
   MountingError default_mounting_error, calibrated_mounting_error;
   double pose_calibration_time_s = 0.0;  // mean time from a clip's first sample to its calibration
+  long body_trackers_unmeasured = 0;     // tracker-clips whose calibration pose did not measure a body tracker
   // Timing of "diffusion" if evaluated, otherwise of the first method.
   std::string timing_method;
   double ms_per_frame_p50 = 0.0;

@@ -86,10 +86,16 @@ struct MountingSpread {
   double head_pitch_deg = 10.0;     // the headset pitched on the head (about its +X)
   double head_roll_deg = 3.0;       // and rolled (about its -Z)
   double grip_rotation_deg = 15.0;  // each controller turned in the hand about its grip point (each axis)
+  // A strapped body tracker (hips, chest, feet, knees, elbows; issue 44): the device sits
+  // strap_min_m to strap_max_m off its joint in a random direction, turned any way (a puck on a
+  // belt or a strap points wherever it was put on).
+  double strap_min_m = 0.02;
+  double strap_max_m = 0.08;
 };
 // `base` (the default mounting) with one session's perturbation drawn from `seed`: the headset
 // turned on the head about the eyes (T_device_joint rotation pre-multiplied by the inverse turn)
-// with its eye offset moved, each controller turned about its grip point.
+// with its eye offset moved, each controller turned about its grip point, each body role strapped
+// (drawn after the headset's and controllers', so their draws do not change with it).
 [[nodiscard]] Mounting draw_session_mounting(const Mounting& base, const MountingSpread& spread, std::uint64_t seed);
 
 // `samples` (device poses through `mounting`, sorted by time) preceded by `seconds` of the
@@ -106,10 +112,13 @@ struct MountingSpread {
 
 // `samples` preceded by `seconds` of the joints `joints` (indexed by Role) held still, sampled at
 // rate_hz and seen through `mounting` as device poses (with_calibration_pose's workhorse; a
-// standing frame of a clip as the calibration pose).
+// standing frame of a clip as the calibration pose). With `body_roles`, the body trackers that
+// `samples` carry are held too (rotation only where their samples are); otherwise only the
+// headset and controllers (with_calibration_pose: the reference describes only those).
 [[nodiscard]] std::vector<TrackerSample> with_held_pose(const std::vector<TrackerSample>& samples,
                                                         const std::array<RigidTransform, kRoleCount>& joints,
-                                                        const Mounting& mounting, double rate_hz, double seconds);
+                                                        const Mounting& mounting, double rate_hz, double seconds,
+                                                        bool body_roles = false);
 
 // The true (noise-free, undelayed) trajectories of the three tracked joints of a clip.
 // Immutable after construction; pose_at() is thread-safe and does not allocate.
