@@ -400,6 +400,47 @@ TEST_F(DefaultModel, BodyTrackersAreUsedAndRotationOnlyOnesDoNoHarm) {
   EXPECT_LE(rot_all, 1.05 * base_all);
 }
 
+// Issue 44 item 7: a body tracker lost mid-walk for 2 s and found again falls back to estimation
+// and returns without a jump: each tracked joint's largest frame-to-frame step stays within 1.5x
+// the truth's largest step.
+TEST_F(DefaultModel, ALostBodyTrackerFallsBackAndReturnsWithoutAJump) {
+  if (!test::have_bandai()) GTEST_SKIP() << "no " << test::bandai();
+  const Motion clip = read_bvh(test::bandai() / "dataset-2" / "dataset-2_walk_normal_002.bvh");
+  const auto times = frame_times(clip);
+  std::string e;
+  const std::optional<TrackerSet> set = parse_tracker_set("head,hands,hips,feet", e);
+  ASSERT_TRUE(set) << e;
+  SimOptions o;
+  o.rate_hz = 90.0;  // a tracker's rate, not the frames'
+  o.roles = set->roles;
+  std::vector<TrackerSample> samples = simulate_trackers(clip, o);
+  constexpr std::int64_t kFrom = 3'000'000'000, kTo = 5'000'000'000;
+  for (Role lost : {Role::Hips, Role::LeftFoot}) {
+    std::vector<TrackerSample> run_samples = samples;
+    for (TrackerSample& s : run_samples)
+      if (s.role == lost && s.t_ns >= kFrom && s.t_ns < kTo) {
+        s.valid = false;
+        s.position_m = Vec3::Zero();
+        s.rotation = Quat::Identity();
+      }
+    DiffusionReconstructor r(model_);
+    const Outputs run = feed_and_reconstruct(r, run_samples, times);
+    const auto j = static_cast<size_t>(features::tracker_joint(lost));
+    double max_step = 0, max_truth_step = 0, max_step_at_return = 0;
+    for (size_t f = 60; f < times.size(); ++f) {
+      const double step = (run.poses[f].global.positions[j] - run.poses[f - 1].global.positions[j]).norm();
+      const GlobalPose a = forward_kinematics(clip.skeleton, clip.frames[f - 1]);
+      const GlobalPose b = forward_kinematics(clip.skeleton, clip.frames[f]);
+      max_step = std::max(max_step, step);
+      max_truth_step = std::max(max_truth_step, (b.positions[j] - a.positions[j]).norm());
+      if (times[f] >= kTo && times[f] < kTo + 300'000'000) max_step_at_return = std::max(max_step_at_return, step);
+    }
+    std::cout << role_name(lost) << ": largest step " << 100 * max_step << " cm (at its return "
+              << 100 * max_step_at_return << "), the truth's " << 100 * max_truth_step << " cm\n";
+    EXPECT_LE(max_step, 1.5 * max_truth_step) << role_name(lost);
+  }
+}
+
 TEST_F(DefaultModel, UserHeightScalesTheBody) {
   const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");
   const auto times = frame_times(clip);
