@@ -168,6 +168,7 @@ struct Daemon::Impl final : ControlTarget {
   RoleArrivals role_arrivals{};  // OutputFrame::role_arrivals: every sample's, before anything may drop it
   RateGate rate_gate;  // config.rate_hz: how often to reconstruct at all
   BodyPose body;
+  BodyPose runtime_body;  // `body` in the runtime's space after a reset (OutputSpace::Runtime)
   protocol::PoseMessage pose_msg;
   std::vector<std::uint8_t> pose_bytes;
   int hips_index = -1;
@@ -365,9 +366,13 @@ struct Daemon::Impl final : ControlTarget {
     const protocol::Status encoded = protocol::encode_pose(pose_msg, pose_bytes);
     BODYD_REQUIRE(encoded.ok(), fmt::format("the pose at t_ns={} cannot be encoded: {}", s.t_ns, encoded.error));
 
-    const OutputFrame frame{seq,        s.t_ns,           in.arrival_ns,     body,
-                            recon->skeleton(), pose_msg,  pose_bytes,        as_received,
-                            conditioner.recentre_rotation(), conditioner.recentre_translation_m(), role_arrivals};
+    // Each output's space (output.h, OutputSpace): the body in the runtime's space is made once,
+    // when an output due now publishes in it and a reset has moved the user's space away from it.
+    bool runtime_body_made = !conditioner.recentred();
+    const OutputFrame user_frame{seq, s.t_ns, in.arrival_ns, body, recon->skeleton(), pose_msg, pose_bytes, as_received,
+                                 role_arrivals};
+    const OutputFrame runtime_frame{seq,        s.t_ns,     in.arrival_ns, conditioner.recentred() ? runtime_body : body,
+                                    recon->skeleton(), pose_msg, pose_bytes, as_received, role_arrivals};
     std::string error;
     for (auto& slot_ptr : outputs) {
       OutputSlot& slot = *slot_ptr;
@@ -375,7 +380,12 @@ struct Daemon::Impl final : ControlTarget {
         slot.skipped_by_rate.add();
         continue;
       }
-      const bool sent = slot.output->send(frame, error);
+      const bool runtime = slot.output->space() == OutputSpace::Runtime;
+      if (runtime && !runtime_body_made) {
+        conditioner.to_runtime_space(body, runtime_body);
+        runtime_body_made = true;
+      }
+      const bool sent = slot.output->send(runtime ? runtime_frame : user_frame, error);
       if (sent) slot.sent.add();
       else slot.count_failure(error, monotonic_ns());
       if (slot.primary) {

@@ -15,6 +15,8 @@ namespace bodyd::daemon {
 
 nlohmann::json Output::status() const { return nlohmann::json::object(); }
 
+std::string_view space_name(OutputSpace space) { return space == OutputSpace::User ? "user" : "runtime"; }
+
 bool parse_output_spec(std::string_view text, OutputSpec& out, std::string& error) {
   out = OutputSpec{};
   out.text = std::string(text);

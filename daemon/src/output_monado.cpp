@@ -96,20 +96,21 @@ class MonadoOutput final : public Output, sv::FramedHandler {
     joints_ = place_joints(skeleton, kBodyTrackers, mask_, missing);
   }
 
+  // WiVRn / Monado own the head: the body goes back into the space their samples came in.
+  OutputSpace space() const override { return OutputSpace::Runtime; }
+
   bool send(const OutputFrame& frame, std::string& out_error) override {
     (void)out_error;
-    const GlobalPose& g = frame.body.global;
-    const Quat undo = frame.recentre_rotation.conjugate();
-    const Vec3& t = frame.recentre_translation_m;
+    const GlobalPose& g = frame.body.global;  // the runtime's space (space())
     for (std::size_t i = 0; i < joints_.size(); ++i) {
       const int j = joints_[i];
       sx::SyntheticTracker& st = work_trackers_[i];
       st.has_pose = j >= 0 && j < static_cast<int>(g.positions.size());
       if (!st.has_pose) continue;
-      st.position_m = undo * (g.positions[static_cast<std::size_t>(j)] - t);
-      st.rotation = (undo * g.rotations[static_cast<std::size_t>(j)]).normalized();
+      st.position_m = g.positions[static_cast<std::size_t>(j)];
+      st.rotation = g.rotations[static_cast<std::size_t>(j)];
     }
-    if (bones_.ready()) bones_.bones(g, undo, t, work_bones_);
+    if (bones_.ready()) bones_.bones(g, work_bones_);
     std::lock_guard lock(server_.mutex());
     std::swap(latest_trackers_, work_trackers_);
     std::swap(latest_bones_, work_bones_);

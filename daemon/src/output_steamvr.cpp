@@ -57,12 +57,13 @@ class SteamvrOutput final : public Output {
     joints_.find(skeleton, kBodyTrackers, mask_, name(), "trackers");
   }
 
+  // SteamVR owns the head: the trackers go back into the space the headset's samples came in.
+  OutputSpace space() const override { return OutputSpace::Runtime; }
+
   bool send(const OutputFrame& frame, std::string& out_error) override {
     if (!joints_.complete(out_error)) return false;
     leave_out_real_trackers(frame);
-    const GlobalPose& g = frame.body.global;
-    // Back to the driver's space (the one the headset's samples came in): undo the re-centring.
-    const Quat undo = frame.recentre_rotation.conjugate();
+    const GlobalPose& g = frame.body.global;  // the driver's space (space())
     std::size_t n = 0;
     for (int j : joints_.indices()) {
       if (j < 0 || j >= static_cast<int>(g.positions.size()) || j >= static_cast<int>(g.rotations.size())) {
@@ -71,8 +72,8 @@ class SteamvrOutput final : public Output {
       }
       const auto k = static_cast<std::size_t>(j);
       poses_[n].id = announced_[n].id;
-      poses_[n].position_m = undo * (g.positions[k] - frame.recentre_translation_m);
-      poses_[n].rotation = (undo * g.rotations[k]).normalized();
+      poses_[n].position_m = g.positions[k];
+      poses_[n].rotation = g.rotations[k];
       ++n;
     }
     // A pose whose headset is lost (rotation only, occluded, gone) is a guess: the trackers are

@@ -32,6 +32,9 @@ class VmcOutput final : public OscOutput {
     rig_error_ = rig_ok_ ? std::string() : error;
   }
 
+  // A VMC receiver draws bodyd's avatar by itself: the user's re-centred space.
+  OutputSpace space() const override { return OutputSpace::User; }
+
   bool send(const OutputFrame& frame, std::string& out_error) override {
     if (!rig_ok_) {
       out_error = "the skeleton is not the humanoid the VMC output knows (see the log)";

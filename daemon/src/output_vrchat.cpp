@@ -96,6 +96,10 @@ class VrchatOutput final : public OscOutput {
     joints_.find(skeleton, vrchat::kSlotPlaces, slots_, name(), "slots");
   }
 
+  // VRChat owns the head: its head message is the headset as received, and the trackers must be
+  // in the same space (after a reset they were re-centred while the head was not: issue 45).
+  OutputSpace space() const override { return OutputSpace::Runtime; }
+
   bool send(const OutputFrame& frame, std::string& out_error) override {
     if (!joints_.complete(out_error)) return false;
     const TrackerSample& head = frame.head_as_received;

@@ -38,6 +38,20 @@ Recentring SampleConditioner::recentre_on(TrackerSample& head) {
   return {c.yaw_rad * 180.0 / M_PI, c.origin_m};
 }
 
+void SampleConditioner::to_runtime_space(const BodyPose& body, BodyPose& out) const {
+  out = body;  // same sizes after the first: vector assignment reuses the storage
+  if (!recentred_) return;
+  const Quat undo = recentre_rotation_.conjugate();
+  for (std::size_t k = 0; k < out.global.positions.size(); ++k) {
+    out.global.positions[k] = undo * (body.global.positions[k] - recentre_translation_m_);
+    out.global.rotations[k] = (undo * body.global.rotations[k]).normalized();
+  }
+  // The root (joint 0) carries the world transform of the local pose.
+  if (!out.pose.local_translations.empty())
+    out.pose.local_translations[0] = undo * (body.pose.local_translations[0] - recentre_translation_m_);
+  if (!out.pose.local_rotations.empty()) out.pose.local_rotations[0] = (undo * body.pose.local_rotations[0]).normalized();
+}
+
 nlohmann::json SampleConditioner::recentre_status() const {
   if (!recentred_) return {{"recentred", false}};
   // The total transform, as "turned by" and "moved by".

@@ -11,6 +11,8 @@
 // Reconstruction thread only.
 #pragma once
 
+#include "bodyd/inference/reconstructor.h"
+
 #include "bodyd/daemon/config.h"
 #include "bodyd/motion/mounting.h"
 #include "bodyd/motion/tracker.h"
@@ -60,6 +62,10 @@ class SampleConditioner {
   [[nodiscard]] Vec3 recentre_translation_m() const { return recentred_ ? recentre_translation_m_ : Vec3::Zero(); }
   // status's keys: {"recentred": bool} and, after a reset, "recentre": {heading_deg, origin_m [x, z]}.
   [[nodiscard]] nlohmann::json recentre_status() const;
+  // `body` (the reconstruction, in the user's re-centred space) in the space the samples came in
+  // (OutputSpace::Runtime, output.h): the one place the re-centring is undone. Its global poses
+  // and its root's local transform; the rest is copied. Allocates only when out's sizes differ.
+  void to_runtime_space(const BodyPose& body, BodyPose& out) const;
 
  private:
   std::array<std::optional<DeviceOffset>, kRoleCount> offsets_;

@@ -64,16 +64,15 @@ bool BoneMap::build(const Skeleton& skeleton, std::string& error) {
   return true;
 }
 
-void BoneMap::bones(const GlobalPose& pose, const Quat& undo_rotation, const Vec3& undo_translation_m,
-                    std::vector<Bone>& out) const {
+void BoneMap::bones(const GlobalPose& pose, std::vector<Bone>& out) const {
   out.resize(defs_.size());
   for (std::size_t i = 0; i < defs_.size(); ++i) {
     const Resolved& d = defs_[i];
     const Vec3 head = (1.0 - d.head_mix) * pose.positions[static_cast<std::size_t>(d.head_a)] +
                       d.head_mix * pose.positions[static_cast<std::size_t>(d.head_b)];
     out[i].body_part = d.body_part;
-    out[i].head_position_m = undo_rotation * (head - undo_translation_m);
-    out[i].rotation_g = (undo_rotation * pose.rotations[static_cast<std::size_t>(d.owner)] * d.k).normalized();
+    out[i].head_position_m = head;
+    out[i].rotation_g = (pose.rotations[static_cast<std::size_t>(d.owner)] * d.k).normalized();
     out[i].length_m = d.length_m;
   }
 }

@@ -23,6 +23,8 @@ class ZmqPublisher final : public Output {
 
   [[nodiscard]] std::string name() const override { return "zmq:" + (bound_.empty() ? endpoint_ : bound_); }
   [[nodiscard]] std::string open() override;
+  // Subscribers draw bodyd's body: the user's re-centred space (the pose stream, docs/protocol.md).
+  [[nodiscard]] OutputSpace space() const override { return OutputSpace::User; }
   [[nodiscard]] bool send(const OutputFrame& frame, std::string& out_error) override;
   void poll(std::int64_t now_ns) override;
   void set_skeleton(const Skeleton& skeleton, const std::vector<std::uint8_t>& bytes) override;

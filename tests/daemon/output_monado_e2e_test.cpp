@@ -187,6 +187,80 @@ TEST(MonadoBridge, HandshakeThenBonesFollowTheZmqPoseFedByTheFeeder) {
             << " deg\n";
 }
 
+// Issue 45 item 3: after `reset` (bodyd's world re-centred, Monado's not) the synthetic trackers
+// stay in Monado's space, next to its own headset: each update's trackers are the ZeroMQ pose's
+// joints (the user's re-centred space) taken back through the re-centring `status` reports.
+TEST(MonadoBridge, AfterResetTheTrackersStayInMonadosSpace) {
+  std::string python;
+  if (std::string why = solarxr_client_skip_reason(python); !why.empty()) GTEST_SKIP() << why;
+  MonadoServer server("?trackers=waist,feet,chest,knees,elbows", "tcp://127.0.0.1:*");
+  const fs::path& dir = server.dir.path;
+  zmq::context_t ctx;
+  zmq::socket_t sub;
+  ASSERT_TRUE(test::subscribe_when_up(ctx, server.endpoints_file(), server.daemon, sub));
+  const auto endpoints = test::wait_endpoints(server.endpoints_file(), 20000);
+  ASSERT_TRUE(endpoints && endpoints->contains("control")) << server.daemon.log();
+  const std::string control = (*endpoints)["control"];
+  write_poses(dir / "poses.txt");
+  test::Child client(solarxr_client(python, {server.run.string(), (dir / "poses.txt").string(),
+                                             (dir / "received.jsonl").string(), "--wivrn", "6"}),
+                     dir / "client.err");
+  protocol::SkeletonMessage skeleton;
+  std::vector<protocol::PoseMessage> poses;
+  const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(2800);
+  collect(sub, skeleton, poses, [&] { return std::chrono::steady_clock::now() > until; });
+  const std::size_t before = poses.size();
+  ASSERT_GT(before, 20u) << server.daemon.log();
+  const auto reset = test::control_request(ctx, control, R"({"cmd":"reset"})");
+  ASSERT_TRUE(reset && (*reset)["ok"] == true) << (reset ? reset->dump() : "no reply");
+  const auto status = test::control_request(ctx, control, R"({"cmd":"status"})");
+  ASSERT_TRUE(status && (*status)["recentred"] == true) << (status ? status->dump() : "");
+  const double heading = (*status)["recentre"]["heading_deg"].get<double>() * M_PI / 180.0;
+  const Vec3 origin((*status)["recentre"]["origin_m"][0].get<double>(), 0.0, (*status)["recentre"]["origin_m"][1].get<double>());
+  collect(sub, skeleton, poses, [&] { return client.wait(0).has_value(); });
+  ASSERT_EQ(client.wait(10000), 0) << client.log() << server.daemon.log();
+  server.daemon.signal(SIGINT);
+  ASSERT_EQ(server.daemon.wait(10000), 0) << server.daemon.log();
+  ASSERT_GT(poses.size(), before + 100) << server.daemon.log();
+  EXPECT_GT(std::abs(heading) + origin.norm(), 0.05) << "the walk should have moved the head off the origin";
+
+  // The poses in Monado's space: as they are before the reset, both ways for the first 30 after
+  // it (on their way while it was asked for), then taken back (p = R^-1 p' + origin).
+  const Quat r(Eigen::AngleAxisd(-heading, Vec3::UnitY()));
+  std::vector<protocol::PoseMessage> in_monado(poses.begin(), poses.begin() + static_cast<std::ptrdiff_t>(before));
+  for (std::size_t i = before; i < poses.size(); ++i) {
+    if (i < before + 30) in_monado.push_back(poses[i]);
+    in_monado.push_back(poses[i]);
+    for (auto& j : in_monado.back().joints) {
+      const Vec3 p = r.conjugate() * vec3(j.position_m) + origin;
+      const Quat q = (r.conjugate() * quat_xyzw(j.rotation_xyzw)).normalized();
+      j.position_m = {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z())};
+      j.rotation_xyzw = {static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()), static_cast<float>(q.w())};
+    }
+  }
+  std::vector<std::size_t> tracker_joint;
+  for (const auto& t : kTrackers) tracker_joint.push_back(joint_index(skeleton, std::get<2>(t)));
+  const auto tracker_mm = [&](const nlohmann::json& u, const protocol::PoseMessage& pose) {
+    double mm = 0;
+    for (std::size_t k = 0; k < std::size(kTrackers); ++k)
+      mm = std::max(mm, (vec3(u["trackers"][k]["p"]) - joint_p(pose, tracker_joint[k])).norm() * 1000.0);
+    return mm;
+  };
+  std::size_t matched = 0, after_reset = 0, next = 0;
+  for (const nlohmann::json& u : read_jsonl(dir / "received.jsonl")) {
+    if (u["kind"] != "update" || u["bones"].empty() || u["trackers"].size() != std::size(kTrackers)) continue;
+    std::size_t p = next;
+    while (p < in_monado.size() && tracker_mm(u, in_monado[p]) > 1.0) ++p;
+    ASSERT_LT(p, in_monado.size()) << "update " << matched << " matches no pose from " << next;
+    if (p >= before + 60) ++after_reset;
+    ++matched;
+    next = p;  // updates go out on bodyd's clock: two may carry the same pose
+  }
+  EXPECT_GT(after_reset, 100u) << matched << " updates matched";
+  std::cout << matched << " updates matched, " << after_reset << " after the reset (heading " << heading * 180.0 / M_PI
+            << " deg, origin " << origin.x() << ", " << origin.z() << " m)\n";
+}
+
 // Bad input on SlimeVRRpc (issue 17 item 4): a length above 16 KiB or below 4 and a flood drop
 // the connection, a bundle that fails FlatBuffers verification is skipped; each is counted by
 // reason in the monado output's status, and a fresh connection's poll is still answered.

@@ -203,6 +203,73 @@ TEST_F(VrchatOutput, OscJsReceivesTheZmqPoseAndTheHeadAsReceived) {
   EXPECT_GT(offset_min_mm, 50.0);
 }
 
+// Issue 45 item 3: `reset` re-centres bodyd's world, not VRChat's. VRChat places the trackers next
+// to the head message (the headset as received, in VRChat's space), so after a reset the trackers
+// must stay in that space: each bundle's slots are the ZeroMQ pose's joints (the user's re-centred
+// space) taken back through the re-centring that `status` reports, and its head message the head
+// sample as replayed. (Before, the trackers were sent re-centred next to the head as received.)
+TEST_F(VrchatOutput, AfterResetTheTrackersStayInTheSpaceOfVrchatsHead) {
+  const fs::path log_path = test::source_dir() / "data" / "demo" / "walk.csv";
+  const std::string control = "ipc://" + (dir.path / "control").string();
+  test::Child daemon({(test::bin_dir() / "bodyd").string(), "--method", "ik", "--replay", log_path.string(), "--exit-at-end",
+                      "--wait-for-subscriber", "--pub", "tcp://127.0.0.1:*", "--control", control, "--endpoints-file",
+                      (dir.path / "endpoints.json").string(), "--output",
+                      "vrchat:127.0.0.1:" + receiver.port + "?slots=hip,feet,knees,chest,elbows"},
+                     dir.path / "bodyd.err");
+  zmq::context_t ctx;
+  zmq::socket_t sub;
+  ASSERT_TRUE(test::subscribe_when_up(ctx, dir.path / "endpoints.json", daemon, sub));
+  protocol::SkeletonMessage skeleton;
+  std::vector<protocol::PoseMessage> poses;
+  // Three seconds of the walk, the reset, the rest.
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(3);
+  test::collect(sub, skeleton, poses, [&] { return std::chrono::steady_clock::now() > until; });
+  const std::size_t before = poses.size();
+  ASSERT_GT(before, 50u) << daemon.log();
+  const auto reset = test::control_request(ctx, control, R"({"cmd":"reset"})");
+  ASSERT_TRUE(reset && (*reset)["ok"] == true) << (reset ? reset->dump() : "no reply");
+  const auto status = test::control_request(ctx, control, R"({"cmd":"status"})");
+  ASSERT_TRUE(status && (*status)["recentred"] == true) << (status ? status->dump() : "");
+  const double heading = (*status)["recentre"]["heading_deg"].get<double>() * M_PI / 180.0;
+  const Vec3 origin((*status)["recentre"]["origin_m"][0].get<double>(), 0.0, (*status)["recentre"]["origin_m"][1].get<double>());
+  // The walk has taken the head well away from where the re-centring puts it.
+  ASSERT_GT(origin.norm(), 0.5) << status->dump();
+  test::collect_until_quiet(sub, skeleton, poses, daemon);
+  ASSERT_EQ(daemon.wait(10000), 0) << daemon.log();
+  ASSERT_EQ(receiver.child->wait(20000), 0) << receiver.child->log();
+  ASSERT_GT(poses.size(), before + 100) << daemon.log();
+
+  std::vector<TrackerSample> log_heads;
+  for (const TrackerSample& h : read_tracker_log(log_path).samples)
+    if (h.role == Role::Head && h.valid) log_heads.push_back(h);
+  ASSERT_EQ(poses.size(), log_heads.size()) << daemon.log();
+  // The poses in VRChat's space: those before the reset as they are; the first 30 after it (made
+  // while the reset was on its way) both as they are and taken back; the later ones taken back
+  // (p_vrchat = R^-1 p + origin, R the turn by -heading about +Y: docs/control.md).
+  const Quat r(Eigen::AngleAxisd(-heading, Vec3::UnitY()));
+  std::vector<protocol::PoseMessage> in_vrchat(poses.begin(), poses.begin() + static_cast<std::ptrdiff_t>(before));
+  std::vector<TrackerSample> heads(log_heads.begin(), log_heads.begin() + static_cast<std::ptrdiff_t>(before));
+  for (std::size_t i = before; i < poses.size(); ++i) {
+    if (i < before + 30) {
+      in_vrchat.push_back(poses[i]);
+      heads.push_back(log_heads[i]);
+    }
+    in_vrchat.push_back(poses[i]);
+    heads.push_back(log_heads[i]);
+    for (auto& j : in_vrchat.back().joints) {
+      const Vec3 p = r.conjugate() * vec(j.position_m) + origin;
+      const Quat q = (r.conjugate() * quat_xyzw(j.rotation_xyzw)).normalized();
+      j.position_m = {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z())};
+      j.rotation_xyzw = {static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()), static_cast<float>(q.w())};
+    }
+  }
+  const std::vector<nlohmann::json> bundles = read_bundles(receiver.bundles);
+  EXPECT_GE(bundles.size() * 100, poses.size() * 95) << bundles.size() << " bundles for " << poses.size() << " poses";
+  expect_bundles_match(in_vrchat, bundles, skeleton, heads);
+  std::cout << "after the reset (heading " << heading * 180.0 / M_PI << " deg, origin " << origin.x() << ", " << origin.z()
+            << " m)\n";
+}
+
 // Issue 9's loop: osc.js plays a clip's head and wrists as VRChat sends them (90 Hz) into
 // bodyd --source vrchat: --output vrchat:, and receives the tracker bundles.
 TEST_F(VrchatOutput, FullLoopFromVrchatInputToVrchatTrackers) {

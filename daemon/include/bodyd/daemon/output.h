@@ -14,7 +14,8 @@
 // output never sees the poses it skips).
 //
 // How to add an output (one new file plus one registration):
-//   1. daemon/src/output_NAME.cpp: a class deriving from Output, and a factory
+//   1. daemon/src/output_NAME.cpp: a class deriving from Output (its space(): User or Runtime,
+//      below), and a factory
 //        std::unique_ptr<Output> make_NAME_output(const OutputSpec&, const OutputEnv&, std::string& error);
 //      that checks spec.target and spec.options (unknown option: an error naming it) and
 //      returns nullptr with `error` set (what is wrong, what to do) when the spec is bad.
@@ -63,24 +64,30 @@ inline constexpr std::int64_t kRealTrackerHoldNs = 5'000'000'000;
   return a.arrival_ns != INT64_MIN && now_ns - a.arrival_ns <= kRealTrackerHoldNs;
 }
 
+// The space an output publishes in (issue 45 item 3), declared once per output and converted in
+// one place (the daemon, before send()):
+//  - User: the user's re-centred space (bodyd's space after `reset`, docs/control.md): apps that
+//    draw bodyd's body themselves (zmq, vmc);
+//  - Runtime: the space the sources' samples came in, where the runtime owns the head and the
+//    app places the trackers next to it (vrchat: its head message is the headset as received;
+//    steamvr, monado: the trackers go back into the runtime that sent the headset).
+// Before any reset the two are the same.
+enum class OutputSpace : std::uint8_t { User, Runtime };
+[[nodiscard]] std::string_view space_name(OutputSpace space);
+
 // One pose, as every output receives it. All references stay valid only during send().
 struct OutputFrame {
   std::uint64_t seq = 0;
   std::int64_t t_ns = 0;        // the pose's time (its head sample's t_ns)
   std::int64_t arrival_ns = 0;  // host monotonic time the head sample reached the daemon
-  const BodyPose& body;         // global joint poses, bodyd space (docs/conventions.md), metres at calibrated size
+  const BodyPose& body;         // global joint poses in the output's space(), metres at calibrated size
   const Skeleton& skeleton;     // the skeleton of `body` (names, parents, rest offsets at calibrated size)
   const protocol::PoseMessage& message;            // the pose stream message (docs/protocol.md)
   const std::vector<std::uint8_t>& message_bytes;  // ... encoded
   // The head sample that triggered this pose, as its source delivered it: BEFORE the device
-  // offset (the headset's own pose, e.g. for VRChat's alignment). May be invalid.
+  // mounting, the offset and the re-centring, so in the Runtime space (the headset's own pose,
+  // e.g. for VRChat's alignment). May be invalid.
   const TrackerSample& head_as_received;
-  // The re-centring ("reset", docs/control.md) that `body` is in: body = T_recentre * (the
-  // space the sources' samples came in), T_recentre(p) = recentre_rotation * p +
-  // recentre_translation_m. Identity until a reset. Outputs that feed the samples' own runtime
-  // back (steamvr, monado) undo it, so their trackers stay where the headset is.
-  Quat recentre_rotation = Quat::Identity();
-  Vec3 recentre_translation_m = Vec3::Zero();
   // Per role, its newest sample's arrival and source (above; the head's is this pose's own).
   // Where the user tracks a role: the steamvr output leaves out its virtual tracker for a role
   // SteamVR's driver sent a sample of within kRealTrackerHoldNs; the other outputs send every
@@ -111,6 +118,8 @@ class Output {
   [[nodiscard]] virtual std::string name() const = 0;
   // Opens sockets. Empty, or what is wrong and what to do.
   [[nodiscard]] virtual std::string open() = 0;
+  // The space its frames' `body` is in (above). Declared by each output; the daemon converts.
+  [[nodiscard]] virtual OutputSpace space() const = 0;
   // Sends one pose without blocking. False (and `out_error` set) when it could not be sent.
   [[nodiscard]] virtual bool send(const OutputFrame& frame, std::string& out_error) = 0;
   // Between poses: housekeeping (subscriptions, periodic messages). Never blocks.

@@ -62,10 +62,8 @@ class BoneMap {
   // False (and `error`) when the skeleton is not bodyd's humanoid.
   [[nodiscard]] bool build(const Skeleton& skeleton, std::string& error);
   [[nodiscard]] bool ready() const { return !defs_.empty(); }
-  // `pose` in bodyd's space; undo_rotation / undo_translation_m map it to the output's space
-  // (p' = undo_rotation * (p - undo_translation_m)). `out` has one bone per kBoneDefs entry.
-  void bones(const GlobalPose& pose, const Quat& undo_rotation, const Vec3& undo_translation_m,
-             std::vector<Bone>& out) const;
+  // `pose` in the output's space (OutputFrame::body). `out` has one bone per kBoneDefs entry.
+  void bones(const GlobalPose& pose, std::vector<Bone>& out) const;
 
  private:
   struct Resolved {
