@@ -29,12 +29,21 @@ struct Client::Impl {
 
   Impl() = default;
 
+  // CURVE's keys on `socket` before it connects, when the options give a server key.
+  void apply_curve(zmq::socket_t& socket) const {
+    if (options.curve_server_key.empty()) return;
+    socket.set(zmq::sockopt::curve_serverkey, options.curve_server_key);
+    socket.set(zmq::sockopt::curve_publickey, options.curve_public_key);
+    socket.set(zmq::sockopt::curve_secretkey, options.curve_secret_key);
+  }
+
   bool open_control(std::string& out_error) {
     control.reset();
     if (options.control_endpoint.empty()) return true;
     try {
       control.emplace(context, zmq::socket_type::req);
       control->set(zmq::sockopt::linger, 0);
+      apply_curve(*control);
       control->connect(options.control_endpoint);
     } catch (const zmq::error_t& e) {
       control.reset();
@@ -60,12 +69,35 @@ Client::~Client() = default;
 std::unique_ptr<Client> Client::connect(const ClientOptions& options, std::string& error) {
   auto impl = std::make_unique<Impl>();
   impl->options = options;
+  ClientOptions& o = impl->options;
+  if (!o.curve_server_key.empty()) {
+    if (o.curve_secret_key.empty()) {
+      // No key pair of our own: a fresh one.
+      char pub[41] = {}, sec[41] = {};
+      if (zmq_curve_keypair(pub, sec) != 0) {
+        error = fmt::format("cannot make a CURVE key pair: {}", zmq_strerror(zmq_errno()));
+        return nullptr;
+      }
+      o.curve_public_key = pub;
+      o.curve_secret_key = sec;
+    } else if (o.curve_public_key.empty()) {
+      char pub[41] = {};
+      if (o.curve_secret_key.size() != 40 || zmq_curve_public(pub, o.curve_secret_key.c_str()) != 0) {
+        error = "the CURVE secret key is not 40 characters of Z85 text";
+        return nullptr;
+      }
+      o.curve_public_key = pub;
+    }
+  }
   try {
     impl->sub.set(zmq::sockopt::linger, 0);
-    impl->sub.set(zmq::sockopt::rcvhwm, std::max(1, options.receive_hwm));
-    impl->sub.set(zmq::sockopt::subscribe, protocol::kPoseTopic);
-    impl->sub.set(zmq::sockopt::subscribe, protocol::kSkeletonTopic);
-    impl->sub.connect(options.pose_endpoint);
+    if (!options.pose_endpoint.empty()) {
+      impl->sub.set(zmq::sockopt::rcvhwm, std::max(1, options.receive_hwm));
+      impl->sub.set(zmq::sockopt::subscribe, protocol::kPoseTopic);
+      impl->sub.set(zmq::sockopt::subscribe, protocol::kSkeletonTopic);
+      impl->apply_curve(impl->sub);
+      impl->sub.connect(options.pose_endpoint);
+    }
   } catch (const zmq::error_t& e) {
     error = fmt::format("pose endpoint \"{}\": {} (expected e.g. ipc:///tmp/bodyd/pose or tcp://127.0.0.1:5555)",
                         options.pose_endpoint, e.what());
@@ -77,6 +109,10 @@ std::unique_ptr<Client> Client::connect(const ClientOptions& options, std::strin
 
 Received Client::receive(PoseMessage& out, std::chrono::milliseconds timeout) {
   Impl& m = *impl_;
+  if (m.options.pose_endpoint.empty()) {
+    m.error = "no pose endpoint configured";
+    return Received::kError;
+  }
   const auto deadline = Clock::now() + timeout;
   for (;;) {
     const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now());
@@ -157,6 +193,7 @@ ControlReply Client::request(const nlohmann::json& request, std::chrono::millise
     zmq::message_t msg;
     if (!m.control->recv(msg, zmq::recv_flags::none)) {
       m.control.reset();  // a REQ socket waiting for a reply cannot send again: start over
+      reply.timed_out = true;
       return failed(fmt::format("no reply from control endpoint \"{}\" within {} ms (is bodyd running?)",
                                 m.options.control_endpoint, timeout.count()));
     }

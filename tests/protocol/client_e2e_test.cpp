@@ -197,6 +197,25 @@ TEST(ClientCpp, ControlTimeoutIsReportedAndTheNextRequestWorks) {
   EXPECT_TRUE(st.ok()) << st.error;
 }
 
+// bodyd-ctl's use (issue 45 item 4): a control client without a pose stream, which tells a
+// timeout (no daemon) from an answer.
+TEST(ClientCpp, AControlOnlyClientTellsATimeoutFromAnAnswer) {
+  const std::string endpoint = ipc_endpoint("control-only");
+  auto c = connect("", endpoint);
+  ASSERT_NE(c, nullptr);
+  PoseMessage pose;
+  EXPECT_EQ(c->receive(pose, 0ms), client::Received::kError);
+  EXPECT_EQ(c->error(), "no pose endpoint configured");
+  auto reply = c->request({{"cmd", "status"}}, 100ms);
+  EXPECT_FALSE(reply.ok);
+  EXPECT_TRUE(reply.timed_out);
+  TestControlServer control(endpoint);
+  reply = c->request({{"cmd", "frobnicate"}}, 5000ms);
+  EXPECT_FALSE(reply.timed_out) << reply.error;
+  EXPECT_FALSE(reply.ok);
+  EXPECT_EQ(reply.error, "unknown command");
+}
+
 TEST(ClientCpp, SkeletonJsonIsChecked) {
   auto j = client::skeleton_to_json(synthetic_skeleton());
   protocol::SkeletonMessage s;

@@ -19,10 +19,18 @@
 namespace bodyd::client {
 
 struct ClientOptions {
-  // The daemon's PUB endpoint (bodyd binds, we connect).
+  // The daemon's PUB endpoint (bodyd binds, we connect); empty for none (a control client:
+  // receive() then fails).
   std::string pose_endpoint{protocol::kDefaultPoseEndpoint};
   // The daemon's control (REP) endpoint; empty for none (request() and skeleton() then fail).
   std::string control_endpoint{protocol::kDefaultControlEndpoint};
+  // CURVE (docs/daemon.md, "Security"), for both sockets: the daemon's public key, Z85 text
+  // (bodyd/client/curve_keys.h reads the key files); empty for none. With it, this client's key
+  // pair: both empty for a fresh pair (enough when bodyd has no --curve-allow list), or the
+  // secret key alone (the public key is computed from it).
+  std::string curve_server_key;
+  std::string curve_public_key;
+  std::string curve_secret_key;
   // Messages queued in this process before newer ones are dropped (ZMQ_RCVHWM). A consumer
   // that only wants the newest pose can drain with timeout 0 and keep the last one.
   int receive_hwm = 1000;
@@ -52,6 +60,7 @@ struct ControlReply {
   bool ok = false;
   nlohmann::json json;
   std::string error;
+  bool timed_out = false;  // no reply came within the timeout (is the daemon running?)
 };
 
 class Client {

@@ -8,6 +8,8 @@
 // configured too.
 #pragma once
 
+#include "bodyd/client/curve_keys.h"
+
 #include <filesystem>
 #include <string>
 #include <string_view>
@@ -55,11 +57,9 @@ struct CurveKeyPair {
 [[nodiscard]] std::string generate_curve_keys(const std::filesystem::path& dir, CurveKeyPair& out_keys,
                                               const std::string& name = "server");
 
-// Reads a Z85 key file (40 key characters; whitespace and '#' comment lines ignored).
-// Empty on success, else "file: what is wrong".
-[[nodiscard]] std::string read_curve_key_file(const std::filesystem::path& path, std::string& out_key);
-
-// The public key of a Z85 secret key; empty when the secret key is malformed.
-[[nodiscard]] std::string curve_public_from_secret(const std::string& secret_key);
+// Reading key files, and the public key of a secret key: shared with the clients, which read
+// the same files (client/include/bodyd/client/curve_keys.h).
+using client::curve_public_from_secret;
+using client::read_curve_key_file;
 
 }  // namespace bodyd::daemon
