@@ -20,7 +20,8 @@ namespace bodyd::daemon {
 
 struct Command {
   enum class Kind { Height, FromHead, Swap, Recentre, PoseBegin } kind = Kind::Height;
-  double height_m = 0.0;                 // Height: the standing head height (0: the model's size); PoseBegin: timeout, s
+  double height_m = 0.0;                 // Height: the standing head height (0: the model's size)
+  double timeout_s = 0.0;                // PoseBegin: how long to wait for the still second, s
   std::uint64_t pose_id = 0;             // PoseBegin: the request's id (its reply's key)
   std::unique_ptr<Reconstructor> recon;  // Swap: the new reconstructor
   std::string model_path;                // Swap: its model file ("" for ik)

@@ -700,11 +700,11 @@ struct Daemon::Impl final : ControlTarget {
         if (!latest_head.fresh(now_ns))
           return control_error(
               "calibrate from pose: no valid head sample in the last 2 s: wear the headset (is it tracking?) and retry");
-        pose_wait.emplace(body_reference, default_mount, now_ns, c.height_m, body_joints);
+        pose_wait.emplace(body_reference, default_mount, now_ns, c.timeout_s, body_joints);
         pose_id = c.pose_id;
         spdlog::info("calibration pose: waiting up to {:.0f} s for a still second (stand straight, look ahead, arms "
                      "relaxed at the sides)",
-                     c.height_m);
+                     c.timeout_s);
         return json{{"ok", true}};
       }
       case Command::Kind::Swap: {
@@ -901,7 +901,7 @@ struct Daemon::Impl final : ControlTarget {
   ControlReply calibrate_pose(double timeout_s) override {
     Command c;
     c.kind = Command::Kind::PoseBegin;
-    c.height_m = timeout_s;
+    c.timeout_s = timeout_s;
     c.pose_id = ++last_pose_id;
     const std::uint64_t id = c.pose_id;
     json started = commands.run(std::move(c));
