@@ -2,21 +2,22 @@
 //
 //   bodyd-ctl status [--json]
 //   bodyd-ctl calibrate --head-height-m 1.62 | --height-m 1.80 | --from-head | --pose [--in SECONDS]
-//   bodyd-ctl reset
+//   bodyd-ctl recenter        (reset: its old name)
 //   bodyd-ctl reload-model [PATH]
 //   bodyd-ctl shutdown
 //   bodyd-ctl skeleton
 //
-// One REQ request, one reply, with a timeout: a daemon that does not answer is reported with
-// the endpoint tried and how to start one, never waited for forever.
+// One request through the C++ client (client/include/bodyd/client/client.h), one reply, with a
+// timeout: a daemon that does not answer is reported with the endpoint tried and how to start
+// one, never waited for forever.
 // Exit codes: 0 done; 1 bodyd answered with an error; 2 bad command line; 3 no answer.
-#include "bodyd/daemon/endpoint.h"
+#include "bodyd/client/client.h"
+#include "bodyd/client/curve_keys.h"
 #include "bodyd/paths/data_files.h"
 
 #include <CLI/CLI.hpp>
 #include <fmt/core.h>
 #include <nlohmann/json.hpp>
-#include <zmq.hpp>
 
 #include <algorithm>
 #include <chrono>
@@ -25,6 +26,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <memory>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -82,8 +84,9 @@ std::optional<Target> choose_target(const std::string& control_flag, const std::
   return Target{kDefaultControl, "bodyd's default"};
 }
 
+// The client's CURVE keys; the client makes a fresh pair when client_secret is empty.
 struct Curve {
-  std::string server_public, client_public, client_secret;
+  std::string server_public, client_secret;
 };
 
 std::optional<Curve> load_curve(const std::string& server_key_file, const std::string& client_key_file,
@@ -93,27 +96,17 @@ std::optional<Curve> load_curve(const std::string& server_key_file, const std::s
     return std::nullopt;
   }
   Curve c;
-  if (std::string e = bodyd::daemon::read_curve_key_file(server_key_file, c.server_public); !e.empty()) {
+  if (std::string e = bodyd::client::read_curve_key_file(server_key_file, c.server_public); !e.empty()) {
     error = e;
     return std::nullopt;
   }
-  if (client_key_file.empty()) {
-    // No key of our own: a fresh pair (enough when bodyd has no --curve-allow list).
-    char pub[41] = {}, sec[41] = {};
-    if (zmq_curve_keypair(pub, sec) != 0) {
-      error = std::string("cannot make a CURVE key pair: ") + zmq_strerror(zmq_errno());
-      return std::nullopt;
-    }
-    c.client_public = pub;
-    c.client_secret = sec;
-    return c;
-  }
-  if (std::string e = bodyd::daemon::read_curve_key_file(client_key_file, c.client_secret); !e.empty()) {
+  // No key of our own: the client makes a fresh pair (enough when bodyd has no --curve-allow list).
+  if (client_key_file.empty()) return c;
+  if (std::string e = bodyd::client::read_curve_key_file(client_key_file, c.client_secret); !e.empty()) {
     error = e;
     return std::nullopt;
   }
-  c.client_public = bodyd::daemon::curve_public_from_secret(c.client_secret);
-  if (c.client_public.empty()) {
+  if (bodyd::client::curve_public_from_secret(c.client_secret).empty()) {
     error = client_key_file + ": not a CURVE secret key (bodyd --gen-keys DIR --client NAME writes DIR/NAME.secret)";
     return std::nullopt;
   }
@@ -138,25 +131,12 @@ std::string no_answer_message(const Target& target, double timeout_s, bool curve
 }
 
 // One request; nullopt when no reply came within the timeout.
-std::optional<json> request(const Target& target, const json& req, double timeout_s, const std::optional<Curve>& curve) {
-  zmq::context_t ctx;
-  zmq::socket_t sock(ctx, zmq::socket_type::req);
-  sock.set(zmq::sockopt::linger, 0);
-  sock.set(zmq::sockopt::rcvtimeo, static_cast<int>(std::lround(timeout_s * 1000)));
-  sock.set(zmq::sockopt::sndtimeo, static_cast<int>(std::lround(timeout_s * 1000)));
-  if (curve) {
-    sock.set(zmq::sockopt::curve_serverkey, curve->server_public);
-    sock.set(zmq::sockopt::curve_publickey, curve->client_public);
-    sock.set(zmq::sockopt::curve_secretkey, curve->client_secret);
-  }
-  sock.connect(target.endpoint);
-  const std::string text = req.dump();
-  if (!sock.send(zmq::buffer(text), zmq::send_flags::none)) return std::nullopt;
-  zmq::message_t reply;
-  if (!sock.recv(reply)) return std::nullopt;
-  json j = json::parse(reply.to_string(), nullptr, false);
-  if (j.is_discarded() || !j.is_object()) return json{{"ok", false}, {"error", "the reply is not a JSON object: " + reply.to_string()}};
-  return j;
+std::optional<json> request(bodyd::client::Client& client, const json& req, double timeout_s) {
+  bodyd::client::ControlReply reply =
+      client.request(req, std::chrono::milliseconds(std::lround(timeout_s * 1000)));
+  if (reply.timed_out) return std::nullopt;
+  if (!reply.json.is_object()) return json{{"ok", false}, {"error", reply.error}};
+  return std::move(reply.json);
 }
 
 // ------------------------------------------------------------------ human-readable replies
@@ -327,7 +307,7 @@ void print_reply(const std::string& cmd, const json& r) {
       if (r.contains("mounting_file_error")) std::cout << "  not kept: " << r["mounting_file_error"].get<std::string>() << "\n";
     }
   }
-  else if (cmd == "reset") {
+  else if (cmd == "recenter" || cmd == "reset") {
     std::cout << "re-centred: the current facing is forward";
     if (r.contains("heading_deg")) std::cout << fmt::format(" (turned by {:.1f} degrees)", r["heading_deg"].get<double>());
     std::cout << "\n";
@@ -394,7 +374,8 @@ int main(int argc, char** argv) {
   o_head->excludes(o_height)->excludes(o_from);
   o_height->excludes(o_from);
 
-  app.add_subcommand("reset", "re-centre: the user's current facing becomes forward");
+  app.add_subcommand("recenter", "re-centre: the user's current facing becomes forward");
+  app.add_subcommand("reset", "the old name of recenter, still accepted");
   auto* reload = app.add_subcommand("reload-model", "load the model file again, or another one");
   std::string model_path;
   reload->add_option("PATH", model_path, "model file (default: the one in use)");
@@ -440,23 +421,28 @@ int main(int argc, char** argv) {
     std::cerr << "bodyd-ctl: " << error << "\n";
     return kExitUsage;
   }
-  std::optional<json> reply;
-  try {
-    if (pose) {
-      // Nobody should count down to learn that bodyd is not there: ask it something first.
-      if (pose_in_s > 0 && !request(*target, json{{"cmd", "status"}}, timeout_s, curve)) {
-        std::cerr << no_answer_message(*target, timeout_s, curve.has_value());
-        return kExitNoAnswer;
-      }
-      count_down(pose_in_s);
-      timeout_s = std::max(timeout_s, kPoseWaitS + 3.0);  // bodyd answers within its wait
-    }
-    reply = request(*target, req, timeout_s, curve);
-  } catch (const zmq::error_t& e) {
-    std::cerr << "bodyd-ctl: " << target->endpoint << " (" << target->from << "): " << e.what()
-              << " (write ipc:///PATH or tcp://HOST:PORT)\n";
+  bodyd::client::ClientOptions options;
+  options.pose_endpoint.clear();  // control requests only
+  options.control_endpoint = target->endpoint;
+  if (curve) {
+    options.curve_server_key = curve->server_public;
+    options.curve_secret_key = curve->client_secret;
+  }
+  const std::unique_ptr<bodyd::client::Client> client = bodyd::client::Client::connect(options, error);
+  if (!client) {
+    std::cerr << "bodyd-ctl: " << target->endpoint << " (" << target->from << "): " << error << "\n";
     return kExitUsage;
   }
+  if (pose) {
+    // Nobody should count down to learn that bodyd is not there: ask it something first.
+    if (pose_in_s > 0 && !request(*client, json{{"cmd", "status"}}, timeout_s)) {
+      std::cerr << no_answer_message(*target, timeout_s, curve.has_value());
+      return kExitNoAnswer;
+    }
+    count_down(pose_in_s);
+    timeout_s = std::max(timeout_s, kPoseWaitS + 3.0);  // bodyd answers within its wait
+  }
+  const std::optional<json> reply = request(*client, req, timeout_s);
   if (!reply) {
     std::cerr << no_answer_message(*target, timeout_s, curve.has_value());
     return kExitNoAnswer;

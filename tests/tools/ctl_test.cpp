@@ -6,6 +6,7 @@
 #include "../daemon_programs.h"
 #include "../test_paths.h"
 
+#include "bodyd/daemon/control.h"
 #include "bodyd/protocol/pose_message.h"
 
 #include <gtest/gtest.h>
@@ -235,6 +236,18 @@ TEST_F(Ctl, ResetRecentresAndSaysSo) {
   EXPECT_LT(std::abs(pose->root_heading_rad), 0.8) << pose->root_heading_rad;
 }
 
+// Issue 45 item 4: the request is recenter; `bodyd-ctl reset`, its old name, is the test above.
+TEST_F(Ctl, RecenterRecentres) {
+  const RunResult r = ctl({"recenter"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("re-centred: the current facing is forward (turned by "), std::string::npos) << r.out;
+  const RunResult j = ctl({"--json", "recenter"});
+  ASSERT_EQ(j.exit_code, 0) << j.err;
+  const json reply = json::parse(j.out);
+  EXPECT_EQ(reply["recentred"], true) << j.out;
+  EXPECT_TRUE(reply.contains("heading_deg")) << j.out;
+}
+
 TEST_F(Ctl, ReloadModelTheSameOrAnotherFile) {
   RunResult r = ctl({"reload-model"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -262,6 +275,20 @@ TEST_F(Ctl, EndpointFromEndpointsFileOrUserConfig) {
   std::ofstream(config.path / "bodyd/config.json") << "{\"control\": \"" << control_ << "\"}\n";
   r = run({kCtl, "status"}, {.env = {{"XDG_CONFIG_HOME", config.path.string()}}, .output_dir = dir_->path, .name = "ctl"});
   EXPECT_EQ(r.exit_code, 0) << r.err;
+}
+
+// bodyd-ctl has a command for every row of the control socket's table of requests
+// (bodyd/daemon/control.h), old names included, with the row's help.
+TEST(CtlHelp, HasACommandForEveryControlRequest) {
+  TempDir dir;
+  const RunResult r = run({kCtl, "--help"}, {.output_dir = dir.path});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const daemon::ControlRequest& row : daemon::control_requests()) {
+    const std::size_t at = r.out.find("\n  " + std::string(row.name) + " ");
+    ASSERT_NE(at, std::string::npos) << "bodyd-ctl --help has no command " << row.name << ":\n" << r.out;
+    const std::string line = r.out.substr(at + 1, r.out.find('\n', at + 1) - at - 1);
+    EXPECT_NE(line.find(row.help), std::string::npos) << line << "\n(the table's help: " << row.help << ")";
+  }
 }
 
 TEST(CtlNoDaemon, SaysWhichEndpointAndHowToStartOne) {

@@ -1,16 +1,22 @@
 // The control socket's requests (docs/control.md): JSON in, JSON out.
 //
-// answer_control_request() parses and checks a request and calls the matching ControlTarget
-// function; it never throws and always answers a JSON object with "ok", now or, for a request
-// that waits (the calibration pose), later. Malformed requests (not JSON, not an object, no
-// "cmd", wrong types, unknown commands or keys) get {"ok": false, "error": "..."} saying what is
-// wrong.
+// answer_control_request() parses a request, finds its row in the table of requests
+// (control_requests()) by "cmd", and the row checks the request's keys and values and calls the
+// matching ControlTarget function; it never throws and always answers a JSON object with "ok",
+// now or, for a request that waits (the calibration pose), later. Malformed requests (not JSON,
+// not an object, no "cmd", wrong types, unknown commands or keys) get {"ok": false, "error":
+// "..."} saying what is wrong.
+//
+// A new request is one ControlTarget function, one row of the table (daemon/src/control.cpp)
+// and its section in docs/control.md (tests/daemon/control_requests_test.cpp checks that the
+// docs and the table list the same requests).
 #pragma once
 
 #include <nlohmann/json.hpp>
 
 #include <functional>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -43,7 +49,8 @@ class ControlTarget {
   virtual nlohmann::json reload_model(const std::optional<std::string>& path) = 0;
   virtual nlohmann::json shutdown() = 0;
   // Re-centres the tracking space: the user's current facing and floor position become forward
-  // and the origin ("reset", docs/control.md). The default answers that it is not supported.
+  // and the origin ("recenter", old name "reset", docs/control.md). The default answers that it
+  // is not supported.
   virtual nlohmann::json recentre();
   // The calibration pose ({"cmd":"calibrate","from":"pose"}, docs/control.md): starts waiting up
   // to `timeout_s` for a still second of the trackers, from which it learns each device's
@@ -52,8 +59,22 @@ class ControlTarget {
   virtual ControlReply calibrate_pose(double timeout_s);
 };
 
-// The commands, for messages.
-inline constexpr std::string_view kControlCommands = "status, skeleton, calibrate, reset, reload-model, shutdown";
+// One request of the control socket: a row of the table.
+struct ControlRequest {
+  std::string_view name;      // its "cmd"
+  std::string_view alias_of;  // empty for a request; else the name of the request this old name stands for
+  std::string_view help;      // one line, as bodyd-ctl's --help says it
+  std::string_view docs;      // its section of docs/control.md, "### `DOCS`" (an old name: its request's)
+  // Checks the request's keys and values and calls the target; an error reply when they are
+  // wrong. `cmd` is the name the request used (for messages).
+  ControlReply (*handle)(const nlohmann::json& request, std::string_view cmd, ControlTarget& target);
+};
+
+// The table of requests, in the order messages list them; old names last.
+[[nodiscard]] std::span<const ControlRequest> control_requests();
+
+// The requests' names for messages ("status, skeleton, ..."), old names left out.
+[[nodiscard]] std::string control_request_names();
 
 // Bounds of a user height a calibration accepts (metres).
 inline constexpr double kMinUserHeightM = 0.5;
