@@ -283,8 +283,7 @@ struct Daemon::Impl final : ControlTarget {
     // The raw sample (before mounting, offsets, re-centring) to the calibrations, body trackers'
     // device poses included: the calibration pose measures their mountings.
     feed_pose_calibrators(s, in.arrival_ns);
-    if (!is_xr_role(s.role) && s.frame == PoseFrame::Device &&
-        mounting_origin[static_cast<std::size_t>(s.role)] == MountingOrigin::Default) {
+    if (!conditioner.uses(s)) {
       // A body tracker's device pose before its mounting is measured (a calibration pose, the
       // auto calibration's still second, or the mounting file): its strap sits a few centimetres
       // off the joint and turned any way, and a device pose is never used through an unknown
@@ -679,7 +678,7 @@ struct Daemon::Impl final : ControlTarget {
         const Recentring r = conditioner.recentre_on(latest_head.sample());
         recon->reset();  // the space jumped: start a fresh history
         {
-          json st = conditioner.recentre_status();
+          json st = recentre_status_json(conditioner);
           std::lock_guard lock(shared_mutex);
           recentre_status = std::move(st);
         }
@@ -992,7 +991,7 @@ std::string Daemon::start() {
     // placed in the pose, so none is measured and their device poses stay unused.
     spdlog::info("body trackers' mountings cannot be measured with this skeleton ({})", e.what());
   }
-  d.conditioner.set_mounting(d.default_mount);
+  d.conditioner.set_default_mounting(d.default_mount);
   if (!d.config.mounting_file.empty()) {
     std::string merror;
     if (std::optional<MountingState> st =

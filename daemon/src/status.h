@@ -14,9 +14,11 @@
 #include <string>
 #include <vector>
 
-namespace bodyd::daemon {
+namespace bodyd {
+class SampleConditioner;  // bodyd/inference/sample_conditioning.h
+}
 
-class SampleConditioner;
+namespace bodyd::daemon {
 
 // What the reconstruction is now: written by the reconstruction thread (and start()), read by
 // the control thread, both under the daemon's lock.
@@ -46,7 +48,7 @@ struct StatusSnapshot {
   double uptime_s = 0.0;
   ReconstructionSummary summary;
   bool offsets_configured = false;
-  nlohmann::json recentre;  // SampleConditioner::recentre_status()
+  nlohmann::json recentre;  // recentre_status_json() (sample_conditioning.h)
   nlohmann::json mounting;  // mounting_status_json()
   std::string record_trackers_file;
   std::vector<drivers::SourceStatus> sources;

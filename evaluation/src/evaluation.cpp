@@ -3,6 +3,7 @@
 #include "bodyd/base/percentile.h"
 #include "bodyd/inference/factory.h"
 #include "bodyd/inference/ik.h"
+#include "bodyd/inference/sample_conditioning.h"
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -179,6 +180,8 @@ class Calibrating final : public Reconstructor {
     inner_->reset();
     detector_.reset();
   }
+  // Forwarded (issue 45: this decorator once forgot it, so the report's refused count read 0).
+  std::int64_t refused_samples() const override { return inner_->refused_samples(); }
   void set_head_height_m(double h) override { inner_->set_head_height_m(h); }
   double head_height_m() const override { return inner_->head_height_m(); }
   // The standing height applied, if any.
@@ -195,12 +198,14 @@ class Calibrating final : public Reconstructor {
 // through the measured one; with `calibrate_height` its height is applied too.
 class Mounted final : public Reconstructor {
  public:
-  // `known`: the roles whose mounting `defaults` holds for sure (an oracle); body trackers not
-  // known wait for the calibration pose.
-  Mounted(std::unique_ptr<Reconstructor> inner, const Mounting& defaults, std::optional<PoseCalibrator> calibrator,
+  // `oracle`: `mounting` is the truth, every role's known (body trackers used at once);
+  // otherwise it is the defaults, and body trackers wait for the calibration pose.
+  Mounted(std::unique_ptr<Reconstructor> inner, const Mounting& mounting, std::optional<PoseCalibrator> calibrator,
           bool calibrate_height, bool oracle)
-      : inner_(std::move(inner)), mounting_(defaults), calibrator_(std::move(calibrator)), calibrate_height_(calibrate_height) {
-    known_.fill(oracle);
+      : inner_(std::move(inner)), calibrator_(std::move(calibrator)), calibrate_height_(calibrate_height) {
+    conditioner_.set_default_mounting(mounting);
+    if (oracle)
+      for (Role r : kRoles) conditioner_.set_mounting(r, mounting.T_device_joint[static_cast<size_t>(r)]);
   }
   std::string_view name() const override { return inner_->name(); }
   const Skeleton& skeleton() const override { return inner_->skeleton(); }
@@ -208,19 +213,19 @@ class Mounted final : public Reconstructor {
     if (calibrator_) {
       if (std::optional<PoseCalibration> c = calibrator_->push(s)) {
         for (Role r : kRoles)
-          if (c->measured[static_cast<size_t>(r)]) {
-            mounting_.T_device_joint[static_cast<size_t>(r)] = c->mounting.T_device_joint[static_cast<size_t>(r)];
-            known_[static_cast<size_t>(r)] = true;
-          }
+          if (c->measured[static_cast<size_t>(r)]) conditioner_.set_mounting(r, c->mounting.T_device_joint[static_cast<size_t>(r)]);
         inner_->reset();  // the inputs jumped, as in the daemon
         if (calibrate_height_) (void)calibrate_from_head_height(*inner_, c->head_height_m);
         found_ = std::move(c);
       }
     }
-    // A body tracker's device pose is not used before its mounting is known (the daemon's rule,
-    // daemon.cpp handle_sample).
-    if (!is_xr_role(s.role) && s.frame == PoseFrame::Device && !known_[static_cast<size_t>(s.role)]) return;
-    inner_->push(device_to_joint(s, mounting_.T_device_joint[static_cast<size_t>(s.role)]));
+    // The daemon's conditioning (bodyd/inference/sample_conditioning.h): a body tracker's device
+    // pose waits for its mounting; the mounting; the rotation made unit length.
+    if (!conditioner_.uses(s)) return;
+    TrackerSample c = s;
+    conditioner_.condition(c);
+    SampleConditioner::finish(c);
+    inner_->push(c);
   }
   bool reconstruct(std::int64_t t_ns, BodyPose& out) override { return inner_->reconstruct(t_ns, out); }
   void reset() override {
@@ -234,8 +239,7 @@ class Mounted final : public Reconstructor {
 
  private:
   std::unique_ptr<Reconstructor> inner_;
-  Mounting mounting_;
-  std::array<bool, kRoleCount> known_{};
+  SampleConditioner conditioner_;
   std::optional<PoseCalibrator> calibrator_;
   bool calibrate_height_;
   std::optional<PoseCalibration> found_;

@@ -5,6 +5,7 @@
 #pragma once
 
 #include "bodyd/inference/one_euro.h"
+#include "bodyd/motion/mounting.h"
 #include "bodyd/motion/rotation.h"
 #include "bodyd/motion/tracker.h"
 #include "bodyd/simulators/tracker_sim.h"
@@ -23,10 +24,8 @@ namespace bodyd::daemon {
 // Fixed per-device calibration of one role: T_device_joint, the joint's pose in the frame of
 // the device that tracks it. A sample's pose becomes T_world_joint = T_world_device *
 // T_device_joint (position p + R * offset, rotation R * offset_rotation).
-struct DeviceOffset {
-  Vec3 position_m = Vec3::Zero();
-  Quat rotation = Quat::Identity();
-};
+// (The same rigid transform as a mounting's: the conditioner, shared with the evaluation, takes it.)
+using DeviceOffset = RigidTransform;
 
 // Where the bundled files are (set at build time to the source tree; see docs/daemon.md).
 [[nodiscard]] std::filesystem::path bundled_recording_path();
