@@ -1,5 +1,6 @@
 #include "bodyd/daemon/curve_allow.h"
 
+#include "bodyd/base/log_rate.h"
 #include "bodyd/daemon/endpoint.h"
 
 #include "bodyd/motion/printable.h"
@@ -9,7 +10,6 @@
 
 #include <algorithm>
 #include <array>
-#include <bit>
 
 namespace bodyd::daemon {
 
@@ -123,7 +123,7 @@ void ZapAllowList::loop() {
         // A client retrying every few ms, or many made-up keys, must not flood the log (issue 20):
         // each of the first kLoggedKeys keys once, and then the 1st, 2nd, 4th, 8th... refusal.
         const bool new_key = refused_logged_.size() < kLoggedKeys && refused_logged_.insert(z85).second;
-        if (new_key || std::has_single_bit(n))
+        if (new_key || log_occurrence(n))
           spdlog::warn("CURVE allow-list: refused client key {} from {} (not in --curve-allow {}; add its .public file "
                        "there and restart bodyd to let it in; {} refused so far, logged at a limited rate)",
                        z85, printable(frames[3], 64), dir_, n);

@@ -6,6 +6,7 @@
 // status reply (status).
 #include "bodyd/daemon/daemon.h"
 
+#include "bodyd/base/log_rate.h"
 #include "bodyd/base/require.h"
 
 #include "bodyd/daemon/control.h"
@@ -290,7 +291,7 @@ struct Daemon::Impl final : ControlTarget {
       // offset at full weight. Joint poses (frames=joint, logs, the simulator) are used.
       stats.body_device_samples_ignored.add();
       body_device_unused[static_cast<std::size_t>(s.role)] = true;
-      if (const std::uint64_t n = stats.body_device_samples_ignored.get(); (n & (n - 1)) == 0)
+      if (const std::uint64_t n = stats.body_device_samples_ignored.get(); log_occurrence(n))
         spdlog::info("{} sample (a body tracker's device pose) not used: its mounting is not calibrated yet: stand in "
                      "the calibration pose (`bodyd-ctl calibrate --pose`), or give its source ?frames=joint if it "
                      "sends the joint's own pose (docs/conventions.md, \"Tracker roles\"; logged at the 1st, 2nd, 4th, 8th...)",

@@ -11,6 +11,7 @@
 // the first): Monado's feeder sends its headset and controllers only when an update arrives, so
 // bodyd must not wait for a pose to send one. send() (the reconstruction thread) only keeps the
 // newest pose.
+#include "bodyd/base/log_rate.h"
 #include "bodyd/daemon/output.h"
 #include "bodyd/daemon/solarxr.h"
 #include "bodyd/drivers/framed_server.h"
@@ -165,7 +166,7 @@ class MonadoOutput final : public Output, sv::FramedHandler {
   void reject(const std::string& reason, const std::string& detail) {
     ++rejected_;
     const std::uint64_t n = ++rejected_by_reason_[reason];
-    if ((n & (n - 1)) == 0)
+    if (log_occurrence(n))
       spdlog::warn("monado {}: {} ({}; {} so far, logged at the 1st, 2nd, 4th, 8th...)", path_, detail, reason, n);
   }
 

@@ -1,8 +1,9 @@
 #include "device_source_base.h"
 
+#include "bodyd/base/log_rate.h"
+
 #include <spdlog/spdlog.h>
 
-#include <bit>
 #include <cstdio>
 
 namespace bodyd::drivers::detail {
@@ -36,7 +37,7 @@ void DeviceContext::push(const TrackerSample& sample, std::int64_t device_t_ns, 
 void DeviceContext::decode_error(const std::string& device, const std::string& what) {
   const std::uint64_t n = decode_errors.fetch_add(1, std::memory_order_relaxed) + 1;
   const std::string text = device + ": rejected a report: " + what;
-  if (std::has_single_bit(n)) spdlog::warn("{} ({} rejected so far)", text, n);
+  if (log_occurrence(n)) spdlog::warn("{} ({} rejected so far)", text, n);
   set_error(text);
 }
 

@@ -2,6 +2,7 @@
 
 #include "network_protocol.h"
 
+#include "bodyd/base/log_rate.h"
 #include "bodyd/base/loopback.h"
 #include "bodyd/base/spec_options.h"
 #include "bodyd/drivers/open_source.h"
@@ -15,7 +16,6 @@
 #include <unistd.h>
 
 #include <atomic>
-#include <bit>
 #include <cerrno>
 #include <charconv>
 #include <cstring>
@@ -199,7 +199,7 @@ class UdpSource final : public NetworkSource, private detail::DatagramResult {
     const std::uint64_t n = total_rejected_.fetch_add(1, std::memory_order_relaxed) + 1;
     const std::string text =
         "rejected a packet from " + address_text(from) + ": " + std::string(input_reject_name(why)) + ": " + detail;
-    if (std::has_single_bit(n)) spdlog::warn("{}: {} ({} rejected so far)", options_.name, text, n);
+    if (log_occurrence(n)) spdlog::warn("{}: {} ({} rejected so far)", options_.name, text, n);
     set_error(text);
   }
 

@@ -3,6 +3,7 @@
 #include "bodyd/drivers/framed_server.h"
 #include "bodyd/drivers/open_source.h"
 
+#include "bodyd/base/log_rate.h"
 #include "bodyd/paths/private_dir.h"
 
 #include "bodyd/motion/limits.h"
@@ -94,9 +95,6 @@ std::string role_label(std::int32_t r) {
 }
 
 constexpr std::int64_t kForwardIntervalNs = static_cast<std::int64_t>(1e9 / kMaxForwardHz);
-
-// Logs the 1st, 2nd, 4th, 8th... occurrence of each reason.
-bool log_now(std::uint64_t count) { return count != 0 && (count & (count - 1)) == 0; }
 
 }  // namespace
 
@@ -244,7 +242,7 @@ struct BridgeServer::Impl final : FramedHandler {
     ++stats.rejected;
     const std::uint64_t n = ++stats.rejected_by_reason[reason];
     stats.last_error = reason + ": " + detail;
-    if (log_now(n))
+    if (log_occurrence(n))
       spdlog::warn("bridge {}: {} ({}; {} so far, logged at the 1st, 2nd, 4th, 8th...)", path, detail, reason, n);
   }
 

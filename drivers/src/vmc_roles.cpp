@@ -1,10 +1,10 @@
 #include "vmc_roles.h"
 
+#include "bodyd/base/log_rate.h"
 #include "bodyd/motion/printable.h"
 
 #include <spdlog/spdlog.h>
 
-#include <bit>
 #include <iterator>
 
 namespace bodyd::drivers::detail {
@@ -75,7 +75,7 @@ std::optional<Role> VmcRoles::role_of(const VmcPose& pose, std::int64_t now_ns) 
   for (auto it = seen_.begin(); it != seen_.end();)
     it = now_ns - it->second.last_ns >= kStaleNs ? seen_.erase(it) : std::next(it);
   if (!seen_.count(pose.serial) && seen_.size() >= kMaxCandidates) {
-    if (std::has_single_bit(++over_limit_))
+    if (log_occurrence(++over_limit_))
       spdlog::warn("{}: controller serial {} ignored: {} controllers without a role are already waiting (the most "
                    "bodyd tracks; {} ignored so far). Name the hands' serials in the spec (left_hand=SERIAL&"
                    "right_hand=SERIAL)",
@@ -131,7 +131,7 @@ void VmcRoles::refuse(const VmcPose& pose, Role role) {
   // The 1st, 2nd, 4th, 8th... refusal: a second device (or a forged packet) is worth a line,
   // not a line per packet.
   const std::uint64_t n = ++refused_[index(role)];
-  if (!std::has_single_bit(n)) return;
+  if (!log_occurrence(n)) return;
   const bool head = role == Role::Head;
   spdlog::warn("{}: serial {} ignored: {} {} held by {}; a role is never taken from its configured serial or from one "
                "that is streaming ({} ignored so far; name the serials in the spec, e.g. {}=SERIAL, to choose)",

@@ -2,6 +2,7 @@
 // computed independently, and the edges the old copies disagreed on.
 #include "bodyd/base/clock.h"
 #include "bodyd/base/little_endian.h"
+#include "bodyd/base/log_rate.h"
 #include "bodyd/base/loopback.h"
 #include "bodyd/base/percentile.h"
 #include "bodyd/base/random.h"
@@ -114,6 +115,17 @@ TEST(MonotonicNs, NeverGoesBackAndIsSteadyClock) {
   const std::int64_t kernel_ns = std::int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
   EXPECT_GE(kernel_ns, last);  // the same clock: ours was read first
   EXPECT_GE(monotonic_ns(), kernel_ns);
+}
+
+// ---- log_occurrence --------------------------------------------------------------------------------
+
+TEST(LogOccurrence, TheFirstSecondFourthEighthAndSoOn) {
+  std::vector<std::uint64_t> logged;
+  for (std::uint64_t n = 0; n <= 100; ++n)
+    if (log_occurrence(n)) logged.push_back(n);
+  EXPECT_EQ(logged, (std::vector<std::uint64_t>{1, 2, 4, 8, 16, 32, 64}));
+  EXPECT_TRUE(log_occurrence(std::uint64_t{1} << 63));
+  EXPECT_FALSE(log_occurrence(std::numeric_limits<std::uint64_t>::max()));
 }
 
 // ---- little-endian ---------------------------------------------------------------------------------
