@@ -10,6 +10,9 @@
 // two more rows say what they add: arrival -> every output sent, and the outputs' own time
 // after the --pub send. --udp-sink PORT binds 127.0.0.1:PORT (UDP) and never reads it, so an
 // OSC output has a receiver (no ICMP "port unreachable") that costs this process nothing.
+// --stalled-subscriber connects a pose subscriber that never reads (receive queue of one pose),
+// so the rows say what a stalled client costs each pose (Pipeline.AStalledSubscriberDoesNotSlowTheDaemon
+// checks that the daemon never waits for one).
 #include "bodyd/base/percentile.h"
 #include "bodyd/daemon/config.h"
 #include "bodyd/daemon/daemon.h"
@@ -19,6 +22,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
+#include <zmq.h>
 
 #include <netinet/in.h>
 #include <sys/resource.h>
@@ -74,7 +78,7 @@ int main(int argc, char** argv) {
   std::string method = "diffusion", model, skeleton;
   int frames = 3000, warmup = 30;
   double speed = 1.0;
-  bool json_out = false;
+  bool json_out = false, stalled_subscriber = false;
   std::vector<std::string> outputs;
   std::vector<int> udp_sinks;
   app.add_option("--replay", replay, "tracker log to replay, paced, in a loop (default: the bundled recording)");
@@ -88,6 +92,7 @@ int main(int argc, char** argv) {
   app.add_option("--output", outputs, "also send every pose to this output (bodyd --output SPEC), repeatable");
   app.add_option("--udp-sink", udp_sinks, "bind UDP 127.0.0.1:PORT and never read it (a receiver for an OSC output)")
       ->check(CLI::Range(1, 65535));
+  app.add_flag("--stalled-subscriber", stalled_subscriber, "connect a pose subscriber that never reads");
   CLI11_PARSE(app, argc, argv);
 
   spdlog::set_level(spdlog::level::warn);
@@ -137,10 +142,24 @@ int main(int argc, char** argv) {
     fmt::print(stderr, "bodyd-bench-latency: {}\n", e);
     return 1;
   }
+  // The stalled subscriber: its subscription reaches the daemon during the warm-up.
+  void* zmq_context = stalled_subscriber ? zmq_ctx_new() : nullptr;
+  void* stalled = zmq_context ? zmq_socket(zmq_context, ZMQ_SUB) : nullptr;
+  if (stalled) {
+    const int one = 1, no_linger = 0;
+    zmq_setsockopt(stalled, ZMQ_RCVHWM, &one, sizeof one);
+    zmq_setsockopt(stalled, ZMQ_LINGER, &no_linger, sizeof no_linger);
+    zmq_setsockopt(stalled, ZMQ_SUBSCRIBE, "", 0);
+    if (zmq_connect(stalled, daemon.pub_endpoint().c_str()) != 0) {
+      fmt::print(stderr, "bodyd-bench-latency: --stalled-subscriber: cannot connect to {}: {}\n", daemon.pub_endpoint(),
+                 zmq_strerror(zmq_errno()));
+      return 1;
+    }
+  }
   const std::string method_name = daemon.status().value("method", std::string("?"));
   if (!json_out)
-    fmt::print("bodyd-bench-latency: {} poses (+{} warm-up) from {} at {}x the recorded rate, method {}\n", frames, warmup,
-               replay, speed, method_name);
+    fmt::print("bodyd-bench-latency: {} poses (+{} warm-up) from {} at {}x the recorded rate, method {}{}\n", frames,
+               warmup, replay, speed, method_name, stalled ? ", a stalled subscriber" : "");
   const double cpu0 = cpu_seconds();
   const auto wall0 = std::chrono::steady_clock::now();
   while (!done.load() && !g_stop) std::this_thread::sleep_for(std::chrono::milliseconds(20));
@@ -148,6 +167,10 @@ int main(int argc, char** argv) {
   const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
   const nlohmann::json status = daemon.status();
   daemon.stop();
+  if (stalled) {
+    zmq_close(stalled);
+    zmq_ctx_term(zmq_context);
+  }
 
   std::vector<std::int64_t> total_ns, queue_ns, reconstruct_ns, send_ns, overhead_ns, all_ns, outputs_ns;
   std::size_t failed = 0;
@@ -176,7 +199,8 @@ int main(int argc, char** argv) {
   if (json_out) {
     nlohmann::json j{{"method", method_name},  {"frames", total_ns.size()},  {"cpu_percent_of_one_core", cpu_percent},
                      {"wall_s", wall_s},        {"cpu_s", cpu_s},              {"pose_rate_hz", head_rate_hz},
-                     {"sends_failed", failed},  {"samples_dropped", status.value("samples_dropped", 0)}};
+                     {"sends_failed", failed},  {"samples_dropped", status.value("samples_dropped", 0)},
+                     {"stalled_subscriber", stalled_subscriber}};
     if (!outputs.empty()) j["outputs"] = status["outputs"];
     for (const auto& [name, p] : rows)
       j["latency_us"][name] = {{"p50", p.p50}, {"p90", p.p90}, {"p99", p.p99}, {"max", p.max}, {"mean", p.mean}};

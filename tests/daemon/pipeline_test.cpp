@@ -187,9 +187,9 @@ TEST(Pipeline, AStalledSubscriberDoesNotSlowTheDaemon) {
   EXPECT_LT(stalled_received, frames / 2);
   std::printf("fast replay of %d poses: %.3f s with a reading subscriber, %.3f s with a stalled one "
               "(which got %d)\n", frames, reading_s, stalled_s, stalled_received);
-  // Generous: this machine is shared (timings vary by 2x between runs); a publisher that
-  // waited for the subscriber would not have finished at all.
-  EXPECT_LT(stalled_s, 2.0 * reading_s + 0.5);
+  // A publisher that waited for the subscriber would not have finished at all (above). How much
+  // a stalled subscriber costs each pose is measured by `bodyd-bench-latency --stalled-subscriber`
+  // (docs/daemon.md, "Benchmark"), not asserted here.
 }
 
 // The endpoints file goes through a private temporary file, as every file bodyd keeps

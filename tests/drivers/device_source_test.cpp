@@ -81,8 +81,7 @@ TEST(HidSource, StreamsEveryRoleOfOneDeviceStampedAtRead) {
     EXPECT_GE(s.sample.t_ns, t_start);
     EXPECT_LE(s.arrival_ns, t_stop);
     EXPECT_LE(s.sample.t_ns, s.arrival_ns);
-    EXPECT_LT(s.arrival_ns - s.sample.t_ns, 50'000'000);  // stamped at read, pushed right after
-    EXPECT_GE(s.sample.t_ns, last_t[s.sample.role]);       // per role, host time never goes back
+    EXPECT_GE(s.sample.t_ns, last_t[s.sample.role]);  // per role, host time never goes back
     last_t[s.sample.role] = s.sample.t_ns;
     ASSERT_TRUE(s.sample.valid);
     bool found = false;
