@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The bodyd diffusion networks ("mlpwin-v1", "tcn-v1"), their noise schedule, DDIM sampler and model-file writer.
 
-The C++ runtime (model/src/network.cpp, tcn.cpp, sampler.cpp, model_file.cpp) implements exactly the
+The C++ runtime (model/src/mlpwin.cpp, tcn.cpp, sampler.cpp, model_file.cpp) implements exactly the
 same networks and sampler; tests/model checks the two against fixtures written by
 training/export_fixture.py. The model file layout is specified in docs/model-file.md.
 

@@ -2,7 +2,7 @@
 #include "bodyd/inference/denoiser.h"
 
 #include "bodyd/base/require.h"
-#include "bodyd/inference/network.h"
+#include "bodyd/inference/mlpwin.h"
 #include "bodyd/inference/tcn.h"
 #include "bodyd/inference/tcnmlp.h"
 
@@ -14,7 +14,7 @@ namespace bodyd::inference {
 namespace {
 
 constexpr std::array kArchitectures = {
-    Architecture{kArchitectureMlpWin, Network::kConfigFields, &Network::tensors, &Network::make},
+    Architecture{kArchitectureMlpWin, MlpWin::kConfigFields, &MlpWin::tensors, &MlpWin::make},
     Architecture{kArchitectureTcn, Tcn::kConfigFields, &Tcn::tensors, &Tcn::make},
     Architecture{kArchitectureTcnMlp, TcnMlp::kConfigFields, &TcnMlp::tensors, &TcnMlp::make},
 };

@@ -1,4 +1,4 @@
-// Internal: the float building blocks the Eigen networks share (network.cpp, tcn.cpp): tensors to
+// Internal: the float building blocks the Eigen networks share (mlpwin.cpp, tcn.cpp): tensors to
 // Eigen, their layers' tensor lists and loading, SiLU and LayerNorm exactly as PyTorch computes
 // them (docs/model-file.md), the input encoder and linear layers, the step-embedding table and the
 // checks of forward(). Each network calls these in its own order; the arithmetic is theirs.
@@ -184,7 +184,7 @@ void split_linear_silu(const SplitLinear& layer, const Eigen::MatrixBase<U>& u, 
 }
 
 // Column t (t in [0, T)): time2(SiLU(time1(sinusoid_TE(t)))), plus `added` when given, evaluated in
-// double and then rounded to float (network.cpp).
+// double and then rounded to float (mlpwin.cpp).
 [[nodiscard]] Eigen::MatrixXf time_table(const Linear& time1, const Linear& time2, int TE, int T,
                                          const Eigen::VectorXf* added);
 

@@ -1,6 +1,6 @@
 // Eigen forward pass of tcn-v1 (docs/model-file.md, "Network "tcn-v1""), whole windows and streamed.
 //
-// Layout as network.cpp: a batch of windows is C x (W * batch), one column per frame, window after
+// Layout as mlpwin.cpp: a batch of windows is C x (W * batch), one column per frame, window after
 // window, so every per-frame layer is one matrix product over all frames; a causal convolution
 // tap is one product over a window's frames shifted by the tap's offset.
 #include "bodyd/inference/tcn.h"

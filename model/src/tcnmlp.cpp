@@ -1,7 +1,7 @@
 // Eigen forward pass of tcnmlp-v1 (docs/model-file.md, "Network "tcnmlp-v1""): whole windows and
 // the newest frame alone.
 //
-// Layout as network.cpp and tcn.cpp: a batch of windows is one column per frame, window after
+// Layout as mlpwin.cpp and tcn.cpp: a batch of windows is one column per frame, window after
 // window. The context runs over every frame of a window, the trunk over its newest N.
 #include "bodyd/inference/tcnmlp.h"
 

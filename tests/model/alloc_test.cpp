@@ -2,7 +2,7 @@
 // (tests/support, bodyd/test/alloc_counter.h) replaces malloc & co. (and so operator new, which
 // calls malloc) with counting wrappers around glibc's implementation, so Eigen's internal
 // allocations are seen too; in a sanitizer build it counts operator new only, so these skip.
-#include "bodyd/inference/network.h"
+#include "bodyd/inference/mlpwin.h"
 #include "bodyd/inference/sampler.h"
 #include "test_util.h"
 
@@ -15,8 +15,8 @@
 namespace bodyd::test {
 namespace {
 
-using inference::Network;
-using inference::NetworkScratch;
+using inference::MlpWin;
+using inference::MlpWinScratch;
 using inference::Sampler;
 using inference::SamplerOptions;
 
@@ -38,11 +38,11 @@ TEST(Allocation, ForwardAndSampleDoNotAllocate) {
   const auto tiny = inference::load_model(tiny_model_path());
   // Default-size shapes, so Eigen takes the same product paths as with a real model.
   const auto model = random_model(inference::MlpWinConfig{20, 191, 64, 512, 2, 64, 100}.to_model_config(), 1, *tiny);
-  const auto net = std::make_shared<const Network>(model);
+  const auto net = std::make_shared<const MlpWin>(model);
   const std::size_t n = static_cast<std::size_t>(net->window_size());
   std::vector<float> x(2 * n, 0.3f), m(2 * n, 0.0f), out(2 * n);
   for (std::size_t i = 0; i < m.size(); i += 4) m[i] = 1.0f;
-  NetworkScratch scratch(*net, 2);
+  MlpWinScratch scratch(*net, 2);
   Sampler plain(net, SamplerOptions{4, 1.0f, 0.0f}, 1);
   Sampler guided(net, SamplerOptions{4, 2.0f, 0.5f}, 1);
   const std::span<const float> x1(x.data(), n), m1(m.data(), n);

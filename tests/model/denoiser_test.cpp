@@ -1,7 +1,7 @@
 // The architecture seam (denoiser.h): the table, the factory, and that a denoiser made from a
 // model file's "architecture" field computes what that architecture's network computes.
 #include "bodyd/inference/denoiser.h"
-#include "bodyd/inference/network.h"
+#include "bodyd/inference/mlpwin.h"
 #include "test_util.h"
 
 #include <gtest/gtest.h>
@@ -38,11 +38,11 @@ TEST(Denoiser, FactoryBuildsTheFilesArchitectureAndMatchesPyTorch) {
   EXPECT_EQ(denoiser->steps(), model->config.steps());
   EXPECT_EQ(denoiser->frames(), 4);
   EXPECT_EQ(denoiser->steps(), 10);
-  EXPECT_NE(dynamic_cast<const inference::Network*>(denoiser.get()), nullptr);
+  EXPECT_NE(dynamic_cast<const inference::MlpWin*>(denoiser.get()), nullptr);
   auto scratch = denoiser->make_scratch(1);
   ASSERT_NE(scratch, nullptr);
   EXPECT_EQ(scratch->max_batch(), 1);
-  // Through the interface, the outputs are PyTorch's (same tolerance as Network's parity test).
+  // Through the interface, the outputs are PyTorch's (same tolerance as MlpWin's parity test).
   for (std::size_t i = 0; i < cases["forward"].size(); ++i) {
     const std::string p = "forward." + std::to_string(i) + ".";
     const auto& expected = io.tensors.at(p + "out").data;

@@ -1,6 +1,6 @@
 #include "reference_network.h"
 
-#include "bodyd/inference/network.h"
+#include "bodyd/inference/mlpwin.h"
 
 #include <cmath>
 #include <string>

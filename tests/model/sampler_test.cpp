@@ -1,7 +1,7 @@
 // DDIM sampler: step schedule, PyTorch parity (given the initial noise), imputation exactness,
 // determinism, and the generator.
 #include "bodyd/inference/sampler.h"
-#include "bodyd/inference/network.h"
+#include "bodyd/inference/mlpwin.h"
 #include "test_util.h"
 
 #include <gtest/gtest.h>
@@ -13,13 +13,13 @@
 namespace bodyd::test {
 namespace {
 
-using inference::Network;
+using inference::MlpWin;
 using inference::Sampler;
 using inference::SamplerOptions;
 
-std::shared_ptr<const Network> tiny_network() {
+std::shared_ptr<const MlpWin> tiny_network() {
   const auto model = inference::load_model(tiny_model_path());
-  return std::make_shared<const Network>(*model);
+  return std::make_shared<const MlpWin>(*model);
 }
 
 TEST(Sampler, Timesteps) {

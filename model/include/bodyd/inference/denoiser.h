@@ -75,7 +75,7 @@ class Denoiser {
   // Buffers for up to max_batch windows per forward() call (allocates; call at set-up).
   [[nodiscard]] virtual std::unique_ptr<DenoiserScratch> make_scratch(int max_batch) const = 0;
   // Evaluates `batch` windows at step t: x, m, out hold batch * W * D floats (frame-major windows,
-  // normalised features; m is 1 where observed). Requirements as Network::forward (a bug if
+  // normalised features; m is 1 where observed). Requirements as MlpWin::forward (a bug if
   // broken: abort with a message), including a scratch made by this denoiser's make_scratch().
   // Does not allocate.
   virtual void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,

@@ -1,4 +1,4 @@
-// What the Eigen denoisers (network.h's mlpwin-v1, tcn.h's tcn-v1) share: their layer types and a
+// What the Eigen denoisers (mlpwin.h's mlpwin-v1, tcn.h's tcn-v1) share: their layer types and a
 // base that holds the config and the model's diffusion / normalisation data, answers the
 // Denoiser accessors from them and makes the network's scratch. The arithmetic they share lives
 // in model/src/eigen_ops.h.

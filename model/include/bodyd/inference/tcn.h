@@ -9,7 +9,7 @@
 // unbounded stream, which TcnStream computes at a cost per frame that does not grow with W.
 // Identical to training/model_net.py's TcnCausal; tests/model checks the two.
 //
-// Like Network: a Tcn holds only weights (immutable, shared between sessions); every buffer lives
+// Like MlpWin: a Tcn holds only weights (immutable, shared between sessions); every buffer lives
 // in a TcnScratch (or a TcnStream) owned by one session. forward() does not allocate.
 #pragma once
 
@@ -93,7 +93,7 @@ class Tcn final : public detail::EigenDenoiser<TcnConfig, Tcn, TcnScratch> {
   // when the dilations cover every offset, as with R >= L).
   [[nodiscard]] std::span<const Eigen::Index> newest_frames() const { return stack_.newest_frames(); }
 
-  // As Network::forward: `batch` windows at step t, frame-major, out the same size. Requirements
+  // As MlpWin::forward: `batch` windows at step t, frame-major, out the same size. Requirements
   // (a bug if broken: abort): whole windows, 1 <= batch <= scratch.max_batch(), 0 <= t < T, out
   // not aliasing x or m, a scratch made by this network. Does not allocate.
   void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,

@@ -9,7 +9,7 @@
 // N frames are decoded as mlpwin-v1 decodes its window, the W - N older ones from the context
 // alone. Identical to training/model_net.py's TcnMlp; tests/model checks the two.
 //
-// Like Network: a TcnMlp holds only weights (immutable, shared between sessions); every buffer
+// Like MlpWin: a TcnMlp holds only weights (immutable, shared between sessions); every buffer
 // lives in a TcnMlpScratch owned by one session. forward() and forward_newest() do not allocate.
 #pragma once
 
@@ -82,7 +82,7 @@ class TcnMlp final : public detail::EigenDenoiser<TcnMlpConfig, TcnMlp, TcnMlpSc
   [[nodiscard]] std::string_view architecture() const override { return kArchitectureTcnMlp; }
   [[nodiscard]] Weights weights() const override { return weights_; }
   using EigenDenoiser::forward;
-  // As Network::forward: `batch` windows at step t, frame-major, out the same size. Requirements
+  // As MlpWin::forward: `batch` windows at step t, frame-major, out the same size. Requirements
   // (a bug if broken: abort): whole windows, 1 <= batch <= scratch.max_batch(), 0 <= t < T, out
   // not aliasing x or m, a scratch made by this network. Does not allocate.
   void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,

@@ -1,6 +1,6 @@
 // Eigen forward pass: against PyTorch's outputs (the parity fixture written by
 // training/export_fixture.py) and against the plain double-precision reference.
-#include "bodyd/inference/network.h"
+#include "bodyd/inference/mlpwin.h"
 #include "reference_network.h"
 #include "test_util.h"
 
@@ -13,20 +13,20 @@
 namespace bodyd::test {
 namespace {
 
-using inference::Network;
-using inference::NetworkScratch;
+using inference::MlpWin;
+using inference::MlpWinScratch;
 
 // Parity with PyTorch: relative_error (max |a - b| / max |b|) at most this.
 constexpr double kParityTolerance = 1e-4;
 // Float forward against the double reference.
 constexpr double kReferenceTolerance = 5e-6;
 
-TEST(Network, MatchesPyTorchOnTheFixture) {
+TEST(MlpWin, MatchesPyTorchOnTheFixture) {
   const auto model = inference::load_model(tiny_model_path());
   const auto io = inference::read_tensor_file(tiny_io_path());
   const auto cases = nlohmann::json::parse(io.metadata.at("cases"));
-  const Network net(*model);
-  NetworkScratch scratch(net);
+  const MlpWin net(*model);
+  MlpWinScratch scratch(net);
   ASSERT_EQ(cases["forward"].size(), 3u);
   for (std::size_t i = 0; i < cases["forward"].size(); ++i) {
     const std::string p = "forward." + std::to_string(i) + ".";
@@ -48,13 +48,13 @@ TEST(Network, MatchesPyTorchOnTheFixture) {
   }
 }
 
-TEST(Network, MatchesReferenceOnLargerConfig) {
+TEST(MlpWin, MatchesReferenceOnLargerConfig) {
   const auto tiny = inference::load_model(tiny_model_path());
   // Default-like shape (E, W, D as deployed) with a smaller trunk to keep the naive reference fast.
   const inference::MlpWinConfig config{20, 191, 64, 128, 2, 64, 100};
   const auto model = random_model(config.to_model_config(), 11, *tiny);
-  const Network net(model);
-  NetworkScratch scratch(net, 2);
+  const MlpWin net(model);
+  MlpWinScratch scratch(net, 2);
   std::mt19937 rng(5);
   const std::size_t n = static_cast<std::size_t>(net.window_size());
   for (int t : {0, 37, 99}) {
@@ -69,11 +69,11 @@ TEST(Network, MatchesReferenceOnLargerConfig) {
   }
 }
 
-TEST(Network, BatchOfTwoEqualsTwoSingles) {
+TEST(MlpWin, BatchOfTwoEqualsTwoSingles) {
   const auto model = inference::load_model(tiny_model_path());
-  const Network net(*model);
-  NetworkScratch single(net, 1);
-  NetworkScratch pair(net, 2);
+  const MlpWin net(*model);
+  MlpWinScratch single(net, 1);
+  MlpWinScratch pair(net, 2);
   std::mt19937 rng(9);
   const std::size_t n = static_cast<std::size_t>(net.window_size());
   auto x = random_window(rng, 2 * n, false);
@@ -90,10 +90,10 @@ TEST(Network, BatchOfTwoEqualsTwoSingles) {
   EXPECT_LE(relative_error(a2, a), 1e-6);
 }
 
-TEST(Network, OutputDependsOnMaskAndStep) {
+TEST(MlpWin, OutputDependsOnMaskAndStep) {
   const auto model = inference::load_model(tiny_model_path());
-  const Network net(*model);
-  NetworkScratch s(net);
+  const MlpWin net(*model);
+  MlpWinScratch s(net);
   std::mt19937 rng(2);
   const std::size_t n = static_cast<std::size_t>(net.window_size());
   const auto x = random_window(rng, n, false);
@@ -107,7 +107,7 @@ TEST(Network, OutputDependsOnMaskAndStep) {
   EXPECT_NE(a, c);
 }
 
-TEST(Network, TimestepEmbedding) {
+TEST(MlpWin, TimestepEmbedding) {
   std::vector<double> e(8);
   inference::timestep_embedding(0, e);
   for (int i = 0; i < 4; ++i) {
@@ -124,8 +124,8 @@ TEST(Network, TimestepEmbedding) {
 TEST(NetworkDeathTest, BrokenPreconditionsAbort) {
   GTEST_FLAG_SET(death_test_style, "threadsafe");
   const auto model = inference::load_model(tiny_model_path());
-  const Network net(*model);
-  NetworkScratch s(net);
+  const MlpWin net(*model);
+  MlpWinScratch s(net);
   const std::size_t n = static_cast<std::size_t>(net.window_size());
   std::vector<float> x(n, 0.0f), m(n, 0.0f), out(n);
   EXPECT_DEATH(net.forward(x, m, model->config.steps(), out, s), "t must be in");

@@ -1,13 +1,14 @@
-// The "mlpwin-v1" denoising network (docs/model-file.md, "Network"), evaluated with Eigen in float.
+// The "mlpwin-v1" denoising network (docs/model-file.md, "Network "mlpwin-v1""), evaluated with
+// Eigen in float.
 //
 // x0_hat = f(x, m, t): x (W x D) the noisy window with observed entries already replaced by the
 // observations, m (W x D) the mask (1 = observed), t the diffusion step in [0, T). Identical to
 // training/model_net.py's MlpWin; tests/model checks both against each other and against
 // a plain double-precision reference.
 //
-// Model apart from state: a Network holds only weights (immutable after construction, share it
-// between sessions as std::shared_ptr<const Network>); every buffer a forward pass needs lives in a
-// NetworkScratch owned by one session and sized when it is constructed. forward() does not
+// Model apart from state: an MlpWin holds only weights (immutable after construction, share it
+// between sessions as std::shared_ptr<const MlpWin>); every buffer a forward pass needs lives in an
+// MlpWinScratch owned by one session and sized when it is constructed. forward() does not
 // allocate. Windows are frame-major: element (w, d) of a window is at index w * D + d.
 #pragma once
 
@@ -36,18 +37,18 @@ struct MlpWinConfig {
   int TE = 0;  // time-embedding sinusoid dimension (even)
   int T = 0;   // diffusion steps
 
-  // From a config the loader checked against Network::kConfigFields.
+  // From a config the loader checked against MlpWin::kConfigFields.
   [[nodiscard]] static MlpWinConfig from(const ModelConfig& config);
   [[nodiscard]] ModelConfig to_model_config() const;
 };
 
-class NetworkScratch;
+class MlpWinScratch;
 
 // The Denoiser of architecture "mlpwin-v1" (denoiser.h).
-class Network final : public detail::EigenDenoiser<MlpWinConfig, Network, NetworkScratch> {
+class MlpWin final : public detail::EigenDenoiser<MlpWinConfig, MlpWin, MlpWinScratch> {
  public:
   // Copies the weights out of a checked model and precomputes the time embedding of every step.
-  explicit Network(const Model& model);
+  explicit MlpWin(const Model& model);
 
   // The architecture table's row (denoiser.h): config fields, tensors, factory.
   static constexpr std::array<ConfigField, 7> kConfigFields = {{
@@ -59,12 +60,12 @@ class Network final : public detail::EigenDenoiser<MlpWinConfig, Network, Networ
       {"TE", "time-embedding dimension", 2},
       {"T", "diffusion steps"},
   }};
-  // Network parameters under their PyTorch state-dict names, in file order (docs/model-file.md).
+  // The network's parameters under their PyTorch state-dict names, in file order (docs/model-file.md).
   [[nodiscard]] static TensorShapes tensors(const ModelConfig& config);
-  static constexpr const char* kWrongScratch = "Network::forward needs a NetworkScratch (made by Network::make_scratch)";
+  static constexpr const char* kWrongScratch = "MlpWin::forward needs an MlpWinScratch (made by MlpWin::make_scratch)";
 
   // make(), config(), frames(), dim(), steps(), alpha_bar(), norm_mean(), norm_std(), make_scratch()
-  // and forward(..., DenoiserScratch&), which takes a NetworkScratch: EigenDenoiser.
+  // and forward(..., DenoiserScratch&), which takes an MlpWinScratch: EigenDenoiser.
   [[nodiscard]] std::string_view architecture() const override { return kArchitectureMlpWin; }
   using EigenDenoiser::forward;
 
@@ -74,7 +75,7 @@ class Network final : public detail::EigenDenoiser<MlpWinConfig, Network, Networ
   // scratch.max_batch(), spans of exactly batch * W * D, 0 <= t < T, scratch made for this
   // network's config. Does not allocate.
   void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
-               NetworkScratch& scratch) const;
+               MlpWinScratch& scratch) const;
 
  private:
   using Linear = detail::Linear;
@@ -91,13 +92,13 @@ class Network final : public detail::EigenDenoiser<MlpWinConfig, Network, Networ
   Linear dec2_;
 };
 
-// Per-session buffers for Network::forward, for up to max_batch windows per call.
-class NetworkScratch final : public detail::EigenScratch<MlpWinConfig> {
+// Per-session buffers for MlpWin::forward, for up to max_batch windows per call.
+class MlpWinScratch final : public detail::EigenScratch<MlpWinConfig> {
  public:
-  explicit NetworkScratch(const Network& network, int max_batch = 1);
+  explicit MlpWinScratch(const MlpWin& network, int max_batch = 1);
 
  private:
-  friend class Network;
+  friend class MlpWin;
   Eigen::MatrixXf e_;      // E x (W * batch): per-frame embeddings, frame after frame
   Eigen::MatrixXf h_;      // H x batch: trunk state
   Eigen::MatrixXf n_;      // H x batch: normalised / activated trunk state

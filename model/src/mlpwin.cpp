@@ -1,11 +1,11 @@
-// Eigen forward pass of mlpwin-v1 (docs/model-file.md, "Network").
+// Eigen forward pass of mlpwin-v1 (docs/model-file.md, "Network "mlpwin-v1"").
 //
 // Layout: a batch of windows is viewed column-per-frame (D x W*batch, column-major), so every
 // per-frame layer (enc, dec1, dec2) is one matrix product over all frames of all windows; the
 // trunk layers are matrix-vector products (matrix-matrix for batch > 1). Weights are row-major
 // (out x in, as stored), which suits Eigen's matrix-vector kernel. Every temporary lives in
-// NetworkScratch; products are written with noalias() into those buffers so nothing allocates.
-#include "bodyd/inference/network.h"
+// MlpWinScratch; products are written with noalias() into those buffers so nothing allocates.
+#include "bodyd/inference/mlpwin.h"
 
 #include <cmath>
 #include <cstdio>
@@ -57,7 +57,7 @@ Eigen::MatrixXf detail::time_table(const Linear& time1, const Linear& time2, int
   return table;
 }
 
-TensorShapes Network::tensors(const ModelConfig& config) {
+TensorShapes MlpWin::tensors(const ModelConfig& config) {
   const MlpWinConfig c = MlpWinConfig::from(config);
   TensorShapes v;
   // In 64 bits: config values are at most 2^16, so products like W * E cannot overflow.
@@ -66,7 +66,7 @@ TensorShapes Network::tensors(const ModelConfig& config) {
   return v;
 }
 
-Network::Network(const Model& model) : EigenDenoiser(model) {
+MlpWin::MlpWin(const Model& model) : EigenDenoiser(model) {
   const MlpWinConfig& c = config_;
   enc_ = detail::load_split_linear(model, "enc", c.D);
   inp_ = load_linear(model, "inp");
@@ -81,8 +81,8 @@ Network::Network(const Model& model) : EigenDenoiser(model) {
   time_table_ = detail::time_table(load_linear(model, "time1"), load_linear(model, "time2"), c.TE, c.T, &inp_.bias);
 }
 
-NetworkScratch::NetworkScratch(const Network& network, int max_batch)
-    : EigenScratch(network.config(), max_batch, "NetworkScratch needs max_batch >= 1") {
+MlpWinScratch::MlpWinScratch(const MlpWin& network, int max_batch)
+    : EigenScratch(network.config(), max_batch, "MlpWinScratch needs max_batch >= 1") {
   const MlpWinConfig& c = config_;
   e_.resize(c.E, c.W * max_batch);
   h_.resize(c.H, max_batch);
@@ -92,11 +92,11 @@ NetworkScratch::NetworkScratch(const Network& network, int max_batch)
   d_.resize(c.E, c.W * max_batch);
 }
 
-void Network::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
-                      NetworkScratch& s) const {
+void MlpWin::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+                     MlpWinScratch& s) const {
   const MlpWinConfig& c = config_;
   BODYD_REQUIRE(s.config_.W == c.W && s.config_.D == c.D && s.config_.E == c.E && s.config_.H == c.H,
-                    "NetworkScratch was made for another network");
+                    "MlpWinScratch was made for another network");
   const Eigen::Index batch = detail::checked_batch(x, m, t, out, c.W, c.D, c.T, s.max_batch_);
 
   const Eigen::Index frames = c.W * batch;
