@@ -70,24 +70,7 @@ TEST(MlpWin, MatchesReferenceOnLargerConfig) {
 }
 
 TEST(MlpWin, BatchOfTwoEqualsTwoSingles) {
-  const auto model = inference::load_model(tiny_model_path());
-  const MlpWin net(*model);
-  MlpWinScratch single(net, 1);
-  MlpWinScratch pair(net, 2);
-  std::mt19937 rng(9);
-  const std::size_t n = static_cast<std::size_t>(net.window_size());
-  auto x = random_window(rng, 2 * n, false);
-  auto m = random_window(rng, 2 * n, true);
-  std::vector<float> out2(2 * n), a(n), b(n);
-  net.forward(x, m, 4, out2, pair);
-  net.forward(std::span(x).first(n), std::span(m).first(n), 4, a, single);
-  net.forward(std::span(x).subspan(n), std::span(m).subspan(n), 4, b, single);
-  EXPECT_LE(relative_error(std::span(out2).first(n), a), 1e-6);
-  EXPECT_LE(relative_error(std::span(out2).subspan(n), b), 1e-6);
-  // A batch-of-two scratch also runs a single window.
-  std::vector<float> a2(n);
-  net.forward(std::span(x).first(n), std::span(m).first(n), 4, a2, pair);
-  EXPECT_LE(relative_error(a2, a), 1e-6);
+  expect_a_batch_of_two_equals_two_singles<MlpWinScratch>(MlpWin(*inference::load_model(tiny_model_path())), 9, 4);
 }
 
 TEST(MlpWin, OutputDependsOnMaskAndStep) {

@@ -68,20 +68,7 @@ TEST(Tcn, OutputsDependOnlyOnTheFrameAndEarlierOnes) {
   EXPECT_GT(relative_error(std::span(b).subspan(6 * D), std::span(a).subspan(6 * D)), 1e-3);
 }
 
-TEST(Tcn, BatchOfTwoEqualsTwoSingles) {
-  const auto net = tiny_tcn();
-  TcnScratch single(*net, 1), pair(*net, 2);
-  std::mt19937 rng(8);
-  const std::size_t n = static_cast<std::size_t>(net->window_size());
-  const auto x = random_window(rng, 2 * n, false);
-  const auto m = random_window(rng, 2 * n, true);
-  std::vector<float> out2(2 * n), a(n), b(n);
-  net->forward(x, m, 2, out2, pair);
-  net->forward(std::span(x).first(n), std::span(m).first(n), 2, a, single);
-  net->forward(std::span(x).subspan(n), std::span(m).subspan(n), 2, b, single);
-  EXPECT_LE(relative_error(std::span(out2).first(n), a), 1e-6);
-  EXPECT_LE(relative_error(std::span(out2).subspan(n), b), 1e-6);
-}
+TEST(Tcn, BatchOfTwoEqualsTwoSingles) { expect_a_batch_of_two_equals_two_singles<TcnScratch>(*tiny_tcn(), 8, 2); }
 
 TEST(Tcn, StreamingEqualsFullRecomputation) {
   const auto net = tiny_tcn();

@@ -150,6 +150,25 @@ inline std::vector<float> ddim_by_full_windows(const inference::Denoiser& net, s
   return x0;
 }
 
+// Two windows in one forward() (a `Scratch` for two, the networks' own kind) give what each gives
+// alone, at step `t`; a scratch for two also runs a single window.
+template <class Scratch, class Net>
+void expect_a_batch_of_two_equals_two_singles(const Net& net, std::uint32_t seed, int t) {
+  Scratch single(net, 1), pair(net, 2);
+  std::mt19937 rng(seed);
+  const std::size_t n = static_cast<std::size_t>(net.window_size());
+  const auto x = random_window(rng, 2 * n, false);
+  const auto m = random_window(rng, 2 * n, true);
+  std::vector<float> out2(2 * n), a(n), b(n);
+  net.forward(x, m, t, out2, pair);
+  net.forward(std::span(x).first(n), std::span(m).first(n), t, a, single);
+  net.forward(std::span(x).subspan(n), std::span(m).subspan(n), t, b, single);
+  EXPECT_LE(relative_error(std::span(out2).first(n), a), 1e-6);
+  EXPECT_LE(relative_error(std::span(out2).subspan(n), b), 1e-6);
+  std::vector<float> a2(n);
+  net.forward(std::span(x).first(n), std::span(m).first(n), t, a2, pair);
+  EXPECT_LE(relative_error(a2, a), 1e-6);
+}
 
 // A temporal network's scratch keeps the encoded past for the network that made it: `b`, of `a`'s
 // shape with other weights, given the same window in the same scratch (a `Scratch`, the
