@@ -215,29 +215,15 @@ TEST(MonadoBridge, AfterResetTheTrackersStayInMonadosSpace) {
   ASSERT_TRUE(reset && (*reset)["ok"] == true) << (reset ? reset->dump() : "no reply");
   const auto status = test::control_request(ctx, control, R"({"cmd":"status"})");
   ASSERT_TRUE(status && (*status)["recentred"] == true) << (status ? status->dump() : "");
-  const double heading = (*status)["recentre"]["heading_deg"].get<double>() * M_PI / 180.0;
-  const Vec3 origin((*status)["recentre"]["origin_m"][0].get<double>(), 0.0, (*status)["recentre"]["origin_m"][1].get<double>());
   collect(sub, skeleton, poses, [&] { return client.wait(0).has_value(); });
   ASSERT_EQ(client.wait(10000), 0) << client.log() << server.daemon.log();
   server.daemon.signal(SIGINT);
   ASSERT_EQ(server.daemon.wait(10000), 0) << server.daemon.log();
   ASSERT_GT(poses.size(), before + 100) << server.daemon.log();
-  EXPECT_GT(std::abs(heading) + origin.norm(), 0.05) << "the walk should have moved the head off the origin";
-
-  // The poses in Monado's space: as they are before the reset, both ways for the first 30 after
-  // it (on their way while it was asked for), then taken back (p = R^-1 p' + origin).
-  const Quat r(Eigen::AngleAxisd(-heading, Vec3::UnitY()));
-  std::vector<protocol::PoseMessage> in_monado(poses.begin(), poses.begin() + static_cast<std::ptrdiff_t>(before));
-  for (std::size_t i = before; i < poses.size(); ++i) {
-    if (i < before + 30) in_monado.push_back(poses[i]);
-    in_monado.push_back(poses[i]);
-    for (auto& j : in_monado.back().joints) {
-      const Vec3 p = r.conjugate() * vec3(j.position_m) + origin;
-      const Quat q = (r.conjugate() * quat_xyzw(j.rotation_xyzw)).normalized();
-      j.position_m = {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z())};
-      j.rotation_xyzw = {static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()), static_cast<float>(q.w())};
-    }
-  }
+  // The poses in Monado's space (test::in_runtime_space).
+  const test::RuntimeSpacePoses back = test::in_runtime_space(poses, before, *status);
+  const std::vector<protocol::PoseMessage>& in_monado = back.poses;
+  EXPECT_GT(std::abs(back.heading_rad) + back.origin_m.norm(), 0.05) << "the walk should have moved the head off the origin";
   std::vector<std::size_t> tracker_joint;
   for (const auto& t : kTrackers) tracker_joint.push_back(joint_index(skeleton, std::get<2>(t)));
   const auto tracker_mm = [&](const nlohmann::json& u, const protocol::PoseMessage& pose) {
@@ -257,8 +243,8 @@ TEST(MonadoBridge, AfterResetTheTrackersStayInMonadosSpace) {
     next = p;  // updates go out on bodyd's clock: two may carry the same pose
   }
   EXPECT_GT(after_reset, 100u) << matched << " updates matched";
-  std::cout << matched << " updates matched, " << after_reset << " after the reset (heading " << heading * 180.0 / M_PI
-            << " deg, origin " << origin.x() << ", " << origin.z() << " m)\n";
+  std::cout << matched << " updates matched, " << after_reset << " after the reset (heading " << back.heading_rad * 180.0 / M_PI
+            << " deg, origin " << back.origin_m.x() << ", " << back.origin_m.z() << " m)\n";
 }
 
 // Bad input on SlimeVRRpc (issue 17 item 4): a length above 16 KiB or below 4 and a flood drop

@@ -339,33 +339,19 @@ TEST(SteamvrBridge, AfterResetTheTrackersStayInTheDriversSpace) {
   ASSERT_TRUE(reset && (*reset)["ok"] == true) << (reset ? reset->dump() : "no reply");
   const auto status = test::control_request(loop.ctx, loop.endpoints["control"], R"({"cmd":"status"})");
   ASSERT_TRUE(status && (*status)["recentred"] == true) << (status ? status->dump() : "");
-  const double heading = (*status)["recentre"]["heading_deg"].get<double>() * M_PI / 180.0;
-  const Vec3 origin((*status)["recentre"]["origin_m"][0].get<double>(), 0.0, (*status)["recentre"]["origin_m"][1].get<double>());
   collect(*loop.sub, loop.skeleton, loop.poses, [&] { return driver.wait(0).has_value(); });
   ASSERT_EQ(driver.wait(0), 0) << driver.log();
   loop.daemon->signal(SIGINT);
   ASSERT_EQ(loop.daemon->wait(10000), 0) << loop.daemon->log();
   ASSERT_GT(loop.poses.size(), before + 100) << loop.daemon->log();
 
-  // R's forward is (sin -heading, 0, cos -heading) (docs/control.md: heading_deg = -atan2(f.x, f.z)).
-  const Quat r(Eigen::AngleAxisd(-heading, Vec3::UnitY()));
+  // The poses in the driver's space (test::in_runtime_space): an output that did not undo the
+  // re-centring matches none of the later ones.
+  const test::RuntimeSpacePoses back = test::in_runtime_space(loop.poses, before, *status);
+  const double heading = back.heading_rad;
+  const Vec3& origin = back.origin_m;
   EXPECT_GT(std::abs(heading) + origin.norm(), 0.05) << "the clip should have moved the head off the origin";
-  // The first poses from `before` on may have been made before the reset took effect (on their
-  // way while it was asked for): those 30 are offered as they are, then taken back through the
-  // re-centring; every later one only taken back (an output that did not undo the re-centring
-  // matches none of them).
-  std::vector<protocol::PoseMessage> driver_space(loop.poses.begin(), loop.poses.begin() + static_cast<std::ptrdiff_t>(before));
-  for (std::size_t i = before; i < loop.poses.size(); ++i) {
-    if (i < before + 30) driver_space.push_back(loop.poses[i]);
-    driver_space.push_back(loop.poses[i]);
-    for (auto& j : driver_space.back().joints) {
-      const Vec3 p = r.conjugate() * vec3(j.position_m) + origin;
-      const Quat q = (r.conjugate() * quat_xyzw(j.rotation_xyzw)).normalized();
-      j.position_m = {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z())};
-      j.rotation_xyzw = {static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()),
-                         static_cast<float>(q.w())};
-    }
-  }
+  const std::vector<protocol::PoseMessage> driver_space = back.poses;
   loop.poses = driver_space;
   const Match m = expect_groups_match_poses(loop, parse(read_jsonl(loop.dir.path / "received.jsonl")));
   std::cout << m.matched << " groups; after the reset (heading " << heading * 180.0 / M_PI << " deg, origin " << origin.x()

@@ -230,10 +230,8 @@ TEST_F(VrchatOutput, AfterResetTheTrackersStayInTheSpaceOfVrchatsHead) {
   ASSERT_TRUE(reset && (*reset)["ok"] == true) << (reset ? reset->dump() : "no reply");
   const auto status = test::control_request(ctx, control, R"({"cmd":"status"})");
   ASSERT_TRUE(status && (*status)["recentred"] == true) << (status ? status->dump() : "");
-  const double heading = (*status)["recentre"]["heading_deg"].get<double>() * M_PI / 180.0;
-  const Vec3 origin((*status)["recentre"]["origin_m"][0].get<double>(), 0.0, (*status)["recentre"]["origin_m"][1].get<double>());
   // The walk has taken the head well away from where the re-centring puts it.
-  ASSERT_GT(origin.norm(), 0.5) << status->dump();
+  ASSERT_GT(test::in_runtime_space({}, 0, *status).origin_m.norm(), 0.5) << status->dump();
   test::collect_until_quiet(sub, skeleton, poses, daemon);
   ASSERT_EQ(daemon.wait(10000), 0) << daemon.log();
   ASSERT_EQ(receiver.child->wait(20000), 0) << receiver.child->log();
@@ -243,31 +241,15 @@ TEST_F(VrchatOutput, AfterResetTheTrackersStayInTheSpaceOfVrchatsHead) {
   for (const TrackerSample& h : read_tracker_log(log_path).samples)
     if (h.role == Role::Head && h.valid) log_heads.push_back(h);
   ASSERT_EQ(poses.size(), log_heads.size()) << daemon.log();
-  // The poses in VRChat's space: those before the reset as they are; the first 30 after it (made
-  // while the reset was on its way) both as they are and taken back; the later ones taken back
-  // (p_vrchat = R^-1 p + origin, R the turn by -heading about +Y: docs/control.md).
-  const Quat r(Eigen::AngleAxisd(-heading, Vec3::UnitY()));
-  std::vector<protocol::PoseMessage> in_vrchat(poses.begin(), poses.begin() + static_cast<std::ptrdiff_t>(before));
-  std::vector<TrackerSample> heads(log_heads.begin(), log_heads.begin() + static_cast<std::ptrdiff_t>(before));
-  for (std::size_t i = before; i < poses.size(); ++i) {
-    if (i < before + 30) {
-      in_vrchat.push_back(poses[i]);
-      heads.push_back(log_heads[i]);
-    }
-    in_vrchat.push_back(poses[i]);
-    heads.push_back(log_heads[i]);
-    for (auto& j : in_vrchat.back().joints) {
-      const Vec3 p = r.conjugate() * vec(j.position_m) + origin;
-      const Quat q = (r.conjugate() * quat_xyzw(j.rotation_xyzw)).normalized();
-      j.position_m = {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z())};
-      j.rotation_xyzw = {static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()), static_cast<float>(q.w())};
-    }
-  }
+  // The poses in VRChat's space (test::in_runtime_space), each with its head sample.
+  const test::RuntimeSpacePoses in_vrchat = test::in_runtime_space(poses, before, *status);
+  std::vector<TrackerSample> heads;
+  for (std::size_t i : in_vrchat.from) heads.push_back(log_heads[i]);
   const std::vector<nlohmann::json> bundles = read_bundles(receiver.bundles);
   EXPECT_GE(bundles.size() * 100, poses.size() * 95) << bundles.size() << " bundles for " << poses.size() << " poses";
-  expect_bundles_match(in_vrchat, bundles, skeleton, heads);
-  std::cout << "after the reset (heading " << heading * 180.0 / M_PI << " deg, origin " << origin.x() << ", " << origin.z()
-            << " m)\n";
+  expect_bundles_match(in_vrchat.poses, bundles, skeleton, heads);
+  std::cout << "after the reset (heading " << in_vrchat.heading_rad * 180.0 / M_PI << " deg, origin "
+            << in_vrchat.origin_m.x() << ", " << in_vrchat.origin_m.z() << " m)\n";
 }
 
 // Issue 9's loop: osc.js plays a clip's head and wrists as VRChat sends them (90 Hz) into

@@ -2,6 +2,7 @@
 // process (on the test-support library's Process, TempDir and read_file).
 #pragma once
 
+#include "bodyd/motion/rotation.h"
 #include "bodyd/protocol/pose_message.h"
 #include "bodyd/test/files.h"
 #include "bodyd/test/process.h"
@@ -102,6 +103,44 @@ void collect(zmq::socket_t& sub, protocol::SkeletonMessage& skeleton, std::vecto
       poses.push_back(pose);
     }
   }
+}
+
+// After a recenter (issue 45 item 3): an output that publishes in the runtime's space sends the
+// ZeroMQ poses (the user's re-centred space) taken back through the re-centring that `status`
+// reports, p = R^-1 p' + origin, q = R^-1 q', R the turn by -heading_deg about +Y
+// (docs/control.md). The poses as that output sends them: those before the recenter (the first
+// `before`) as they are; the next `in_flight` both as they are and taken back (made while the
+// recenter was on its way); every later one taken back. `from[i]`: the index in `poses` of the
+// i-th pose returned.
+struct RuntimeSpacePoses {
+  std::vector<protocol::PoseMessage> poses;
+  std::vector<std::size_t> from;
+  double heading_rad = 0.0;
+  Vec3 origin_m = Vec3::Zero();
+};
+inline RuntimeSpacePoses in_runtime_space(const std::vector<protocol::PoseMessage>& poses, std::size_t before,
+                                          const nlohmann::json& status, std::size_t in_flight = 30) {
+  RuntimeSpacePoses out;
+  out.heading_rad = status["recentre"]["heading_deg"].get<double>() * M_PI / 180.0;
+  out.origin_m = Vec3(status["recentre"]["origin_m"][0].get<double>(), 0.0, status["recentre"]["origin_m"][1].get<double>());
+  const Quat r(Eigen::AngleAxisd(-out.heading_rad, Vec3::UnitY()));
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    if (i < before + in_flight) {
+      out.poses.push_back(poses[i]);
+      out.from.push_back(i);
+    }
+    if (i < before) continue;
+    out.poses.push_back(poses[i]);
+    out.from.push_back(i);
+    for (auto& j : out.poses.back().joints) {
+      const Vec3 p = r.conjugate() * Vec3(j.position_m[0], j.position_m[1], j.position_m[2]) + out.origin_m;
+      const Quat q = (r.conjugate() * Quat(j.rotation_xyzw[3], j.rotation_xyzw[0], j.rotation_xyzw[1], j.rotation_xyzw[2]))
+                         .normalized();
+      j.position_m = {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z())};
+      j.rotation_xyzw = {static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()), static_cast<float>(q.w())};
+    }
+  }
+  return out;
 }
 
 // collect() until `feeder` has exited and no pose came for 500 ms.
