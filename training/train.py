@@ -133,6 +133,21 @@ def parse_args():
     p.add_argument("--extra-mount-deg", type=float, default=5.0,
                    help="strapping error of an extra tracker: a constant rotation offset per sample, about this many "
                         "degrees (standard deviation per axis of the rotation vector)")
+    p.add_argument("--xr-mount-prob", type=float, default=0.0,
+                   help="per sample: probability that the headset and controllers are seen through a wrong mounting "
+                        "(a user on the default mounting, issue 44: --device-frames xr costs 1.55x joint frames); "
+                        "0 (default): never, as before")
+    p.add_argument("--head-mount-cm", type=float, default=1.5,
+                   help="with --xr-mount-prob: the Head joint's constant position error, cm (standard deviation per "
+                        "axis); bodyd-eval --device-frames xr measures the default mounting 2.2 cm off at the eyes, 5.3 "
+                        "degrees turned (about 1.2 cm at the joint)")
+    p.add_argument("--head-mount-deg", type=float, default=3.0,
+                   help="with --xr-mount-prob: the Head joint's constant rotation error, degrees per axis")
+    p.add_argument("--hand-mount-cm", type=float, default=1.1,
+                   help="with --xr-mount-prob: each wrist's constant position error, cm per axis (grip offset 1.2 cm, "
+                        "14 degrees about a 6 cm lever)")
+    p.add_argument("--hand-mount-deg", type=float, default=8.0,
+                   help="with --xr-mount-prob: each wrist's constant rotation error, degrees per axis (grips 14 degrees)")
     p.add_argument("--holdout-every", type=int, default=20, help="every Nth training clip is held out for monitoring")
     p.add_argument("--exclude-split", action="append", default=[], metavar="FILE",
                    help="never train on (nor monitor with) the clips this file lists: '#' comments, then one path per "
@@ -522,20 +537,25 @@ def main():
             frac = max(frac, (time.time() - t0 + wall_before) / 60.0 / a.minutes)
         return a.lr * 0.5 * (1 + math.cos(math.pi * min(1.0, frac)))
 
-    def strapped(obs, g):
-        """obs with each extra role's joint seen through a strapped tracker: a constant offset per sample in
-        the joint's own frame, position R o (o ~ N(0, --extra-mount-cm) per axis) and rotation R Q (Q about a
-        random rotation vector ~ N(0, --extra-mount-deg) per axis)."""
+    def strapped(obs, g, joints=None, sel=None):
+        """obs with each listed joint seen through a wrong mounting: a constant offset per sample in the joint's
+        own frame, position R o (o ~ N(0, cm) per axis) and rotation R Q (Q about a random rotation vector
+        ~ N(0, deg) per axis). `joints`: (position entries, rotation entries, cm, deg) per joint; default the
+        extra roles with --extra-mount-cm / --extra-mount-deg. `sel` (B,): only those samples."""
         B = obs.shape[0]
         raw = obs * std_d + mean_d
-        for _, pos, rot in masker.extra:
+        if joints is None:
+            joints = [(pos, rot, a.extra_mount_cm, a.extra_mount_deg) for _, pos, rot in masker.extra]
+        for pos, rot, cm, deg in joints:
+            if sel is not None:
+                before_pos, before_rot = raw[:, :, pos].clone(), raw[:, :, rot].clone()
             c0 = torch.nn.functional.normalize(raw[:, :, rot[:3]], dim=-1)
             c1 = raw[:, :, rot[3:]]
             c1 = torch.nn.functional.normalize(c1 - (c1 * c0).sum(-1, keepdim=True) * c0, dim=-1)
             c2 = torch.cross(c0, c1, dim=-1)
-            o = torch.randn(B, 1, 3, generator=g, device=dev) * (a.extra_mount_cm / 100.0)
+            o = torch.randn(B, 1, 3, generator=g, device=dev) * (cm / 100.0)
             raw[:, :, pos] = raw[:, :, pos] + c0 * o[..., 0:1] + c1 * o[..., 1:2] + c2 * o[..., 2:3]
-            v = torch.randn(B, 3, generator=g, device=dev) * math.radians(a.extra_mount_deg)
+            v = torch.randn(B, 3, generator=g, device=dev) * math.radians(deg)
             angle = v.norm(dim=-1, keepdim=True).clamp_min(1e-9)
             k = v / angle
             K = torch.zeros(B, 3, 3, device=dev)
@@ -545,6 +565,10 @@ def main():
             Q = (torch.eye(3, device=dev).expand(B, 3, 3) + sa * K + (1 - ca) * (K @ K)).view(B, 1, 3, 3)
             raw[:, :, rot[:3]] = c0 * Q[..., 0, 0:1] + c1 * Q[..., 1, 0:1] + c2 * Q[..., 2, 0:1]
             raw[:, :, rot[3:]] = c0 * Q[..., 0, 1:2] + c1 * Q[..., 1, 1:2] + c2 * Q[..., 2, 1:2]
+            if sel is not None:  # the other samples keep their joint as it was
+                keep = (~sel).view(B, 1, 1)
+                raw[:, :, pos] = torch.where(keep, before_pos, raw[:, :, pos])
+                raw[:, :, rot] = torch.where(keep, before_rot, raw[:, :, rot])
         return (raw - mean_d) / std_d
 
     def loss_on(model, idx, g, augment=False):
@@ -563,6 +587,12 @@ def main():
             # Only the trackers' frames: a prefix frame is the emitted body, not a tracker's view of it.
             pf = prefix.unsqueeze(-1)
             obs = pf * obs + (1 - pf) * strapped(obs, g)
+        if a.xr_mount_prob > 0:
+            # The headset and controllers through a wrong mounting, in every frame: the emitted past holds the
+            # head and hands where the trackers put them (the runtime's body solver), so the prefix does too.
+            xr = [(masker.head[:3], masker.head[3:], a.head_mount_cm, a.head_mount_deg)] + \
+                 [(h[:3], h[3:], a.hand_mount_cm, a.hand_mount_deg) for h in masker.hands]
+            obs = strapped(obs, g, xr, torch.rand(B, generator=g, device=dev) < a.xr_mount_prob)
         if augment and a.self_prefix > 0:
             # The online loop's past is what it emitted: the model's own reconstruction, trackers exact. Here it
             # is approximated by one reconstruction of the whole window from its trackers (no past), by the EMA
