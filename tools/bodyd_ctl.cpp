@@ -268,6 +268,21 @@ void print_status(const json& r) {
     std::cout << "\n";
   }
   if (!r.value("sources_started", true)) std::cout << "  (sources wait for a subscriber: --wait-for-subscriber)\n";
+  // Every role with its state, source and rate (issue 44).
+  if (const json trackers = r.value("trackers", json::object()); trackers.is_object() && !trackers.empty()) {
+    std::string line;
+    for (const char* role : {"head", "left_hand", "right_hand", "hips", "chest", "left_foot", "right_foot", "left_knee",
+                             "right_knee", "left_elbow", "right_elbow"}) {
+      if (!trackers.contains(role)) continue;
+      const json& t = trackers[role];
+      std::string name = role;
+      std::replace(name.begin(), name.end(), '_', ' ');
+      line += fmt::format("{}{} {}", line.empty() ? "" : "; ", name, t.value("state", std::string("?")));
+      if (t.contains("source"))
+        line += fmt::format(" ({}, {:.0f} Hz)", t.value("source", std::string("?")), t.value("rate_hz", 0.0));
+    }
+    std::cout << "trackers: " << line << "\n";
+  }
   const json by_role = r.value("samples_by_role", json::object());
   std::cout << fmt::format("samples: {} in (head {}, left hand {}, right hand {}), {} dropped, queue {}/{}\n",
                            r.value("samples_in", json(0)).dump(), by_role.value("head", json(0)).dump(),

@@ -166,7 +166,14 @@ struct Daemon::Impl final : ControlTarget {
   // Reconstruction-thread state.
   std::uint64_t seq = 0;
   std::int64_t last_pose_t_ns = INT64_MIN;
-  RoleArrivals role_arrivals{};  // OutputFrame::role_arrivals: every sample's, before anything may drop it
+  RoleArrivals role_arrivals{};
+  // status's `trackers`: each role's newest sample (relaxed atomics: written here, read by status()).
+  struct RoleSeenAtomic {
+    std::atomic<std::int64_t> arrival_ns{INT64_MIN};
+    std::atomic<int> source{-1};
+    std::atomic<std::uint8_t> flags{0};
+  };
+  std::array<RoleSeenAtomic, kRoleCount> role_seen;  // OutputFrame::role_arrivals: every sample's, before anything may drop it
   RateGate rate_gate;  // config.rate_hz: how often to reconstruct at all
   BodyPose body;
   BodyPose runtime_body;  // `body` in the runtime's space after a reset (OutputSpace::Runtime)
@@ -284,6 +291,14 @@ struct Daemon::Impl final : ControlTarget {
     // The raw sample (before mounting, offsets, re-centring) to the calibrations, body trackers'
     // device poses included: the calibration pose measures their mountings.
     feed_pose_calibrators(s, in.arrival_ns);
+    {
+      RoleSeenAtomic& seen = role_seen[static_cast<std::size_t>(s.role)];
+      seen.flags.store(static_cast<std::uint8_t>((s.valid ? RoleSeen::kValid : 0) | (s.has_position ? RoleSeen::kPosition : 0) |
+                                                 (conditioner.uses(s) ? RoleSeen::kUsed : 0)),
+                       std::memory_order_relaxed);
+      seen.source.store(static_cast<int>(in.source_index), std::memory_order_relaxed);
+      seen.arrival_ns.store(in.arrival_ns, std::memory_order_relaxed);
+    }
     if (!conditioner.uses(s)) {
       // A body tracker's device pose before its mounting is measured (a calibration pose, the
       // auto calibration's still second, or the mounting file): its strap sits a few centimetres
@@ -818,6 +833,10 @@ struct Daemon::Impl final : ControlTarget {
   json status() override {
     StatusSnapshot s;
     s.uptime_s = static_cast<double>(drivers::monotonic_ns() - start_ns) / 1e9;
+    s.now_ns = drivers::monotonic_ns();
+    for (std::size_t r = 0; r < kRoleCount; ++r)
+      s.trackers[r] = {role_seen[r].arrival_ns.load(std::memory_order_relaxed), role_seen[r].source.load(std::memory_order_relaxed),
+                       role_seen[r].flags.load(std::memory_order_relaxed)};
     {
       std::lock_guard lock(shared_mutex);
       s.summary = summary;

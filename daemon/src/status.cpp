@@ -89,6 +89,32 @@ json status_json(const StatusSnapshot& s, const PipelineStats& stats) {
     src.push_back(source_status_json(
         s.sources[i], i < s.source_rates_hz_by_role.size() ? s.source_rates_hz_by_role[i] : std::array<double, kRoleCount>{}));
   j["sources"] = src;
+  // Every role with its source, rate and state (issue 44): the headset's and controllers' always,
+  // a body tracker's once it has sent something.
+  json trackers = json::object();
+  for (Role r : kRoles) {
+    const RoleSeen& seen = s.trackers[static_cast<std::size_t>(r)];
+    if (seen.arrival_ns == INT64_MIN) {
+      if (is_xr_role(r)) trackers[std::string(role_name(r))] = {{"state", "none yet"}};
+      continue;
+    }
+    json t;
+    const double age_s = static_cast<double>(s.now_ns - seen.arrival_ns) * 1e-9;
+    const bool silent = s.now_ns - seen.arrival_ns > RoleRateSink::kSilentNs;  // as the rates
+    t["state"] = silent                                    ? "silent"
+                 : !(seen.flags & RoleSeen::kUsed)         ? "not used: mounting not calibrated"
+                 : !(seen.flags & RoleSeen::kValid)        ? "lost"
+                 : !(seen.flags & RoleSeen::kPosition)     ? "rotation only"
+                                                           : "tracked";
+    t["age_s"] = age_s;
+    if (seen.source >= 0 && static_cast<std::size_t>(seen.source) < s.sources.size()) {
+      t["source"] = s.sources[static_cast<std::size_t>(seen.source)].name;
+      if (static_cast<std::size_t>(seen.source) < s.source_rates_hz_by_role.size())
+        t["rate_hz"] = s.source_rates_hz_by_role[static_cast<std::size_t>(seen.source)][static_cast<std::size_t>(r)];
+    }
+    trackers[std::string(role_name(r))] = std::move(t);
+  }
+  j["trackers"] = std::move(trackers);
   j["sources_started"] = s.sources_started;
   stats.to_json(j);
   j["samples_dropped"] = s.samples_dropped;

@@ -10,6 +10,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -44,8 +45,19 @@ void summary_json(const ReconstructionSummary& summary, nlohmann::json& out);
                                                   const std::string& mounting_file);
 
 // Everything `status` says, as the daemon gathered it.
+// One role's newest sample as the reconstruction thread saw it (status's `trackers`, issue 44):
+// written with relaxed atomics per sample, read by the control thread.
+struct RoleSeen {
+  static constexpr std::uint8_t kValid = 1, kPosition = 2, kUsed = 4;
+  std::int64_t arrival_ns = INT64_MIN;  // host monotonic; INT64_MIN: none yet
+  int source = -1;                      // index into the sources
+  std::uint8_t flags = 0;
+};
+
 struct StatusSnapshot {
   double uptime_s = 0.0;
+  std::int64_t now_ns = 0;
+  std::array<RoleSeen, kRoleCount> trackers{};
   ReconstructionSummary summary;
   bool offsets_configured = false;
   nlohmann::json recentre;  // recentre_status_json() (sample_conditioning.h)

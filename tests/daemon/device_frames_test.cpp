@@ -286,6 +286,10 @@ TEST(CalibrationPose, MeasuresStrappedBodyTrackersWhichAreUsedOnlyFromThenOn) {
     // The default (identity) was 70 degrees off.
     EXPECT_GT(mounting_difference(RigidTransform{}, pose.truth.T_device_joint[i]).angle_deg, 60.0);
   }
+  // status says which trackers are used: the body trackers are, once measured.
+  EXPECT_EQ(r.status_at_reply["trackers"]["hips"]["state"], "tracked") << r.status_at_reply["trackers"].dump();
+  EXPECT_EQ(r.status_at_reply["trackers"]["head"]["state"], "tracked");
+  EXPECT_NE(r.status_at_reply["trackers"]["hips"].value("source", std::string()).find("replay:"), std::string::npos);
   // From then on they are used (90 samples a second).
   EXPECT_GT(r.status["samples_by_role"].value("hips", std::uint64_t{0}), 30u) << r.status.dump();
   EXPECT_GT(r.status["samples_by_role"].value("left_foot", std::uint64_t{0}), 30u);
@@ -311,6 +315,9 @@ TEST(CalibrationPose, RefusesSwappedFootTrackersAndSaysWhich) {
   EXPECT_NE((*r.reply)["error"].get<std::string>().find("right_foot tracker is on your left side"), std::string::npos)
       << r.reply->dump();
   for (const char* foot : {"left_foot", "right_foot"}) {
+    // status says why a tracker that sends is not used.
+    EXPECT_EQ(r.status_at_reply["trackers"][foot]["state"], "not used: mounting not calibrated")
+        << r.status_at_reply["trackers"].dump();
     EXPECT_FALSE(r.status["mounting"]["roles"].contains(foot));
     EXPECT_EQ(r.status["samples_by_role"].value(foot, std::uint64_t{0}), 0u);
   }
