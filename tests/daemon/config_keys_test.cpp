@@ -6,6 +6,8 @@
 #include "bodyd/daemon/config_keys.h"
 #include "../test_paths.h"
 
+#include "bodyd/test/files.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -22,11 +24,8 @@ namespace {
 using nlohmann::json;
 
 std::string text_of(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  EXPECT_TRUE(in) << path;
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
+  EXPECT_TRUE(std::filesystem::is_regular_file(path)) << path;
+  return test::read_file(path);
 }
 
 std::string number_text(double x) {

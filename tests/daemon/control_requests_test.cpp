@@ -5,6 +5,8 @@
 #include "bodyd/daemon/control.h"
 #include "../test_paths.h"
 
+#include "bodyd/test/files.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -19,11 +21,8 @@ namespace bodyd::daemon {
 namespace {
 
 std::string text_of(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  EXPECT_TRUE(in) << path;
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
+  EXPECT_TRUE(std::filesystem::is_regular_file(path)) << path;
+  return test::read_file(path);
 }
 
 // The part of `text` from the line `heading` ("## ..." or "### ...") to the next heading of the
