@@ -12,8 +12,8 @@ std::unique_ptr<TrackerSource> open_usb_spec(const SourceSpec&, const SourceOpti
 std::string check_device_spec(const SourceSpec&);                                                              // device_list.cpp
 std::unique_ptr<TrackerSource> open_network_spec(const SourceSpec&, const SourceOptions&, std::string& error); // network_source.cpp
 std::string check_network_spec(const SourceSpec&);                                                             // network_source.cpp
-std::unique_ptr<TrackerSource> open_steamvr_spec(const SourceSpec&, const SourceOptions&, std::string& error);  // slimevr_bridge.cpp
-std::unique_ptr<TrackerSource> open_monado_spec(const SourceSpec&, const SourceOptions&, std::string& error);   // slimevr_bridge.cpp
+std::unique_ptr<TrackerSource> open_steamvr_spec(const SourceSpec&, const SourceOptions&, std::string& error);  // slimevr/bridge_source.cpp
+std::unique_ptr<TrackerSource> open_monado_spec(const SourceSpec&, const SourceOptions&, std::string& error);   // solarxr/monado_source.cpp
 
 const std::vector<SourceScheme>& source_schemes() {
   // scheme, syntax, required argument, bare, declared frame, factory, check

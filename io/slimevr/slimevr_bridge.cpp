@@ -1,7 +1,9 @@
-// The SlimeVR bridge server, its registry and the steamvr:/monado: sources (slimevr_bridge.h).
+// The SlimeVR bridge server (slimevr_bridge.h); its registry is bridge_registry.cpp, its sources
+// bridge_source.cpp (steamvr:) and ../solarxr/monado_source.cpp (monado:).
 #include "bodyd/io/slimevr/slimevr_bridge.h"
 #include "bodyd/io/slimevr/framed_server.h"
 #include "bodyd/io/open_source.h"
+#include "bridge_source.h"
 
 #include "bodyd/base/log_rate.h"
 #include "bodyd/paths/private_dir.h"
@@ -84,6 +86,10 @@ std::optional<Role> bodyd_role(std::int32_t r) {
   }
 }
 
+constexpr std::int64_t kForwardIntervalNs = static_cast<std::int64_t>(1e9 / kMaxForwardHz);
+
+}  // namespace
+
 // SlimeVR's role names (the driver's TrackerRole.hpp), for status and logs.
 std::string role_label(std::int32_t r) {
   static constexpr std::array<std::string_view, role::kMax + 1> kNames{
@@ -93,10 +99,6 @@ std::string role_label(std::int32_t r) {
       "keyboard",   "hmd",           "beacon",         "generic_controller"};
   return r >= 0 && r <= role::kMax ? std::string(kNames[static_cast<std::size_t>(r)]) : std::to_string(r);
 }
-
-constexpr std::int64_t kForwardIntervalNs = static_cast<std::int64_t>(1e9 / kMaxForwardHz);
-
-}  // namespace
 
 std::string default_driver_socket_dir(std::string& error) {
   if (std::string d = env("XDG_DATA_HOME"); !d.empty()) return d + "/dev.slimevr.SlimeVR";
@@ -703,110 +705,4 @@ BridgeStats BridgeServer::stats() const {
   return s;
 }
 
-std::shared_ptr<BridgeServer> shared_bridge(const std::string& path) {
-  static std::mutex mutex;
-  static std::map<std::string, std::weak_ptr<BridgeServer>> servers;
-  std::lock_guard lock(mutex);
-  std::error_code ec;
-  const std::string key = std::filesystem::absolute(path, ec).lexically_normal().string();
-  if (auto s = servers[key].lock()) return s;
-  auto s = std::make_shared<BridgeServer>(path);
-  servers[key] = s;
-  return s;
-}
-
-// ---- the sources -------------------------------------------------------------------------------
-
-namespace {
-
-class BridgeSource final : public TrackerSource {
- public:
-  BridgeSource(std::string name, std::shared_ptr<BridgeServer> server) : name_(std::move(name)), server_(std::move(server)) {}
-  ~BridgeSource() override { stop(); }
-
-  const std::string& name() const override { return name_; }
-
-  std::string start(SampleSink& sink, std::uint16_t source_index) override {
-    if (started_) return {};
-    server_->attach_sink(&sink, source_index);
-    if (std::string e = server_->start(); !e.empty()) {
-      server_->attach_sink(nullptr, 0);
-      return "--source " + name_ + ": " + e;
-    }
-    started_ = true;
-    return {};
-  }
-
-  void stop() override {
-    if (!started_) return;
-    server_->attach_sink(nullptr, 0);
-    server_->stop();
-    started_ = false;
-  }
-
-  SourceStatus status() const override {
-    const BridgeStats b = server_->stats();
-    SourceStatus s;
-    s.name = name_;
-    s.connected = b.clients > 0;
-    s.samples = b.samples;
-    s.rate_hz = s.connected ? b.rate_hz : 0.0;  // forwarded to the reconstruction (coalesced)
-    s.rejected = b.rejected;
-    s.rejected_by_reason = b.rejected_by_reason;
-    s.last_error = b.last_error;
-    s.counters = {{"clients", b.clients},     {"connections", b.connections}, {"disconnects", b.disconnects},
-                  {"dropped", b.dropped},     {"frames_in", b.frames_in},     {"ignored", b.ignored},
-                  {"refused", b.refused},     {"coalesced", b.coalesced},     {"untrusted", b.untrusted},
-                  {"devices_not_listed", b.devices_not_listed}};
-    for (const auto& [serial, r] : b.roles_in) {
-      const auto use = b.roles_use.find(serial);
-      s.devices[serial] = "role " + std::to_string(r) + " (" + role_label(r) + ") -> " +
-                          (use == b.roles_use.end() ? std::string("not used") : use->second);
-    }
-    return s;
-  }
-
- private:
-  std::string name_;
-  std::shared_ptr<BridgeServer> server_;
-  bool started_ = false;
-};
-
-}  // namespace
-
-std::unique_ptr<TrackerSource> open_steamvr_source(std::string_view spec, std::string_view argument, std::string& error) {
-  std::string e;
-  const std::string path = socket_path(argument, kDriverSocketName, e, default_driver_socket_dir);
-  if (path.empty()) {
-    error = "--source " + std::string(spec) + ": " + e;
-    return nullptr;
-  }
-  warn_if_shadowed(path);
-  return std::make_unique<BridgeSource>("steamvr:" + path, shared_bridge(path));
-}
-
-std::unique_ptr<TrackerSource> open_monado_source(std::string_view spec, std::string_view argument, std::string& error) {
-  std::string e;
-  std::string dir(argument);
-  if (dir.empty()) dir = default_socket_dir(e);
-  std::string path = dir.empty() ? std::string() : socket_path(dir + "/" + std::string(kMonadoInputSocketName), {}, e);
-  if (path.empty()) {
-    error = "--source " + std::string(spec) + ": " + e;
-    return nullptr;
-  }
-  return std::make_unique<BridgeSource>("monado:" + path, shared_bridge(path));
-}
-
 }  // namespace bodyd::drivers::slimevr
-
-namespace bodyd::drivers {
-
-// The registry's factories (sources.cpp): steamvr[:SOCKET] and monado[:DIR].
-std::unique_ptr<TrackerSource> open_steamvr_spec(const SourceSpec& spec, const SourceOptions&, std::string& error) {
-  return slimevr::open_steamvr_source(spec.text, spec.argument, error);
-}
-std::unique_ptr<TrackerSource> open_monado_spec(const SourceSpec& spec, const SourceOptions&, std::string& error) {
-  return slimevr::open_monado_source(spec.text, spec.argument, error);
-}
-
-}  // namespace bodyd::drivers
