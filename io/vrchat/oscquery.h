@@ -2,7 +2,7 @@
 //
 // OSCQuery (Vidvox OSCQueryProposal, github.com/Vidvox/OSCQueryProposal) lets VRChat find an
 // app that wants its tracking data: the app serves its OSC address tree as JSON over HTTP
-// (a small poll()-based server of its own, oscquery.cpp) and announces two mDNS services, `_oscjson._tcp` (the HTTP port) and
+// (a small poll()-based server of its own, oscquery_http.h) and announces two mDNS services, `_oscjson._tcp` (the HTTP port) and
 // `_osc._udp` (the OSC port), through the Avahi daemon. VRChat sends /tracking/vrsystem/* to
 // an app whose tree contains /tracking/vrsystem (vrchat-community/osc wiki, "OSCQuery").
 //
@@ -14,7 +14,7 @@
 //   anything else                404 (unknown path), 400 (unknown attribute), 405 (not GET or HEAD),
 //                                403 (a Host that is not an IP address, localhost or NAME.local)
 // Read-only: no request changes anything. One request per connection; the limits (header
-// timeout, connection caps, back-off when out of descriptors) are in oscquery.cpp.
+// timeout, connection caps, back-off when out of descriptors) are in oscquery_http.h; the mDNS announcement is oscquery_mdns.cpp.
 //
 // mDNS is best effort: without a running avahi-daemon the HTTP endpoint still answers and
 // mdns_state() (and the log, once) says so; the launch-option route then works.
