@@ -185,17 +185,6 @@ InputReject decode_osc_packet(const std::uint8_t* data, std::size_t size, std::v
 }
 
 // ---------------------------------------------------------------------------------------------
-Quat unity_euler_deg_to_quat(double x_deg, double y_deg, double z_deg) {
-  // Order "YXZ": R = Ry(y) * Rx(x) * Rz(z) (rotation.h applies the last axis first).
-  static const EulerOrder kUnity = [] {
-    EulerOrder o;
-    (void)parse_euler_order("YXZ", o);
-    return o;
-  }();
-  return quat_from_euler_deg(Vec3(y_deg, x_deg, z_deg), kUnity);
-}
-
-// ---------------------------------------------------------------------------------------------
 MessageUse decode_vrchat_message(const OscMessage& m, VrchatPose& out, InputReject& out_reject) {
   out_reject = InputReject::None;
   static constexpr std::string_view kPrefix = "/tracking/vrsystem/";

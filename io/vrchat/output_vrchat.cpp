@@ -44,28 +44,6 @@ bool parse_slots(std::string_view text, SlotMask& out, std::string& error) {
 
 std::string slot_names(SlotMask mask) { return place_names(kSlotPlaces, mask); }
 
-Vec3 unity_euler_deg_from_quat(const Quat& q_unity) {
-  const Eigen::Matrix3d r = q_unity.normalized().toRotationMatrix();
-  // R = Ry(y) Rx(x) Rz(z) has   R(1,2) = -sin x,
-  //   R(0,2) = sin y cos x,  R(2,2) = cos y cos x,  R(1,0) = cos x sin z,  R(1,1) = cos x cos z.
-  const double cos_x = std::hypot(r(0, 2), r(2, 2));
-  double x, y, z;
-  if (cos_x > 1e-9) {
-    x = std::atan2(-r(1, 2), cos_x);
-    y = std::atan2(r(0, 2), r(2, 2));
-    z = std::atan2(r(1, 0), r(1, 1));
-  } else {
-    // Gimbal lock: with z = 0, R = Ry(y) Rx(+-90) has R(0,0) = cos y, R(2,0) = -sin y.
-    x = r(1, 2) < 0 ? M_PI / 2 : -M_PI / 2;
-    y = std::atan2(-r(2, 0), r(0, 0));
-    z = 0.0;
-  }
-  // atan2 gives -pi for (-0, negative): the range is (-180, 180], so half a turn is +180.
-  const auto wrap = [](double a) { return a <= -M_PI ? a + 2.0 * M_PI : a; };
-  constexpr double kDeg = 180.0 / M_PI;
-  return Vec3(x * kDeg, wrap(y) * kDeg, wrap(z) * kDeg);
-}
-
 TrackerPose tracker_from_bodyd(const Vec3& position_m, const Quat& rotation) {
   return TrackerPose{unity_from_bodyd(position_m), unity_euler_deg_from_quat(unity_from_bodyd(rotation))};
 }

@@ -17,6 +17,7 @@
 #include "bodyd/motion/limits.h"
 #include "bodyd/motion/tracker.h"
 #include "bodyd/motion/unity_axes.h"
+#include "bodyd/io/vrchat/unity_euler.h"
 
 #include <array>
 #include <cstddef>
@@ -117,7 +118,7 @@ inline constexpr std::size_t kMaxTrackerLineBytes = 1024;
 // The mirror S = diag(1, 1, -1) of bodyd/motion/unity_axes.h (its own inverse, so these convert back too).
 [[nodiscard]] inline Vec3 unity_position_to_bodyd(const Vec3& p_unity) { return bodyd_from_unity(p_unity); }
 [[nodiscard]] inline Quat unity_rotation_to_bodyd(const Quat& q_unity) { return bodyd_from_unity(q_unity); }
-// Unity's Quaternion.Euler(x, y, z) (degrees): q = Ry(y) * Rx(x) * Rz(z), in Unity's axes.
-[[nodiscard]] Quat unity_euler_deg_to_quat(double x_deg, double y_deg, double z_deg);
+// Unity's Quaternion.Euler(x, y, z): unity_euler_deg_to_quat, with its inverse in
+// bodyd/io/vrchat/unity_euler.h.
 
 }  // namespace bodyd::drivers

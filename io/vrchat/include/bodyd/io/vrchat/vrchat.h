@@ -16,6 +16,7 @@
 //             i.e. applied Z first, then X, then Y.
 #pragma once
 
+#include "bodyd/io/vrchat/unity_euler.h"
 #include "bodyd/motion/rotation.h"
 
 #include <array>
@@ -55,10 +56,8 @@ inline constexpr SlotMask kDefaultSlots = 0b0000'0111;  // hip and both feet (VR
 // "hip,left_foot,right_foot" (names of kSlots, in slot order).
 [[nodiscard]] std::string slot_names(SlotMask mask);
 
-// Unity's Euler angles (degrees, (x, y, z)) of a rotation in Unity's axes: the inverse of
-// Quaternion.Euler, R = Ry(y) Rx(x) Rz(z). x in [-90, 90], y and z in (-180, 180]. At gimbal
-// lock (x = +-90 degrees, where only y - z or y + z is defined) z is 0.
-[[nodiscard]] Vec3 unity_euler_deg_from_quat(const Quat& q_unity);
+// Unity's Euler angles of a rotation (the inverse of Quaternion.Euler): unity_euler_deg_from_quat,
+// beside Quaternion.Euler itself in bodyd/io/vrchat/unity_euler.h.
 
 // One tracker as VRChat reads it, from a pose in bodyd space.
 struct TrackerPose {
