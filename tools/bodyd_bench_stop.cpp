@@ -14,11 +14,11 @@
 // after its due time (target < 50 ms) and the whole replay's length (95 ms of log; < 1000 ms);
 // with --hid-clip, for a simulated 100 Hz HID tracker, the largest time from a report's read
 // (the sample's stamp) to its push into the sink (target < 50 ms).
-#include "bodyd/drivers/fake_devices.h"
-#include "bodyd/drivers/hid_source.h"
-#include "bodyd/drivers/network_source.h"
-#include "bodyd/drivers/open_source.h"
-#include "bodyd/drivers/replay_source.h"
+#include "bodyd/io/devices/fake_devices.h"
+#include "bodyd/io/devices/hid_source.h"
+#include "bodyd/io/osc/network_source.h"
+#include "bodyd/io/open_source.h"
+#include "bodyd/io/replay/replay_source.h"
 #include "bodyd/motion/bvh.h"
 
 #include <CLI/CLI.hpp>

@@ -3,8 +3,8 @@
 #include "bodyd/daemon/config.h"
 
 #include "bodyd/daemon/config_keys.h"
-#include "bodyd/daemon/output.h"
-#include "bodyd/drivers/open_source.h"
+#include "bodyd/io/output.h"
+#include "bodyd/io/open_source.h"
 #include "bodyd/motion/limits.h"
 #include "bodyd/paths/data_files.h"
 #include "config_readers.h"

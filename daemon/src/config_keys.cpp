@@ -2,7 +2,7 @@
 // (bodyd/daemon/config_keys.h says what each column drives).
 #include "bodyd/daemon/config_keys.h"
 
-#include "bodyd/drivers/open_source.h"
+#include "bodyd/io/open_source.h"
 #include "bodyd/motion/limits.h"
 #include "config_readers.h"
 

@@ -6,7 +6,7 @@
 #pragma once
 
 #include "bodyd/daemon/control.h"
-#include "zmq_util.h"
+#include "bodyd/io/zmq/zmq_util.h"
 
 #include <atomic>
 #include <chrono>

@@ -10,11 +10,11 @@
 #include "bodyd/base/require.h"
 
 #include "bodyd/daemon/control.h"
-#include "bodyd/daemon/output.h"
+#include "bodyd/io/output.h"
 #include "bodyd/daemon/sample_queue.h"
 #include "bodyd/daemon/tracker_recorder.h"
 #include "bodyd/inference/calibration.h"
-#include "bodyd/drivers/open_source.h"
+#include "bodyd/io/open_source.h"
 #include "bodyd/protocol/pose_message.h"
 #include "calibration_pose_wait.h"
 #include "calibration_state.h"
@@ -22,11 +22,11 @@
 #include "control_server.h"
 #include "mounting_state.h"
 #include "persisted_file.h"
-#include "pose_wire.h"
+#include "bodyd/io/zmq/pose_wire.h"
 #include "sample_conditioning.h"
 #include "stats.h"
 #include "status.h"
-#include "zmq_publisher.h"
+#include "bodyd/io/zmq/zmq_publisher.h"
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -234,12 +234,12 @@ struct Daemon::Impl final : ControlTarget {
   // ---------------------------------------------------------------- outputs
   // Creates the --pub output and the --output outputs (not opened yet).
   std::string make_outputs() {
-    std::unique_ptr<ZmqPublisher> primary = make_pub_output(config);
+    const OutputEnv env{config};
+    std::unique_ptr<ZmqPublisher> primary = make_pub_output(config.pub_endpoint, env);
     pub = primary.get();
     outputs.push_back(std::make_unique<OutputSlot>());
     outputs.back()->output = std::move(primary);
     outputs.back()->primary = true;
-    const OutputEnv env{config};
     for (const std::string& text : config.outputs) {
       OutputSpec spec;
       std::string error;

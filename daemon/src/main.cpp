@@ -2,10 +2,10 @@
 // command line lives in the bodyd_daemon library.
 #include "bodyd/daemon/config.h"
 #include "bodyd/daemon/daemon.h"
-#include "bodyd/daemon/endpoint.h"
+#include "bodyd/io/zmq/endpoint.h"
 #include "bodyd/daemon/reconstructors.h"
 #include "bodyd/daemon/service.h"
-#include "bodyd/drivers/device_list.h"
+#include "bodyd/io/devices/device_list.h"
 
 #include <nlohmann/json.hpp>
 #include <spdlog/sinks/stdout_color_sinks.h>

@@ -2,7 +2,7 @@
 // reconstruction thread and read, approximately, by the control thread.
 #pragma once
 
-#include "bodyd/drivers/source.h"
+#include "bodyd/io/source.h"
 #include "bodyd/motion/tracker.h"
 
 #include <nlohmann/json.hpp>

@@ -1,7 +1,7 @@
 #include "status.h"
 
 #include "bodyd/daemon/config.h"
-#include "pose_wire.h"
+#include "bodyd/io/zmq/pose_wire.h"
 #include "sample_conditioning.h"
 
 namespace bodyd::daemon {

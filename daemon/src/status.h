@@ -2,7 +2,7 @@
 // built here from a snapshot the daemon takes (daemon.cpp), so the keys live in one place.
 #pragma once
 
-#include "bodyd/drivers/source.h"
+#include "bodyd/io/source.h"
 #include "bodyd/motion/mounting.h"
 #include "bodyd/protocol/pose_message.h"
 #include "calibration_state.h"

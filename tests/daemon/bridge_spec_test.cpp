@@ -1,9 +1,9 @@
 // The steamvr/monado specs (docs/outputs.md, docs/drivers.md): defaults, options, and bad specs
 // refused with a message naming what is wrong.
 #include "bodyd/daemon/config.h"
-#include "bodyd/daemon/output.h"
-#include "bodyd/drivers/open_source.h"
-#include "bodyd/drivers/slimevr_bridge.h"
+#include "bodyd/io/output.h"
+#include "bodyd/io/open_source.h"
+#include "bodyd/io/slimevr/slimevr_bridge.h"
 #include "bodyd/test/temp_dir.h"
 
 #include <gtest/gtest.h>

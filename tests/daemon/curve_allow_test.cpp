@@ -1,8 +1,8 @@
 // The CURVE allow-list (--curve-allow DIR, docs/daemon.md "Security"): a client whose public
 // key is in DIR gets poses and control answers; one with another key, or without CURVE, gets
 // nothing. Keys made by bodyd --gen-keys (server) and --gen-keys DIR --client NAME.
-#include "bodyd/daemon/curve_allow.h"
-#include "bodyd/daemon/endpoint.h"
+#include "bodyd/io/zmq/curve_allow.h"
+#include "bodyd/io/zmq/endpoint.h"
 #include "bodyd/protocol/pose_message.h"
 #include "bodyd/test/files.h"
 #include "bodyd/test/process.h"

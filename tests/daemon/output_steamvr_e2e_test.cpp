@@ -8,7 +8,7 @@
 // python3 or python3-protobuf is missing.
 #include "slimevr_helpers.h"
 
-#include "bodyd/daemon/output.h"
+#include "bodyd/io/output.h"
 
 #include <sys/socket.h>
 #include <sys/stat.h>

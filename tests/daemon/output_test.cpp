@@ -5,8 +5,8 @@
 // Quaternion.Euler(x, y, z) = Ry(y) Rx(x) Rz(z), the mirror S = diag(1, 1, -1)); the other
 // direction is built with Eigen's AngleAxis, independently of the code under test.
 #include "bodyd/daemon/config.h"
-#include "bodyd/daemon/output.h"
-#include "bodyd/daemon/vrchat.h"
+#include "bodyd/io/output.h"
+#include "bodyd/io/vrchat/vrchat.h"
 #include "bodyd/motion/limits.h"
 
 #include <gtest/gtest.h>

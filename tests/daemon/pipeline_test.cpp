@@ -2,7 +2,7 @@
 // in-process reconstruction, a stalled subscriber does not slow it, CURVE, endpoint rules,
 // the control socket, the output rate and device offsets.
 #include "bodyd/daemon/daemon.h"
-#include "bodyd/daemon/endpoint.h"
+#include "bodyd/io/zmq/endpoint.h"
 #include "bodyd/daemon/reconstructors.h"
 #include "bodyd/motion/tracker_log.h"
 #include "fake_reconstructor.h"

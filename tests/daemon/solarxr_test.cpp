@@ -3,7 +3,7 @@
 // identity (tails straight down), the left arm's bones take -Y to -X and the right arm's to +X,
 // every bone's tail is head + rotation_g * (0, -length, 0), and a turn of the whole body turns
 // every bone by the same rotation (K is a constant of the joint).
-#include "bodyd/daemon/solarxr.h"
+#include "bodyd/io/solarxr/solarxr.h"
 #include "bodyd/motion/bvh.h"
 #include "bodyd/motion/humanoid.h"
 #include "../test_paths.h"

@@ -2,10 +2,10 @@
 // config file and flags, the control request parser, and the replay/sim sources.
 #include "bodyd/daemon/config.h"
 #include "bodyd/daemon/control.h"
-#include "bodyd/daemon/endpoint.h"
+#include "bodyd/io/zmq/endpoint.h"
 #include "bodyd/daemon/sample_queue.h"
-#include "bodyd/drivers/open_source.h"
-#include "bodyd/drivers/replay_source.h"
+#include "bodyd/io/open_source.h"
+#include "bodyd/io/replay/replay_source.h"
 #include "bodyd/motion/limits.h"
 #include "bodyd/motion/tracker_log.h"
 #include "fake_reconstructor.h"
@@ -810,7 +810,7 @@ TEST(OpenSource, SpecsAndErrors) {
   ASSERT_TRUE(bundled) << error;
 }
 
-// Issue 19 item 2: the --source help names every registered scheme (drivers/src/sources.cpp),
+// Issue 19 item 2: the --source help names every registered scheme (io/sources.cpp),
 // as the unknown-kind error does (tests/drivers/source_registry_test.cpp).
 TEST(OpenSource, HelpListsEverySource) {
   daemon::DaemonConfig c;

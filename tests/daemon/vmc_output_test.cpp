@@ -1,9 +1,9 @@
-// `--output vmc:` (bodyd/daemon/vmc.h, docs/outputs.md "VMC"): the bundle's bytes read back by
+// `--output vmc:` (bodyd/io/vmc/vmc.h, docs/outputs.md "VMC"): the bundle's bytes read back by
 // an OSC reader written here from the OSC 1.0 specification; and bodyd end to end, its bundles
 // received by osc.js (tests/daemon/node/vmc_receive.js), forward kinematics over the Unity
 // humanoid from the received local rotations compared with the ZeroMQ stream's joints.
 #include "bodyd/daemon/config.h"
-#include "bodyd/daemon/vmc.h"
+#include "bodyd/io/vmc/vmc.h"
 #include "bodyd/motion/bvh.h"
 #include "bodyd/motion/humanoid.h"
 #include "bodyd/motion/tracker_log.h"

@@ -74,7 +74,7 @@ TEST(Docs, ConventionsAreCitedFromTheRepository) {
   const fs::path root = bodyd::test::source_dir();
   ASSERT_TRUE(fs::exists(root / "docs" / "conventions.md"));
   // Sources and docs cite docs/conventions.md; the shared CONVENTIONS.md is not in a user's clone.
-  for (const char* dir : {"docs", "motion", "inference", "drivers", "daemon", "protocol", "client",
+  for (const char* dir : {"docs", "motion", "inference", "io", "daemon", "protocol", "client",
                           "render", "tools", "simulators", "viewer", "training", "scripts"}) {
     if (!fs::exists(root / dir)) continue;
     for (const auto& entry : fs::recursive_directory_iterator(root / dir)) {

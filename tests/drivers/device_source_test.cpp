@@ -1,11 +1,11 @@
 // The HID and USB drivers over fake transports fed by simulated devices: streaming,
 // several roles on one device, misbehaving devices, hotplug, stalls, clocks, the Razer
 // Hydra's mode switch, and the daemon-facing specs (BODYD_FAKE_DEVICES).
-#include "bodyd/drivers/device_list.h"
-#include "bodyd/drivers/fake_devices.h"
-#include "bodyd/drivers/hid_source.h"
-#include "bodyd/drivers/open_source.h"
-#include "bodyd/drivers/usb_source.h"
+#include "bodyd/io/devices/device_list.h"
+#include "bodyd/io/devices/fake_devices.h"
+#include "bodyd/io/devices/hid_source.h"
+#include "bodyd/io/open_source.h"
+#include "bodyd/io/devices/usb_source.h"
 #include "bodyd/motion/bvh.h"
 
 #include "../test_paths.h"

@@ -7,9 +7,9 @@
 #pragma once
 
 #include "../fuzz/fuzz_check.h"
-#include "bodyd/drivers/hydra.h"
-#include "bodyd/drivers/osc_decode.h"
-#include "bodyd/drivers/report.h"
+#include "bodyd/io/devices/hydra.h"
+#include "bodyd/io/osc/osc_decode.h"
+#include "bodyd/io/devices/report.h"
 
 #include <cmath>
 #include <cstddef>

@@ -1,6 +1,6 @@
 // The Razer Hydra decoder against hand-built 52-byte reports (synthesised from the layout
 // in docs/drivers.md; no hardware capture was available) and its encoder.
-#include "bodyd/drivers/hydra.h"
+#include "bodyd/io/devices/hydra.h"
 
 #include <gtest/gtest.h>
 

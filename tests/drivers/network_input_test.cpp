@@ -3,15 +3,15 @@
 // VMC's automatic role assignment, OSCQuery over HTTP (Node's http module), and the
 // "same samples, same poses" check of VMC and UDP input against a tracker-log replay
 // (Node's osc.js as the sender).
-#include "bodyd/drivers/network_source.h"
-#include "bodyd/drivers/open_source.h"
+#include "bodyd/io/osc/network_source.h"
+#include "bodyd/io/open_source.h"
 #include "bodyd/inference/ik.h"
 #include "bodyd/motion/bvh.h"
 #include "bodyd/motion/tracker_log.h"
 #include "bodyd/simulators/tracker_sim.h"
 
-#include "../../drivers/src/oscquery.h"
-#include "../../drivers/src/vmc_roles.h"
+#include "../../io/vrchat/oscquery.h"
+#include "../../io/vmc/vmc_roles.h"
 #include "../test_paths.h"
 #include "osc_helpers.h"
 

@@ -1,5 +1,5 @@
 // OSC packets built by liblo for the network-input tests: an encoder independent of bodyd's
-// decoder (drivers/src/osc_decode.cpp), so the tests check one against the other.
+// decoder (io/osc/osc_decode.cpp), so the tests check one against the other.
 #pragma once
 
 #include <lo/lo.h>

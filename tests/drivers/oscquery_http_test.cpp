@@ -2,7 +2,7 @@
 // of connections that never finish their headers must not keep VRChat's request from being
 // answered, a page's own domain resolved to us (DNS rebinding) is refused, nothing but GET/HEAD
 // is served, and stopping does not wait. The client that checks the answers is curl.
-#include "../../drivers/src/oscquery.h"
+#include "../../io/vrchat/oscquery.h"
 
 #include "bodyd/test/net.h"
 #include "bodyd/test/process.h"

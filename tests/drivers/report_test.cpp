@@ -1,6 +1,6 @@
 // The bodyd tracker report decoder and encoder against hand-built bytes (the worked
 // example of docs/hid-tracker.md), every malformed case, and round trips.
-#include "bodyd/drivers/report.h"
+#include "bodyd/io/devices/report.h"
 
 #include <gtest/gtest.h>
 

@@ -1,18 +1,18 @@
-// The source registry (drivers/src/sources.cpp) and the UDP protocol table
-// (drivers/src/network_protocols.cpp) agree with what a user is told: the unknown-kind error
+// The source registry (io/sources.cpp) and the UDP protocol table
+// (io/osc/network_protocols.cpp) agree with what a user is told: the unknown-kind error
 // lists every scheme, each row's spec parses to that row, and the declared device frames are
 // the documented ones (docs/drivers.md, "Device frames"). The --source help is checked against
 // the same rows in tests/daemon/unit_test.cpp (OpenSource.HelpListsEverySource).
-#include "bodyd/drivers/device_table.h"
-#include "bodyd/drivers/network_source.h"
-#include "bodyd/drivers/open_source.h"
+#include "bodyd/io/devices/device_table.h"
+#include "bodyd/io/osc/network_source.h"
+#include "bodyd/io/open_source.h"
 
-#include "bodyd/drivers/fake_devices.h"
-#include "bodyd/drivers/hydra.h"
-#include "bodyd/drivers/report.h"
+#include "bodyd/io/devices/fake_devices.h"
+#include "bodyd/io/devices/hydra.h"
+#include "bodyd/io/devices/report.h"
 
-#include "../../drivers/src/device_protocol.h"
-#include "../../drivers/src/network_protocol.h"
+#include "../../io/devices/device_protocol.h"
+#include "../../io/osc/network_protocol.h"
 
 #include <gtest/gtest.h>
 
@@ -246,7 +246,7 @@ TEST(DeviceTable, TheUdevRuleGrantsExactlyTheTable) {
   const std::set<RuleLine> rule = udev_rule_lines(text.str()), table = table_rule_lines();
   for (const RuleLine& r : table)
     EXPECT_TRUE(rule.count(r)) << "the udev rule lacks SUBSYSTEM==\"" << r.subsystem << "\" for " << std::hex
-                               << r.id.vendor_id << ":" << r.id.product_id << " (drivers/src/device_table.cpp)";
+                               << r.id.vendor_id << ":" << r.id.product_id << " (io/devices/device_table.cpp)";
   for (const RuleLine& r : rule)
     EXPECT_TRUE(table.count(r)) << "the udev rule grants SUBSYSTEM==\"" << r.subsystem << "\" " << std::hex
                                 << r.id.vendor_id << ":" << r.id.product_id << ", which the device table lacks";

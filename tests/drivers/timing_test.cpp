@@ -3,8 +3,8 @@
 // monotonic stamps taken at read. The reconstructor (the ik baseline; also the diffusion
 // model when models/bodyd-default.safetensors exists) must give the same output whatever
 // the interleaving of roles in which the same samples reach it.
-#include "bodyd/drivers/fake_devices.h"
-#include "bodyd/drivers/hid_source.h"
+#include "bodyd/io/devices/fake_devices.h"
+#include "bodyd/io/devices/hid_source.h"
 #include "bodyd/inference/factory.h"
 #include "bodyd/motion/bvh.h"
 

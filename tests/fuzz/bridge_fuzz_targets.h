@@ -5,8 +5,8 @@
 #pragma once
 
 #include "fuzz_check.h"
-#include "bodyd/daemon/solarxr.h"
-#include "bodyd/drivers/slimevr_bridge.h"
+#include "bodyd/io/solarxr/solarxr.h"
+#include "bodyd/io/slimevr/slimevr_bridge.h"
 
 #include <cmath>
 #include <cstddef>

@@ -15,7 +15,7 @@
 // push_wait (a lossless replay) are never dropped for their age.
 #pragma once
 
-#include "bodyd/drivers/source.h"
+#include "bodyd/io/source.h"
 
 #include <chrono>
 #include <condition_variable>

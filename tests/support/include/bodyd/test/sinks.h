@@ -1,8 +1,8 @@
 // A tracker-source sink that keeps every sample it is given. Header-only: a test that
-// includes this links bodyd_drivers. (Log lines: log_capture.h.)
+// includes this links bodyd_io. (Log lines: log_capture.h.)
 #pragma once
 
-#include "bodyd/drivers/source.h"
+#include "bodyd/io/source.h"
 
 #include <chrono>
 #include <cstddef>
