@@ -195,8 +195,9 @@ TEST(CurveAllowList, WarningsOnceAndRefusalsAtALimitedRate) {
       sub.connect(e["pub"].get<std::string>());
       clients.push_back(std::move(sub));
     }
-    // Until bodyd has refused at least 128 handshakes (it says so at each power of two).
-    for (int i = 0; i < 200 && bodyd.err().find("128 refused so far") == std::string::npos; ++i)
+    // Until bodyd has refused at least 128 handshakes (it says so at each power of two); up to 30 s,
+    // since a loaded machine retries the handshakes slowly (10 s was once too few in a test run).
+    for (int i = 0; i < 600 && bodyd.err().find("128 refused so far") == std::string::npos; ++i)
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   bodyd.signal(SIGTERM);
