@@ -8,6 +8,7 @@
 #include "bodyd/base/random.h"
 #include "bodyd/inference/diffusion.h"
 #include "bodyd/inference/evaluation.h"
+#include "bodyd/inference/filter_option_keys.h"
 #include "bodyd/motion/split_file.h"
 #include "bodyd/simulators/sim_flags.h"
 #include "bodyd/simulators/tracker_sim.h"
@@ -21,6 +22,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <fstream>
+#include <map>
 #include <optional>
 #include <sstream>
 
@@ -73,54 +75,26 @@ int main(int argc, char** argv) {
                  fmt::format("diffusion: the network's online weights, f32 or bf16 (default {}; docs/model.md, \"Weights in bf16\")",
                              bodyd::inference::weights_name(bodyd::DiffusionOptions{}.weights)))
       ->check(CLI::IsMember({"f32", "bf16"}));
-  bool no_filter = false;
-  app.add_flag("--no-filter", no_filter, "diffusion: no One Euro tracker filter (the daemon's \"filter\": {\"enabled\": false})");
-  app.add_option("--filter-min-cutoff-hz", method_options.filter.min_cutoff_hz,
-                 "diffusion: the tracker filter's min_cutoff_hz (docs/daemon.md, \"Tracker filter\")")
-      ->capture_default_str();
-  app.add_option("--filter-beta", method_options.filter.beta_per_m_s, "diffusion: the tracker filter's beta_per_m_s")
-      ->capture_default_str();
-  app.add_option("--filter-d-cutoff-hz", method_options.filter.d_cutoff_hz,
-                 "diffusion: the tracker filter's d_cutoff_hz (cutoff of its speed estimate)")
-      ->capture_default_str();
-  app.add_option("--filter-rot-min-cutoff-hz", method_options.filter.rot_min_cutoff_hz,
-                 "diffusion: the tracker filter's rot_min_cutoff_hz")
-      ->capture_default_str();
-  app.add_option("--filter-rot-beta", method_options.filter.rot_beta_per_rad_s,
-                 "diffusion: the tracker filter's rot_beta_per_rad_s")
-      ->capture_default_str();
-  app.add_option("--filter-head-correction-cutoff-hz", method_options.filter.head_correction_cutoff_hz,
-                 "diffusion: the head correction's cutoff on a noisy head tracker, Hz (docs/model.md, \"Tracked joints\")")
-      ->capture_default_str();
-  app.add_option("--filter-anchor-cutoff-hz", method_options.filter.anchor_cutoff_hz,
-                 "diffusion: the smoothed anchor's cutoff on a noisy head tracker, Hz (0: off; docs/model.md, \"Tracked joints\")")
-      ->capture_default_str();
-  app.add_option("--filter-hand-reach-slack-m", method_options.filter.hand_reach_slack_m,
-                 "diffusion: how far a noisy hand may be out of reach before the body chases it, m (0: off; docs/model.md, \"Tracked joints\")")
-      ->capture_default_str();
-  app.add_option("--filter-arm-soft-zone-m", method_options.filter.arm_soft_zone_m,
-                 "diffusion: the arms' soft reach on a noisy hand tracker, m (0: off; docs/model.md, \"Tracked joints\")")
-      ->capture_default_str();
-  // The body filter (diffusion.h, one_euro.h BodyFilterOptions; the daemon's "body_filter" keys).
-  bool no_body_filter = false;
-  std::optional<double> body_min_cutoff_hz, body_rot_min_cutoff_hz;
-  auto* no_body_filter_flag =
-      app.add_flag("--no-body-filter", no_body_filter,
-                   "diffusion: no One Euro body filter on the model's decoded pose (the daemon's "
-                   "\"body_filter\": {\"enabled\": false}; docs/evaluation.md)");
-  app.add_option("--body-filter-min-cutoff-hz", body_min_cutoff_hz,
-                 "diffusion: the body filter's cutoff of a still body, Hz, for the Hips position and the joint rotations "
-                 "(its min_cutoff_hz and rot_min_cutoff_hz)")
-      ->excludes(no_body_filter_flag);
-  app.add_option("--body-filter-beta", method_options.body_filter.beta_per_m_s,
-                 "diffusion: the body filter's beta_per_m_s (Hips cutoff increase per m/s)")
-      ->capture_default_str()->excludes(no_body_filter_flag);
-  app.add_option("--body-filter-rot-min-cutoff-hz", body_rot_min_cutoff_hz,
-                 "diffusion: the body filter's rot_min_cutoff_hz alone (after --body-filter-min-cutoff-hz)")
-      ->excludes(no_body_filter_flag);
-  app.add_option("--body-filter-rot-beta", method_options.body_filter.rot_beta_per_rad_s,
-                 "diffusion: the body filter's rot_beta_per_rad_s (rotation cutoff increase per rad/s)")
-      ->capture_default_str()->excludes(no_body_filter_flag);
+  // The tracker filter and the body filter: one flag per row of the filters' table, the rows of the
+  // daemon's "filter" and "body_filter" keys (filter_option_keys.h; docs/evaluation.md).
+  bodyd::FilterSettings filters{method_options.filter, method_options.body_filter};
+  std::map<std::string, CLI::Option*> filter_flags;  // by full key name ("body_filter.enabled")
+  for (const bodyd::FilterOptionKey& row : bodyd::filter_option_keys()) {
+    std::string names = bodyd::filter_flag(row);
+    if (!row.eval_aliases.empty()) names += "," + std::string(row.eval_aliases);
+    const std::string help = fmt::format("diffusion: {} (the daemon's \"{}\", docs/daemon.md)", row.help, row.full_name());
+    CLI::Option* option = std::visit(
+        [&](auto field) -> CLI::Option* {
+          auto& member = field(filters);
+          if constexpr (std::is_same_v<std::remove_reference_t<decltype(member)>, bool>)
+            return app.add_flag(names, member, help);
+          else
+            return app.add_option(names, member, help)->capture_default_str();
+        },
+        row.field);
+    if (row.group == "body_filter" && row.name != "enabled") option->excludes(filter_flags.at("body_filter.enabled"));
+    filter_flags[row.full_name()] = option;
+  }
   // The foot lock's knobs (DiffusionOptions, diffusion.h); unset: its defaults. CLI11's range
   // checks let NaN through, hence the finite check.
   const CLI::Validator finite(
@@ -209,12 +183,10 @@ int main(int argc, char** argv) {
     options.methods = split_list(methods_text);
     if (options.methods.empty()) throw std::runtime_error("--methods names no method");
     options.model_path = model;
-    if (no_filter) method_options.filter.enabled = false;
     if (const std::string e = bodyd::validate(method_options.filter); !e.empty()) throw std::runtime_error(e);
-    if (no_body_filter) method_options.body_filter.enabled = false;
-    if (body_min_cutoff_hz)
-      method_options.body_filter.min_cutoff_hz = method_options.body_filter.rot_min_cutoff_hz = *body_min_cutoff_hz;
-    if (body_rot_min_cutoff_hz) method_options.body_filter.rot_min_cutoff_hz = *body_rot_min_cutoff_hz;
+    // --body-filter-min-cutoff-hz alone sets the rotations' cutoff too (as it always has here).
+    if (filter_flags.at("body_filter.min_cutoff_hz")->count() > 0 && filter_flags.at("body_filter.rot_min_cutoff_hz")->count() == 0)
+      method_options.body_filter.rot_min_cutoff_hz = method_options.body_filter.min_cutoff_hz;
     if (const std::string e = bodyd::validate(method_options.body_filter); !e.empty()) throw std::runtime_error(e);
     if (!weights_text.empty()) method_options.weights = bodyd::inference::parse_weights(weights_text);
     options.reconstructor = method_options;

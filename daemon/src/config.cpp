@@ -134,35 +134,27 @@ const ConfigGroup* find_group(std::string_view name) {
 std::string read_key(const ConfigKey& row, const json& value, const std::string& where, DaemonConfig& config) {
   if (row.read) return row.read(value, where, config);
   std::string error;
-  const bool ok = std::visit(
-      [&](auto field) -> bool {
-        if constexpr (std::is_same_v<decltype(field), const SimOptionKey*>) {
-          return std::visit([&](auto sim_field) { return get_value(value, where, sim_field(config.sim), error); },
-                            field->field);
-        } else {
-          auto& member = field(config);
-          using T = std::remove_reference_t<decltype(member)>;
-          if constexpr (std::is_same_v<T, std::vector<std::string>>) {
-            if (!value.is_array()) {
-              error = where + ": expected an array of strings";
-              return false;
-            }
-            member.clear();
-            for (const auto& item : value) {
-              std::string text;
-              if (!get_value(item, where, text, error)) return false;
-              member.push_back(text);
-            }
-            return true;
-          } else if constexpr (std::is_same_v<T, DeviceOffsets>) {
-            error = where + ": this key has no reader (config_keys.cpp)";  // its row names one
-            return false;
-          } else {
-            return get_value(value, where, member, error);
-          }
-        }
-      },
-      row.field);
+  const bool ok = with_member(row, config, [&](auto& member) -> bool {
+    using T = std::remove_reference_t<decltype(member)>;
+    if constexpr (std::is_same_v<T, std::vector<std::string>>) {
+      if (!value.is_array()) {
+        error = where + ": expected an array of strings";
+        return false;
+      }
+      member.clear();
+      for (const auto& item : value) {
+        std::string text;
+        if (!get_value(item, where, text, error)) return false;
+        member.push_back(text);
+      }
+      return true;
+    } else if constexpr (std::is_same_v<T, DeviceOffsets>) {
+      error = where + ": this key has no reader (config_keys.cpp)";  // its row names one
+      return false;
+    } else {
+      return get_value(value, where, member, error);
+    }
+  });
   return ok ? std::string() : error;
 }
 
@@ -170,17 +162,12 @@ std::string read_key(const ConfigKey& row, const json& value, const std::string&
 json print_key(const ConfigKey& row, const DaemonConfig& config) {
   if (row.print) return row.print(config);
   DaemonConfig copy = config;  // the rows' accessors take a mutable configuration; this only reads
-  return std::visit(
-      [&](auto field) -> json {
-        if constexpr (std::is_same_v<decltype(field), const SimOptionKey*>) {
-          return std::visit([&](auto sim_field) { return json(sim_field(copy.sim)); }, field->field);
-        } else if constexpr (std::is_same_v<std::remove_reference_t<decltype(field(copy))>, DeviceOffsets>) {
-          return json();  // its row names a printer
-        } else {
-          return json(field(copy));
-        }
-      },
-      row.field);
+  return with_member(row, copy, [](const auto& member) -> json {
+    if constexpr (std::is_same_v<std::remove_cvref_t<decltype(member)>, DeviceOffsets>)
+      return json();  // its row names a printer
+    else
+      return json(member);
+  });
 }
 
 // {key}, {flag}, {min}, {max}, {value} in a range's message.
@@ -205,35 +192,30 @@ std::string range_message(const ConfigKey& row, double value, bool integer) {
 std::string check_key(const ConfigKey& row, const DaemonConfig& config) {
   DaemonConfig copy = config;
   std::string error;
-  std::visit(
-      [&](auto field) {
-        if constexpr (!std::is_same_v<decltype(field), const SimOptionKey*>) {
-          const auto& member = field(copy);
-          using T = std::remove_cvref_t<decltype(member)>;
-          if constexpr (std::is_arithmetic_v<T> && !std::is_same_v<T, bool>) {
-            if (row.range.error.empty()) return;
-            const double v = static_cast<double>(member);
-            const bool in_range = std::isfinite(v) && (row.range.min_exclusive ? v > row.range.min : v >= row.range.min) &&
-                                  v <= row.range.max;
-            if (!in_range && !(row.range.zero_allowed && v == 0.0))
-              error = range_message(row, v, std::is_integral_v<T>);
-          } else if constexpr (std::is_same_v<T, std::string>) {
-            if (row.choices.empty()) return;
-            std::vector<std::string_view> choices;
-            for (std::size_t start = 0; start <= row.choices.size();) {
-              const std::size_t comma = std::min(row.choices.find(',', start), row.choices.size());
-              choices.push_back(row.choices.substr(start, comma - start));
-              start = comma + 1;
-            }
-            if (std::find(choices.begin(), choices.end(), member) != choices.end()) return;
-            std::string expected;
-            for (std::size_t i = 0; i < choices.size(); ++i)
-              expected += (i == 0 ? "" : i + 1 == choices.size() ? " or " : ", ") + std::string(choices[i]);
-            error = row.full_name() + " \"" + member + "\": expected " + expected;
-          }
-        }
-      },
-      row.field);
+  // The simulator's and the filters' rows have no range or choices here (their own validate()).
+  with_member(row, copy, [&](const auto& member) {
+    using T = std::remove_cvref_t<decltype(member)>;
+    if constexpr (std::is_arithmetic_v<T> && !std::is_same_v<T, bool>) {
+      if (row.range.error.empty()) return;
+      const double v = static_cast<double>(member);
+      const bool in_range = std::isfinite(v) && (row.range.min_exclusive ? v > row.range.min : v >= row.range.min) &&
+                            v <= row.range.max;
+      if (!in_range && !(row.range.zero_allowed && v == 0.0)) error = range_message(row, v, std::is_integral_v<T>);
+    } else if constexpr (std::is_same_v<T, std::string>) {
+      if (row.choices.empty()) return;
+      std::vector<std::string_view> choices;
+      for (std::size_t start = 0; start <= row.choices.size();) {
+        const std::size_t comma = std::min(row.choices.find(',', start), row.choices.size());
+        choices.push_back(row.choices.substr(start, comma - start));
+        start = comma + 1;
+      }
+      if (std::find(choices.begin(), choices.end(), member) != choices.end()) return;
+      std::string expected;
+      for (std::size_t i = 0; i < choices.size(); ++i)
+        expected += (i == 0 ? "" : i + 1 == choices.size() ? " or " : ", ") + std::string(choices[i]);
+      error = row.full_name() + " \"" + member + "\": expected " + expected;
+    }
+  });
   return error;
 }
 
@@ -535,24 +517,15 @@ CliResult parse_command_line(int argc, const char* const* argv, DaemonConfig& co
   std::deque<std::pair<const ConfigKey*, std::vector<std::string>>> list_flags;
   for (const ConfigKey& row : config_keys()) {
     if (row.flag.empty()) continue;
-    CLI::Option* option = std::visit(
-        [&](auto field) -> CLI::Option* {
-          if constexpr (std::is_same_v<decltype(field), const SimOptionKey*>) {
-            return std::visit([&](auto sim_field) { return app.add_option(row.flag, sim_field(config.sim), row.help); },
-                              field->field);
-          } else {
-            auto& member = field(config);
-            using T = std::remove_reference_t<decltype(member)>;
-            if constexpr (std::is_same_v<T, bool>) {
-              return app.add_flag(row.flag, member, row.help);
-            } else if constexpr (std::is_same_v<T, std::vector<std::string>> || std::is_same_v<T, DeviceOffsets>) {
-              return app.add_option(row.flag, list_flags.emplace_back(&row, std::vector<std::string>{}).second, row.help);
-            } else {
-              return app.add_option(row.flag, member, row.help);
-            }
-          }
-        },
-        row.field);
+    CLI::Option* option = with_member(row, config, [&](auto& member) -> CLI::Option* {
+      using T = std::remove_reference_t<decltype(member)>;
+      if constexpr (std::is_same_v<T, bool>)
+        return app.add_flag(row.flag, member, row.help);
+      else if constexpr (std::is_same_v<T, std::vector<std::string>> || std::is_same_v<T, DeviceOffsets>)
+        return app.add_option(row.flag, list_flags.emplace_back(&row, std::vector<std::string>{}).second, row.help);
+      else
+        return app.add_option(row.flag, member, row.help);
+    });
     if (row.flag_check == FlagCheck::Positive) option->check(CLI::PositiveNumber);
     if (row.flag_check == FlagCheck::NonNegative) option->check(CLI::NonNegativeNumber);
   }

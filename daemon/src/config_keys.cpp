@@ -15,17 +15,6 @@ template <auto Member>
 auto& at(DaemonConfig& c) {
   return c.*Member;
 }
-template <double OneEuroOptions::* Member>
-double& filter_at(DaemonConfig& c) {
-  return c.filter.*Member;
-}
-bool& filter_enabled(DaemonConfig& c) { return c.filter.enabled; }
-template <double BodyFilterOptions::* Member>
-double& body_filter_at(DaemonConfig& c) {
-  return c.body_filter.*Member;
-}
-bool& body_filter_enabled(DaemonConfig& c) { return c.body_filter.enabled; }
-
 constexpr std::string_view kCommandLine = "Command line";
 constexpr std::string_view kTrackerFilter = "Tracker filter";
 constexpr std::string_view kBodyFilter = "Body filter";
@@ -116,45 +105,12 @@ std::vector<ConfigKey> make_rows() {
   add({.name = "auto_calibrate", .field = &at<&DaemonConfig::auto_calibrate>, .flag = "!--no-auto-calibrate",
        .help = "do not calibrate the user's size from the head's first still half second (docs/daemon.md, "
                "\"Calibration\")"});
-  // The diffusion method's tracker filter; validate(OneEuroOptions) checks the values.
-  add({.group = "filter", .name = "enabled", .field = &filter_enabled, .flag = "!--no-filter",
-       .help = "no One Euro filter on the tracker samples (config \"filter\": {\"enabled\": false})",
-       .doc = kTrackerFilter});
-  add({.group = "filter", .name = "min_cutoff_hz", .field = &filter_at<&OneEuroOptions::min_cutoff_hz>,
-       .help = "position cutoff of a still tracker, Hz", .doc = kTrackerFilter});
-  add({.group = "filter", .name = "beta_per_m_s", .field = &filter_at<&OneEuroOptions::beta_per_m_s>,
-       .help = "cutoff increase per m/s of speed", .doc = kTrackerFilter});
-  add({.group = "filter", .name = "d_cutoff_hz", .field = &filter_at<&OneEuroOptions::d_cutoff_hz>,
-       .help = "cutoff of the speed estimate, Hz", .doc = kTrackerFilter});
-  add({.group = "filter", .name = "rot_min_cutoff_hz", .field = &filter_at<&OneEuroOptions::rot_min_cutoff_hz>,
-       .help = "rotation cutoff of a still tracker, Hz", .doc = kTrackerFilter});
-  add({.group = "filter", .name = "rot_beta_per_rad_s", .field = &filter_at<&OneEuroOptions::rot_beta_per_rad_s>,
-       .help = "rotation cutoff increase per rad/s of angular speed", .doc = kTrackerFilter});
-  add({.group = "filter", .name = "head_correction_cutoff_hz",
-       .field = &filter_at<&OneEuroOptions::head_correction_cutoff_hz>,
-       .help = "cutoff of the head correction on a noisy head tracker, Hz", .doc = kTrackerFilter});
-  add({.group = "filter", .name = "anchor_cutoff_hz", .field = &filter_at<&OneEuroOptions::anchor_cutoff_hz>,
-       .help = "cutoff of the smoothed anchor on a noisy head tracker, Hz (0: off)", .doc = kTrackerFilter});
-  add({.group = "filter", .name = "hand_reach_slack_m", .field = &filter_at<&OneEuroOptions::hand_reach_slack_m>,
-       .help = "how far a noisy hand may be out of reach before the body chases it, m (0: off)", .doc = kTrackerFilter});
-  add({.group = "filter", .name = "arm_soft_zone_m", .field = &filter_at<&OneEuroOptions::arm_soft_zone_m>,
-       .help = "soft reach of the arms on a noisy hand tracker, m (0: off)", .doc = kTrackerFilter});
-  // The diffusion method's body filter (issue 18 item 4); validate(BodyFilterOptions) checks the values.
-  add({.group = "body_filter", .name = "enabled", .field = &body_filter_enabled, .flag = "!--no-body-filter",
-       .help = "no One Euro filter on the model's decoded body (config \"body_filter\": {\"enabled\": false})",
-       .doc = kBodyFilter});
-  add({.group = "body_filter", .name = "min_cutoff_hz", .field = &body_filter_at<&BodyFilterOptions::min_cutoff_hz>,
-       .help = "Hips position cutoff of a still body, Hz", .doc = kBodyFilter});
-  add({.group = "body_filter", .name = "beta_per_m_s", .field = &body_filter_at<&BodyFilterOptions::beta_per_m_s>,
-       .help = "Hips cutoff increase per m/s of speed", .doc = kBodyFilter});
-  add({.group = "body_filter", .name = "d_cutoff_hz", .field = &body_filter_at<&BodyFilterOptions::d_cutoff_hz>,
-       .help = "cutoff of the speed estimates, Hz", .doc = kBodyFilter});
-  add({.group = "body_filter", .name = "rot_min_cutoff_hz",
-       .field = &body_filter_at<&BodyFilterOptions::rot_min_cutoff_hz>,
-       .help = "joint rotation cutoff of a still joint, Hz", .doc = kBodyFilter});
-  add({.group = "body_filter", .name = "rot_beta_per_rad_s",
-       .field = &body_filter_at<&BodyFilterOptions::rot_beta_per_rad_s>,
-       .help = "rotation cutoff increase per rad/s of the joint's angular speed", .doc = kBodyFilter});
+  // The diffusion method's tracker filter and body filter (issue 18 item 4): the filters' own rows,
+  // which bodyd-eval's flags share; validate(OneEuroOptions) and validate(BodyFilterOptions) check
+  // the values.
+  for (const FilterOptionKey& filter : filter_option_keys())
+    add({.group = filter.group, .name = filter.name, .field = &filter, .flag = std::string(filter.daemon_flag),
+         .help = std::string(filter.help), .doc = filter.group == "filter" ? kTrackerFilter : kBodyFilter});
   add({.name = "offsets", .field = &at<&DaemonConfig::offsets>, .flag = "--offset",
        .help = "device offset ROLE=x,y,z[,qx,qy,qz,qw] (metres; rotation x,y,z,w), repeatable",
        .read = read_offsets, .print = print_offsets});

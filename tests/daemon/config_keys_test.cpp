@@ -38,71 +38,63 @@ std::string number_text(double x) {
 // Sets the key in `config` to a value other than its default that still passes validation,
 // and returns that value as its flag takes it ("" for a bool flag).
 std::string set_other_value(const ConfigKey& row, DaemonConfig& config) {
-  return std::visit(
-      [&](auto field) -> std::string {
-        const auto set = [&](auto& member) -> std::string {
-          using T = std::remove_reference_t<decltype(member)>;
-          if constexpr (std::is_same_v<T, bool>) {
-            member = !member;
-            return "";
-          } else if constexpr (std::is_integral_v<T>) {
-            member += 1;
-            return std::to_string(member);
-          } else if constexpr (std::is_floating_point_v<T>) {
-            member = member == 0.0 ? 0.5 : member * 1.5;
-            return number_text(member);
-          } else if constexpr (std::is_same_v<T, std::string>) {
-            if (!row.choices.empty()) {
-              std::stringstream choices{std::string(row.choices)};
-              for (std::string choice; std::getline(choices, choice, ',');)
-                if (choice != member) return member = choice;
-            }
-            return member = member.empty() ? "other" : member + "-other";
-          } else if constexpr (std::is_same_v<T, std::vector<std::string>>) {
-            // A well-formed spec of the list (check_specs runs on the flags' values).
-            const std::string spec = row.name == "sources"   ? "replay:other.csv"
-                                     : row.name == "outputs" ? "vrchat:127.0.0.1:9000"
-                                                             : "";
-            EXPECT_FALSE(spec.empty()) << row.full_name() << ": give this test an example value of the new list key";
-            member = {spec};
-            return spec;
-          } else {
-            static_assert(std::is_same_v<T, DeviceOffsets>);
-            member[0] = DeviceOffset{Vec3(0.01, 0.02, 0.03), Quat::Identity()};
-            return "head=0.01,0.02,0.03";
-          }
-        };
-        if constexpr (std::is_same_v<decltype(field), const SimOptionKey*>)
-          return std::visit([&](auto sim_field) { return set(sim_field(config.sim)); }, field->field);
-        else
-          return set(field(config));
-      },
-      row.field);
+  return with_member(row, config, [&](auto& member) -> std::string {
+    using T = std::remove_reference_t<decltype(member)>;
+    if constexpr (std::is_same_v<T, bool>) {
+      member = !member;
+      return "";
+    } else if constexpr (std::is_integral_v<T>) {
+      member += 1;
+      return std::to_string(member);
+    } else if constexpr (std::is_floating_point_v<T>) {
+      member = member == 0.0 ? 0.5 : member * 1.5;
+      return number_text(member);
+    } else if constexpr (std::is_same_v<T, std::string>) {
+      if (!row.choices.empty()) {
+        std::stringstream choices{std::string(row.choices)};
+        for (std::string choice; std::getline(choices, choice, ',');)
+          if (choice != member) return member = choice;
+      }
+      return member = member.empty() ? "other" : member + "-other";
+    } else if constexpr (std::is_same_v<T, std::vector<std::string>>) {
+      // A well-formed spec of the list (check_specs runs on the flags' values).
+      const std::string spec = row.name == "sources"   ? "replay:other.csv"
+                               : row.name == "outputs" ? "vrchat:127.0.0.1:9000"
+                                                       : "";
+      EXPECT_FALSE(spec.empty()) << row.full_name() << ": give this test an example value of the new list key";
+      member = {spec};
+      return spec;
+    } else {
+      static_assert(std::is_same_v<T, DeviceOffsets>);
+      member[0] = DeviceOffset{Vec3(0.01, 0.02, 0.03), Quat::Identity()};
+      return "head=0.01,0.02,0.03";
+    }
+  });
 }
 
 // Whether the key holds the same value in both (read through the row, not the printer).
 bool same_value(const ConfigKey& row, DaemonConfig a, DaemonConfig b) {
-  return std::visit(
-      [&](auto field) -> bool {
-        const auto same = [](const auto& x, const auto& y) {
-          if constexpr (std::is_same_v<std::remove_cvref_t<decltype(x)>, DeviceOffsets>) {
-            for (std::size_t r = 0; r < x.size(); ++r) {
-              if (x[r].has_value() != y[r].has_value()) return false;
-              if (x[r] && (!x[r]->position_m.isApprox(y[r]->position_m) ||
-                           !x[r]->rotation.coeffs().isApprox(y[r]->rotation.coeffs())))
-                return false;
-            }
-            return true;
-          } else {
-            return x == y;
-          }
-        };
-        if constexpr (std::is_same_v<decltype(field), const SimOptionKey*>)
-          return std::visit([&](auto sim_field) { return same(sim_field(a.sim), sim_field(b.sim)); }, field->field);
-        else
-          return same(field(a), field(b));
-      },
-      row.field);
+  const auto same = [](const auto& x, const auto& y) {
+    if constexpr (std::is_same_v<std::remove_cvref_t<decltype(x)>, DeviceOffsets>) {
+      for (std::size_t r = 0; r < x.size(); ++r) {
+        if (x[r].has_value() != y[r].has_value()) return false;
+        if (x[r] && (!x[r]->position_m.isApprox(y[r]->position_m) ||
+                     !x[r]->rotation.coeffs().isApprox(y[r]->rotation.coeffs())))
+          return false;
+      }
+      return true;
+    } else {
+      return x == y;
+    }
+  };
+  return with_member(row, a, [&](const auto& x) {
+    return with_member(row, b, [&](const auto& y) -> bool {
+      if constexpr (std::is_same_v<decltype(x), decltype(y)>)
+        return same(x, y);
+      else
+        return false;
+    });
+  });
 }
 
 // "" when `have` is `want`, else what is missing and what is extra.
@@ -208,7 +200,10 @@ TEST(ConfigKeys, EveryFlagSetsItsKey) {
     std::vector<std::string> args{"bodyd"};
     if (row.name == "curve_allow") args.insert(args.end(), {"--curve-secret-key", "k"});  // needs it (validate_config)
     args.push_back(flag_name(row));
-    if (!std::holds_alternative<ConfigRef<bool>>(row.field)) args.push_back(value);
+    const bool is_flag = with_member(row, expected, [](const auto& member) {
+      return std::is_same_v<std::remove_cvref_t<decltype(member)>, bool>;
+    });
+    if (!is_flag) args.push_back(value);
     std::vector<const char*> argv;
     for (const auto& a : args) argv.push_back(a.c_str());
     DaemonConfig config;
@@ -223,15 +218,10 @@ TEST(ConfigKeys, RangesAndChoicesAreChecked) {
   int checked = 0;
   for (const ConfigKey& row : config_keys()) {
     const auto set = [&](DaemonConfig& c, double v) {
-      std::visit(
-          [&](auto field) {
-            if constexpr (!std::is_same_v<decltype(field), const SimOptionKey*>) {
-              auto& member = field(c);
-              using T = std::remove_reference_t<decltype(member)>;
-              if constexpr (std::is_arithmetic_v<T> && !std::is_same_v<T, bool>) member = static_cast<T>(v);
-            }
-          },
-          row.field);
+      with_member(row, c, [&](auto& member) {
+        using T = std::remove_reference_t<decltype(member)>;
+        if constexpr (std::is_arithmetic_v<T> && !std::is_same_v<T, bool>) member = static_cast<T>(v);
+      });
     };
     const auto error_for = [&](double v) {
       DaemonConfig c;
@@ -404,13 +394,19 @@ std::string output_of(const std::string& command) {
   return out;
 }
 
+// The flags a tool's --help names.
+std::set<std::string> help_flags(const std::string& help) {
+  std::set<std::string> flags;
+  static const std::regex kFlag("(^|[\\s,!])(--[a-z][a-z-]*)");
+  for (std::sregex_iterator it(help.begin(), help.end(), kFlag), end; it != end; ++it) flags.insert((*it)[2]);
+  return flags;
+}
+
 // bodyd-sim and bodyd-eval take every row's flag and its older spellings.
 TEST(SimOptionKeys, BothToolsTakeEveryRowsFlags) {
   for (const char* tool : {"bodyd-sim", "bodyd-eval"}) {
     const std::string help = output_of((test::bin_dir() / tool).string() + " --help");
-    std::set<std::string> flags;
-    static const std::regex kFlag("(^|[\\s,])(--[a-z][a-z-]*)");
-    for (std::sregex_iterator it(help.begin(), help.end(), kFlag), end; it != end; ++it) flags.insert((*it)[2]);
+    const std::set<std::string> flags = help_flags(help);
     for (const SimOptionKey& row : sim_option_keys()) {
       EXPECT_TRUE(flags.count(std::string(row.flag))) << tool << " has no " << row.flag << ":\n" << help;
       std::stringstream aliases{std::string(row.aliases)};
@@ -424,6 +420,31 @@ TEST(SimOptionKeys, BothToolsTakeEveryRowsFlags) {
   const std::string by_flag = output_of(sim + " --dropout-mean-ms 123 --rate-hz 45");
   EXPECT_NE(by_flag.find("mean_ms=123"), std::string::npos) << by_flag.substr(0, 2000);
   EXPECT_EQ(output_of(sim + " --dropout-ms 123 --tracker-rate-hz 45"), by_flag);
+}
+
+// bodyd-eval takes one flag per row of the filters' table, the daemon's "filter" and "body_filter"
+// keys (issue 45 item 4), and each sets its own key: a bad value is refused naming that key.
+TEST(FilterOptionKeys, EvalTakesEveryRowsFlagAndSetsItsKey) {
+  const std::string eval = (test::bin_dir() / "bodyd-eval").string();
+  const std::set<std::string> flags = help_flags(output_of(eval + " --help"));
+  const std::string clip = " --methods ik " + (test::fixtures() / "walk_60.bvh").string();
+  int numbers = 0;
+  for (const FilterOptionKey& row : filter_option_keys()) {
+    std::string flag = filter_flag(row);
+    if (flag.starts_with('!')) flag.erase(0, 1);
+    EXPECT_TRUE(flags.count(flag)) << "bodyd-eval has no " << flag << " for " << row.full_name();
+    std::vector<std::string> names{flag};
+    std::stringstream aliases{std::string(row.eval_aliases)};
+    for (std::string alias; std::getline(aliases, alias, ',');) names.push_back(alias);
+    if (!std::holds_alternative<double& (*)(FilterSettings)>(row.field)) continue;
+    ++numbers;
+    for (const std::string& name : names) {
+      const std::string out = output_of(eval + " " + name + " -1" + clip);
+      EXPECT_NE(out.find(std::string(row.group) + " " + std::string(row.name) + " must be"), std::string::npos)
+          << name << " -1: " << out;
+    }
+  }
+  EXPECT_EQ(numbers, 14);
 }
 
 // The "body_filter" keys (issue 18 item 4) parse, print back, are checked, and --no-body-filter

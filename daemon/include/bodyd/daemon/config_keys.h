@@ -7,10 +7,12 @@
 // A new key: a member of DaemonConfig (its initializer is the default), one row in
 // daemon/src/config_keys.cpp, and its line in docs/daemon.md (the "Command line" table, or the
 // section the row's `doc` names). The "sim" object's keys are the simulator's own rows
-// (bodyd/simulators/sim_option_keys.h), spliced in.
+// (bodyd/simulators/sim_option_keys.h), and the "filter" and "body_filter" objects' the
+// filters' rows (bodyd/inference/filter_option_keys.h, which bodyd-eval's flags share), spliced in.
 #pragma once
 
 #include "bodyd/daemon/config.h"
+#include "bodyd/inference/filter_option_keys.h"
 #include "bodyd/simulators/sim_option_keys.h"
 
 #include <nlohmann/json_fwd.hpp>
@@ -23,6 +25,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <type_traits>
 #include <variant>
 #include <vector>
 
@@ -33,10 +36,11 @@ using DeviceOffsets = std::array<std::optional<DeviceOffset>, kRoleCount>;
 template <class T>
 using ConfigRef = T& (*)(DaemonConfig&);
 // The DaemonConfig member a key sets; its type says how the file's value is read and printed.
-// A simulator row reads and writes config.sim through the simulator's table.
+// A simulator row reads and writes config.sim through the simulator's table, a filter row
+// config.filter and config.body_filter through the filters' (with_member() hides the difference).
 using ConfigField = std::variant<ConfigRef<bool>, ConfigRef<int>, ConfigRef<std::size_t>, ConfigRef<double>,
                                  ConfigRef<std::string>, ConfigRef<std::vector<std::string>>, ConfigRef<DeviceOffsets>,
-                                 const SimOptionKey*>;
+                                 const SimOptionKey*, const FilterOptionKey*>;
 
 // A check CLI11 makes of a flag's value, before validation (its own message, exit 2).
 enum class FlagCheck { None, Positive, NonNegative };
@@ -86,6 +90,26 @@ struct ConfigGroup {
 [[nodiscard]] std::span<const ConfigGroup> config_groups();
 // The row of "replay_speed" or "sim.seed", or nullptr.
 [[nodiscard]] const ConfigKey* find_config_key(std::string_view full_name);
+
+// Calls f with the DaemonConfig member the row sets (a bool&, double&, std::string&, ...), whatever
+// table the row comes from; returns what f returns.
+template <class F>
+decltype(auto) with_member(const ConfigKey& row, DaemonConfig& config, F&& f) {
+  return std::visit(
+      [&](auto field) -> decltype(auto) {
+        if constexpr (std::is_same_v<decltype(field), const SimOptionKey*>)
+          return std::visit([&](auto sim_field) -> decltype(auto) { return f(sim_field(config.sim)); }, field->field);
+        else if constexpr (std::is_same_v<decltype(field), const FilterOptionKey*>)
+          return std::visit(
+              [&](auto filter_field) -> decltype(auto) {
+                return f(filter_field(FilterSettings{config.filter, config.body_filter}));
+              },
+              field->field);
+        else
+          return f(field(config));
+      },
+      row.field);
+}
 
 // Flags that set no key of their own (actions, and shorthands for a key's flag).
 inline constexpr std::array<std::string_view, 10> kNonKeyFlags{
