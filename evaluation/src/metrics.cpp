@@ -231,6 +231,21 @@ double MetricsAccumulator::LagSums::ms(double fps) const {
   return 1000.0 * lag / fps;
 }
 
+const std::array<std::pair<double AccuracyMetrics::*, MetricsAccumulator::TermId>, 13>
+    MetricsAccumulator::kTermFields{{{&AccuracyMetrics::mpjpe_cm, kAll},
+                                     {&AccuracyMetrics::upper_pe_cm, kUpper},
+                                     {&AccuracyMetrics::lower_pe_cm, kLower},
+                                     {&AccuracyMetrics::hand_pe_cm, kHands},
+                                     {&AccuracyMetrics::root_pe_cm, kRoot},
+                                     {&AccuracyMetrics::mpjre_deg, kRot},
+                                     {&AccuracyMetrics::mpjve_cm_s, kVel},
+                                     {&AccuracyMetrics::jitter_m_s3, kJitter},
+                                     {&AccuracyMetrics::foot_skate_ratio, kSkate},
+                                     {&AccuracyMetrics::head_pe_cm, kHead},
+                                     {&AccuracyMetrics::gap_jerk_m_s3, kGapJerk},
+                                     {&AccuracyMetrics::lag_ms, kLag},
+                                     {&AccuracyMetrics::tracked_lag_ms, kTrackedLag}}};
+
 AccuracyMetrics MetricsAccumulator::end_clip() {
   in_clip_ = false;
   AccuracyMetrics m;
@@ -242,26 +257,14 @@ AccuracyMetrics MetricsAccumulator::end_clip() {
   }
   if (const double lag = untracked_lag_.ms(fps_); !std::isnan(lag)) terms_[kLag].add(lag);
   if (const double lag = tracked_lag_.ms(fps_); !std::isnan(lag)) terms_[kTrackedLag].add(lag);
-  m.mpjpe_cm = terms_[kAll].finish(clip_frames_);
-  m.upper_pe_cm = terms_[kUpper].finish(clip_frames_);
-  m.lower_pe_cm = terms_[kLower].finish(clip_frames_);
-  m.hand_pe_cm = terms_[kHands].finish(clip_frames_);
-  m.root_pe_cm = terms_[kRoot].finish(clip_frames_);
-  m.mpjre_deg = terms_[kRot].finish(clip_frames_);
-  m.mpjve_cm_s = terms_[kVel].finish(clip_frames_);
-  m.jitter_m_s3 = terms_[kJitter].finish(clip_frames_);
+  for (const auto& [field, term] : kTermFields) m.*field = terms_[term].finish(clip_frames_);
   for (auto* terms : {&joint_jitter_, &truth_joint_jitter_, &joint_pe_, &joint_height_error_})
     for (Term& t : *terms) (void)t.finish(clip_frames_);
-  m.foot_skate_ratio = terms_[kSkate].finish(clip_frames_);
   last_truth_.jitter_m_s3 = terms_[kTruthJitter].finish(clip_frames_);
   last_truth_.foot_skate_ratio = terms_[kTruthSkate].finish(clip_frames_);
-  m.head_pe_cm = terms_[kHead].finish(clip_frames_);
-  m.gap_jerk_m_s3 = terms_[kGapJerk].finish(clip_frames_);
   last_truth_.gap_jerk_m_s3 = terms_[kTruthGapJerk].finish(clip_frames_);
   m.hand_pe_max_cm = clip_hand_max_;
   m.gap_hand_jump_cm = clip_gap_jump_;
-  m.lag_ms = terms_[kLag].finish(clip_frames_);
-  m.tracked_lag_ms = terms_[kTrackedLag].finish(clip_frames_);
   hand_max_ = max_of(hand_max_, clip_hand_max_);
   gap_jump_ = max_of(gap_jump_, clip_gap_jump_);
   ++clips_;
@@ -272,21 +275,9 @@ AccuracyMetrics MetricsAccumulator::end_clip() {
 
 AccuracyMetrics MetricsAccumulator::result() const {
   AccuracyMetrics m;
-  m.mpjpe_cm = terms_[kAll].mean();
-  m.upper_pe_cm = terms_[kUpper].mean();
-  m.lower_pe_cm = terms_[kLower].mean();
-  m.hand_pe_cm = terms_[kHands].mean();
-  m.root_pe_cm = terms_[kRoot].mean();
-  m.mpjre_deg = terms_[kRot].mean();
-  m.mpjve_cm_s = terms_[kVel].mean();
-  m.jitter_m_s3 = terms_[kJitter].mean();
-  m.foot_skate_ratio = terms_[kSkate].mean();
-  m.head_pe_cm = terms_[kHead].mean();
+  for (const auto& [field, term] : kTermFields) m.*field = terms_[term].mean();
   m.hand_pe_max_cm = hand_max_;
   m.gap_hand_jump_cm = gap_jump_;
-  m.gap_jerk_m_s3 = terms_[kGapJerk].mean();
-  m.lag_ms = terms_[kLag].mean();
-  m.tracked_lag_ms = terms_[kTrackedLag].mean();
   return m;
 }
 

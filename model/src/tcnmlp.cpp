@@ -113,12 +113,17 @@ TcnMlpScratch::TcnMlpScratch(const TcnMlp& network, int max_batch)
   h_past_.resize(c.H);
 }
 
-void TcnMlp::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
-                     TcnMlpScratch& s) const {
+void TcnMlp::require_own_scratch(const TcnMlpScratch& s) const {
   const TcnMlpConfig& c = config_;
   BODYD_REQUIRE(s.config_.W == c.W && s.config_.D == c.D && s.config_.N == c.N && s.config_.E == c.E &&
                     s.config_.H == c.H && s.config_.C == c.C,
                 "TcnMlpScratch was made for another network");
+}
+
+void TcnMlp::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+                     TcnMlpScratch& s) const {
+  const TcnMlpConfig& c = config_;
+  require_own_scratch(s);
   const Eigen::Index batch = checked_batch(x, m, t, out, c.W, c.D, c.T, s.max_batch_);
   const Eigen::Index W = c.W, N = c.N, frames = W * batch;
   const Eigen::Map<const Eigen::MatrixXf> X(x.data(), c.D, frames);
@@ -186,9 +191,7 @@ void TcnMlp::forward_newest(std::span<const float> x, std::span<const float> m, 
 void TcnMlp::forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                             TcnMlpScratch& s) const {
   const TcnMlpConfig& c = config_;
-  BODYD_REQUIRE(s.config_.W == c.W && s.config_.D == c.D && s.config_.N == c.N && s.config_.E == c.E &&
-                    s.config_.H == c.H && s.config_.C == c.C,
-                "TcnMlpScratch was made for another network");
+  require_own_scratch(s);
   check_newest(x, m, t, out, c.W, c.D, c.T);
 
   const Eigen::Index W = c.W, N = c.N, past = N - 1;

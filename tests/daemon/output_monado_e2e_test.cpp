@@ -59,9 +59,9 @@ std::string solarxr_client_skip_reason(std::string& python) {
 }
 
 // The SolarXR client's command line: solarxr_client.py with `args`.
-std::vector<std::string> solarxr_client(const std::string& python, std::initializer_list<std::string> args) {
+std::vector<std::string> solarxr_client(const std::string& python, const std::vector<std::string>& args) {
   std::vector<std::string> command{python, client_script("solarxr_client.py").string(), pb_dir().string()};
-  command.insert(command.end(), args);
+  command.insert(command.end(), args.begin(), args.end());
   return command;
 }
 
@@ -79,6 +79,19 @@ struct MonadoServer {
                 "--endpoints-file", endpoints_file().string()},
                dir.path / "bodyd.err") {}
   fs::path endpoints_file() const { return dir.path / "endpoints.json"; }
+  // The control endpoint bodyd bound (with control "tcp://127.0.0.1:*"); "" when it wrote none in 20 s.
+  std::string control_endpoint() const {
+    const auto endpoints = test::wait_endpoints(endpoints_file(), 20000);
+    return endpoints && endpoints->contains("control") ? (*endpoints)["control"].get<std::string>() : "";
+  }
+  // The feeder (solarxr_client.py) sending write_poses()'s poses to the server, `extra` after its
+  // arguments; what it receives goes to received.jsonl, its log to client.err.
+  test::Child feeder(const std::string& python, const std::vector<std::string>& extra = {}) const {
+    write_poses(dir.path / "poses.txt");
+    std::vector<std::string> args{run.string(), (dir.path / "poses.txt").string(), (dir.path / "received.jsonl").string()};
+    args.insert(args.end(), extra.begin(), extra.end());
+    return test::Child(solarxr_client(python, args), dir.path / "client.err");
+  }
 };
 
 Vec3 joint_p(const protocol::PoseMessage& pose, std::size_t j) { return vec3(pose.joints[j].position_m); }
@@ -93,10 +106,7 @@ TEST(MonadoBridge, HandshakeThenBonesFollowTheZmqPoseFedByTheFeeder) {
   zmq::socket_t sub;
   ASSERT_TRUE(test::subscribe_when_up(ctx, server.endpoints_file(), server.daemon, sub));
 
-  write_poses(dir / "poses.txt");
-  test::Child client(solarxr_client(python, {server.run.string(), (dir / "poses.txt").string(),
-                                             (dir / "received.jsonl").string()}),
-                     dir / "client.err");
+  test::Child client = server.feeder(python);
   protocol::SkeletonMessage skeleton;
   std::vector<protocol::PoseMessage> poses;
   collect_until_quiet(sub, skeleton, poses, client);
@@ -198,13 +208,9 @@ TEST(MonadoBridge, AfterResetTheTrackersStayInMonadosSpace) {
   zmq::context_t ctx;
   zmq::socket_t sub;
   ASSERT_TRUE(test::subscribe_when_up(ctx, server.endpoints_file(), server.daemon, sub));
-  const auto endpoints = test::wait_endpoints(server.endpoints_file(), 20000);
-  ASSERT_TRUE(endpoints && endpoints->contains("control")) << server.daemon.log();
-  const std::string control = (*endpoints)["control"];
-  write_poses(dir / "poses.txt");
-  test::Child client(solarxr_client(python, {server.run.string(), (dir / "poses.txt").string(),
-                                             (dir / "received.jsonl").string(), "--wivrn", "6"}),
-                     dir / "client.err");
+  const std::string control = server.control_endpoint();
+  ASSERT_FALSE(control.empty()) << server.daemon.log();
+  test::Child client = server.feeder(python, {"--wivrn", "6"});
   protocol::SkeletonMessage skeleton;
   std::vector<protocol::PoseMessage> poses;
   const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(2800);
@@ -313,17 +319,14 @@ struct WivrnRun {
     zmq::context_t ctx;
     zmq::socket_t sub;
     ASSERT_TRUE(test::subscribe_when_up(ctx, server.endpoints_file(), server.daemon, sub));
-    const auto endpoints = test::wait_endpoints(server.endpoints_file(), 20000);
-    ASSERT_TRUE(endpoints && endpoints->contains("control")) << server.daemon.log();
-    write_poses(dir / "poses.txt");
-    test::Child client(solarxr_client(python, {server.run.string(), (dir / "poses.txt").string(),
-                                               (dir / "received.jsonl").string(), "--wivrn", std::to_string(kSeconds)}),
-                       dir / "client.err");
+    const std::string control = server.control_endpoint();
+    ASSERT_FALSE(control.empty()) << server.daemon.log();
+    test::Child client = server.feeder(python, {"--wivrn", std::to_string(kSeconds)});
     protocol::SkeletonMessage skeleton;
     std::vector<protocol::PoseMessage> received;
     collect(sub, skeleton, received, [&] { return client.wait(0).has_value(); });
     ASSERT_EQ(client.wait(10000), 0) << client.log() << server.daemon.log();
-    const auto st = test::control_request(ctx, (*endpoints)["control"], R"({"cmd":"status"})");
+    const auto st = test::control_request(ctx, control, R"({"cmd":"status"})");
     ASSERT_TRUE(st) << server.daemon.log();
     status = *st;
     server.daemon.signal(SIGINT);

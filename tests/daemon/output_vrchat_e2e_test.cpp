@@ -161,19 +161,30 @@ class VrchatOutput : public ::testing::Test {
     if (std::string why = node_or_skip_reason(node); !why.empty()) GTEST_SKIP() << why;
     ASSERT_TRUE(start_receiver(node, dir.path, receiver));
   }
+  // bodyd (--method ik) with `args`, its vrchat output sending every slot to osc.js, publishing on
+  // TCP with its endpoints in endpoints.json and --control `control`; its log in bodyd.err.
+  test::Child start_bodyd(const std::string& control, const std::vector<std::string>& args) const {
+    std::vector<std::string> command{(test::bin_dir() / "bodyd").string(), "--method", "ik", "--pub", "tcp://127.0.0.1:*",
+                                     "--control", control, "--endpoints-file", (dir.path / "endpoints.json").string(),
+                                     "--output", "vrchat:127.0.0.1:" + receiver.port + "?slots=hip,feet,knees,chest,elbows"};
+    command.insert(command.end(), args.begin(), args.end());
+    return test::Child(command, dir.path / "bodyd.err");
+  }
+  // The bundled walk, and the arguments that replay it once from the first subscriber on.
+  static fs::path walk_log() { return test::source_dir() / "data" / "demo" / "walk.csv"; }
+  static std::vector<std::string> replay_walk() {
+    return {"--replay", walk_log().string(), "--exit-at-end", "--wait-for-subscriber"};
+  }
   std::string node;
   test::TempDir dir;
   Receiver receiver;
 };
 
 TEST_F(VrchatOutput, OscJsReceivesTheZmqPoseAndTheHeadAsReceived) {
-
-  const fs::path log_path = test::source_dir() / "data" / "demo" / "walk.csv";
   // A head offset of 8 cm: the head message must carry the headset's pose before it.
-  test::Child daemon({(test::bin_dir() / "bodyd").string(), "--method", "ik", "--replay", log_path.string(), "--exit-at-end", "--wait-for-subscriber", "--pub", "tcp://127.0.0.1:*", "--control", "none",
-                      "--endpoints-file", (dir.path / "endpoints.json").string(), "--offset", "head=0,-0.08,0.05",
-                      "--output", "vrchat:127.0.0.1:" + receiver.port + "?slots=hip,feet,knees,chest,elbows"},
-                     dir.path / "bodyd.err");
+  std::vector<std::string> args = replay_walk();
+  args.insert(args.end(), {"--offset", "head=0,-0.08,0.05"});
+  test::Child daemon = start_bodyd("none", args);
   zmq::context_t ctx;
   zmq::socket_t sub;
   ASSERT_TRUE(test::subscribe_when_up(ctx, dir.path / "endpoints.json", daemon, sub));
@@ -191,7 +202,7 @@ TEST_F(VrchatOutput, OscJsReceivesTheZmqPoseAndTheHeadAsReceived) {
   // One pose per head sample of the log, in order (the replay may move the log's times onto
   // the host clock, so the order is what pairs them).
   std::vector<TrackerSample> heads;
-  for (const TrackerSample& h : read_tracker_log(log_path).samples)
+  for (const TrackerSample& h : read_tracker_log(walk_log()).samples)
     if (h.role == Role::Head && h.valid) heads.push_back(h);
   ASSERT_EQ(poses.size(), heads.size()) << daemon.log();
   double offset_min_mm = 1e9;  // how far the offset head (the pose stream's Head) is from the raw one
@@ -209,13 +220,8 @@ TEST_F(VrchatOutput, OscJsReceivesTheZmqPoseAndTheHeadAsReceived) {
 // space) taken back through the re-centring that `status` reports, and its head message the head
 // sample as replayed. (Before, the trackers were sent re-centred next to the head as received.)
 TEST_F(VrchatOutput, AfterResetTheTrackersStayInTheSpaceOfVrchatsHead) {
-  const fs::path log_path = test::source_dir() / "data" / "demo" / "walk.csv";
   const std::string control = "ipc://" + (dir.path / "control").string();
-  test::Child daemon({(test::bin_dir() / "bodyd").string(), "--method", "ik", "--replay", log_path.string(), "--exit-at-end",
-                      "--wait-for-subscriber", "--pub", "tcp://127.0.0.1:*", "--control", control, "--endpoints-file",
-                      (dir.path / "endpoints.json").string(), "--output",
-                      "vrchat:127.0.0.1:" + receiver.port + "?slots=hip,feet,knees,chest,elbows"},
-                     dir.path / "bodyd.err");
+  test::Child daemon = start_bodyd(control, replay_walk());
   zmq::context_t ctx;
   zmq::socket_t sub;
   ASSERT_TRUE(test::subscribe_when_up(ctx, dir.path / "endpoints.json", daemon, sub));
@@ -238,7 +244,7 @@ TEST_F(VrchatOutput, AfterResetTheTrackersStayInTheSpaceOfVrchatsHead) {
   ASSERT_GT(poses.size(), before + 100) << daemon.log();
 
   std::vector<TrackerSample> log_heads;
-  for (const TrackerSample& h : read_tracker_log(log_path).samples)
+  for (const TrackerSample& h : read_tracker_log(walk_log()).samples)
     if (h.role == Role::Head && h.valid) log_heads.push_back(h);
   ASSERT_EQ(poses.size(), log_heads.size()) << daemon.log();
   // The poses in VRChat's space (test::in_runtime_space), each with its head sample.
@@ -266,11 +272,7 @@ TEST_F(VrchatOutput, FullLoopFromVrchatInputToVrchatTrackers) {
     if (s.role == Role::Head && s.valid) heads.push_back(s);
 
   const std::string in_port = std::to_string(test::free_loopback_port());
-  test::Child daemon({(test::bin_dir() / "bodyd").string(), "--method", "ik", "--source",
-                      "vrchat:127.0.0.1:" + in_port + "?oscquery=off", "--output",
-                      "vrchat:127.0.0.1:" + receiver.port + "?slots=hip,feet,knees,chest,elbows", "--pub",
-                      "tcp://127.0.0.1:*", "--control", "none", "--endpoints-file", (dir.path / "endpoints.json").string()},
-                     dir.path / "bodyd.err");
+  test::Child daemon = start_bodyd("none", {"--source", "vrchat:127.0.0.1:" + in_port + "?oscquery=off"});
   zmq::context_t ctx;
   zmq::socket_t sub;
   ASSERT_TRUE(test::subscribe_when_up(ctx, dir.path / "endpoints.json", daemon, sub));

@@ -166,6 +166,8 @@ class MetricsAccumulator {
     kAll, kUpper, kLower, kHands, kRoot, kRot, kVel, kJitter, kSkate, kTruthJitter, kTruthSkate,
     kHead, kGapJerk, kTruthGapJerk, kLag, kTrackedLag, kTerms
   };
+  // The AccuracyMetrics field each term gives: the clip's mean at end_clip(), the run's at result().
+  static const std::array<std::pair<double AccuracyMetrics::*, TermId>, 13> kTermFields;
   // lag_ms or tracked_lag_ms of the clip: the slots (within sets_.all) of its joints and the
   // clip's sums of E(k) for k = -1..kMaxLagFrames over `frames` frames.
   struct LagSums {

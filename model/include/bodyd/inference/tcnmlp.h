@@ -102,6 +102,8 @@ class TcnMlp final : public detail::EigenDenoiser<TcnMlpConfig, TcnMlp, TcnMlpSc
 
  private:
   friend class TcnMlpScratch;
+  // A bug check: `s` was made for this network's shape.
+  void require_own_scratch(const TcnMlpScratch& s) const;
   using Linear = detail::Linear;
   using LayerNorm = detail::LayerNorm;
 
