@@ -105,39 +105,30 @@ int main(int argc, char** argv) {
       "FINITE");
   // The help shows DiffusionOptions' own defaults, so a re-chosen default cannot leave it behind.
   const bodyd::DiffusionOptions defaults;
-  app.add_option("--contact-on", method_options.contact_on,
-                 fmt::format("diffusion: a free foot plants when its predicted contact exceeds this (default {})",
-                             defaults.contact_on))
-      ->check(finite)->check(CLI::Range(0.0, 1.0));
-  app.add_option("--contact-off", method_options.contact_off,
-                 fmt::format("diffusion: a planted foot stays planted while its predicted contact exceeds this "
-                             "(default {})",
-                             defaults.contact_off))
-      ->check(finite)->check(CLI::Range(0.0, 1.0));
-  app.add_option("--foot-unlock-distance-m", method_options.foot_unlock_distance_m,
-                 fmt::format("diffusion: a planted foot further than this from its prediction re-plants there, m "
-                             "(default {})",
-                             defaults.foot_unlock_distance_m))
-      ->check(finite)->check(CLI::NonNegativeNumber);
-  app.add_option("--foot-release-half-life-s", method_options.foot_release_half_life_s,
-                 fmt::format("diffusion: a lifted foot eases from its planted spot to the prediction with this "
-                             "half-life, s (default {})",
-                             defaults.foot_release_half_life_s))
-      ->check(finite)->check(CLI::PositiveNumber);
-  app.add_option("--foot-contact-speed-m-s", method_options.foot_contact_speed_m_s,
-                 fmt::format("diffusion: a planted toe follows the prediction at most this fast, m/s (default {})",
-                             defaults.foot_contact_speed_m_s))
-      ->check(finite)->check(CLI::NonNegativeNumber);
-  app.add_option("--leg-position-blend", method_options.leg_position_blend,
-                 fmt::format("diffusion: each leg is bent so its ankle moves this fraction of the way from where the "
-                             "joint rotations put it to the ankle position the network predicts (0-1, default {})",
-                             defaults.leg_position_blend))
-      ->check(finite)->check(CLI::Range(0.0, 1.0));
-  app.add_option("--elbow-pole-bias-m", method_options.elbow_pole_bias_m,
-                 fmt::format("diffusion: the arms' elbow pole is the predicted elbow pushed this far outward, down "
-                             "and back, m (default {})",
-                             defaults.elbow_pole_bias_m))
-      ->check(finite)->check(CLI::Range(0.0, 10.0));
+  const auto knob = [&](const char* flag, auto& member, std::string_view what, auto default_value,
+                        const CLI::Validator& range) {
+    app.add_option(flag, member, fmt::format("diffusion: {} (default {})", what, default_value))->check(finite)->check(range);
+  };
+  knob("--contact-on", method_options.contact_on, "a free foot plants when its predicted contact exceeds this",
+       defaults.contact_on, CLI::Range(0.0, 1.0));
+  knob("--contact-off", method_options.contact_off, "a planted foot stays planted while its predicted contact exceeds this",
+       defaults.contact_off, CLI::Range(0.0, 1.0));
+  knob("--foot-unlock-distance-m", method_options.foot_unlock_distance_m,
+       "a planted foot further than this from its prediction re-plants there, m", defaults.foot_unlock_distance_m,
+       CLI::NonNegativeNumber);
+  knob("--foot-release-half-life-s", method_options.foot_release_half_life_s,
+       "a lifted foot eases from its planted spot to the prediction with this half-life, s",
+       defaults.foot_release_half_life_s, CLI::PositiveNumber);
+  knob("--foot-contact-speed-m-s", method_options.foot_contact_speed_m_s,
+       "a planted toe follows the prediction at most this fast, m/s", defaults.foot_contact_speed_m_s,
+       CLI::NonNegativeNumber);
+  knob("--leg-position-blend", method_options.leg_position_blend,
+       "each leg is bent so its ankle moves this fraction of the way from where the joint rotations put it to the "
+       "ankle position the network predicts (0-1)",
+       defaults.leg_position_blend, CLI::Range(0.0, 1.0));
+  knob("--elbow-pole-bias-m", method_options.elbow_pole_bias_m,
+       "the arms' elbow pole is the predicted elbow pushed this far outward, down and back, m", defaults.elbow_pole_bias_m,
+       CLI::Range(0.0, 10.0));
   std::string device_frames = "joint", calibration_pose = "first-still", reference_path;
   bool method_pose_eye = false;
   bodyd::add_device_frames_flag(app, device_frames,

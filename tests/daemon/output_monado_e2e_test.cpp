@@ -97,13 +97,20 @@ struct MonadoServer {
 Vec3 joint_p(const protocol::PoseMessage& pose, std::size_t j) { return vec3(pose.joints[j].position_m); }
 Quat joint_q(const protocol::PoseMessage& pose, std::size_t j) { return quat_xyzw(pose.joints[j].rotation_xyzw); }
 
-TEST(MonadoBridge, HandshakeThenBonesFollowTheZmqPoseFedByTheFeeder) {
+// The SolarXR client's Python (skipped without it) and a subscriber for bodyd's pose stream.
+class MonadoBridge : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (std::string why = solarxr_client_skip_reason(python); !why.empty()) GTEST_SKIP() << why;
+  }
   std::string python;
-  if (std::string why = solarxr_client_skip_reason(python); !why.empty()) GTEST_SKIP() << why;
-  MonadoServer server("?trackers=waist,feet,chest,knees,elbows", "none");
-  const fs::path& dir = server.dir.path;
   zmq::context_t ctx;
   zmq::socket_t sub;
+};
+
+TEST_F(MonadoBridge, HandshakeThenBonesFollowTheZmqPoseFedByTheFeeder) {
+  MonadoServer server("?trackers=waist,feet,chest,knees,elbows", "none");
+  const fs::path& dir = server.dir.path;
   ASSERT_TRUE(test::subscribe_when_up(ctx, server.endpoints_file(), server.daemon, sub));
 
   test::Child client = server.feeder(python);
@@ -200,13 +207,9 @@ TEST(MonadoBridge, HandshakeThenBonesFollowTheZmqPoseFedByTheFeeder) {
 // Issue 45 item 3: after `reset` (bodyd's world re-centred, Monado's not) the synthetic trackers
 // stay in Monado's space, next to its own headset: each update's trackers are the ZeroMQ pose's
 // joints (the user's re-centred space) taken back through the re-centring `status` reports.
-TEST(MonadoBridge, AfterResetTheTrackersStayInMonadosSpace) {
-  std::string python;
-  if (std::string why = solarxr_client_skip_reason(python); !why.empty()) GTEST_SKIP() << why;
+TEST_F(MonadoBridge, AfterResetTheTrackersStayInMonadosSpace) {
   MonadoServer server("?trackers=waist,feet,chest,knees,elbows", "tcp://127.0.0.1:*");
   const fs::path& dir = server.dir.path;
-  zmq::context_t ctx;
-  zmq::socket_t sub;
   ASSERT_TRUE(test::subscribe_when_up(ctx, server.endpoints_file(), server.daemon, sub));
   const std::string control = server.control_endpoint();
   ASSERT_FALSE(control.empty()) << server.daemon.log();
@@ -256,9 +259,7 @@ TEST(MonadoBridge, AfterResetTheTrackersStayInMonadosSpace) {
 // Bad input on SlimeVRRpc (issue 17 item 4): a length above 16 KiB or below 4 and a flood drop
 // the connection, a bundle that fails FlatBuffers verification is skipped; each is counted by
 // reason in the monado output's status, and a fresh connection's poll is still answered.
-TEST(MonadoBridge, BadRequestsAreCountedAndANewClientIsStillServed) {
-  std::string python;
-  if (std::string why = solarxr_client_skip_reason(python); !why.empty()) GTEST_SKIP() << why;
+TEST_F(MonadoBridge, BadRequestsAreCountedAndANewClientIsStillServed) {
   MonadoServer server("", "tcp://127.0.0.1:*");
   const fs::path& dir = server.dir.path;
   const auto endpoints = test::wait_endpoints(server.endpoints_file(), 20000);
