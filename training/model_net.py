@@ -82,6 +82,21 @@ class ResBlock(nn.Module):
         return h + self.fc2(F.silu(self.fc1(self.norm(h))))
 
 
+def add_mlp_trunk(net: nn.Module, frames: int, D: int, E: int, H: int, L: int, TE: int) -> None:
+    """mlpwin-v1's modules over `frames` frames, registered on `net` in this order (the order of
+    net.parameters(), which a checkpoint's optimizer state follows): enc, inp, time1, time2,
+    blocks, out_norm, out, dec1, dec2. tcnmlp-v1's trunk is the same over its newest N frames."""
+    net.enc = nn.Linear(2 * D, E)
+    net.inp = nn.Linear(frames * E, H)
+    net.time1 = nn.Linear(TE, H)
+    net.time2 = nn.Linear(H, H)
+    net.blocks = nn.ModuleList([ResBlock(H) for _ in range(L)])
+    net.out_norm = nn.LayerNorm(H, eps=LAYERNORM_EPS)
+    net.out = nn.Linear(H, frames * E)
+    net.dec1 = nn.Linear(2 * E, E)
+    net.dec2 = nn.Linear(E, D)
+
+
 class MlpWin(nn.Module):
     """mlpwin-v1: per-frame encoder, MLP trunk over the whole window, per-frame decoder.
 
@@ -98,15 +113,7 @@ class MlpWin(nn.Module):
         if TE % 2 != 0:
             raise ValueError(f"TE must be even, got {TE}")
         self.W, self.D, self.E, self.H, self.L, self.TE, self.T = W, D, E, H, L, TE, T
-        self.enc = nn.Linear(2 * D, E)
-        self.inp = nn.Linear(W * E, H)
-        self.time1 = nn.Linear(TE, H)
-        self.time2 = nn.Linear(H, H)
-        self.blocks = nn.ModuleList([ResBlock(H) for _ in range(L)])
-        self.out_norm = nn.LayerNorm(H, eps=LAYERNORM_EPS)
-        self.out = nn.Linear(H, W * E)
-        self.dec1 = nn.Linear(2 * E, E)
-        self.dec2 = nn.Linear(E, D)
+        add_mlp_trunk(self, W, D, E, H, L, TE)
 
     def config(self) -> dict:
         return {"W": self.W, "D": self.D, "E": self.E, "H": self.H, "L": self.L, "TE": self.TE, "T": self.T}
@@ -221,15 +228,7 @@ class TcnMlp(nn.Module):
         self.cdec1 = nn.Linear(C, C)
         self.cdec2 = nn.Linear(C, D)
         self.ctx = nn.Linear(C, H)
-        self.enc = nn.Linear(2 * D, E)
-        self.inp = nn.Linear(N * E, H)
-        self.time1 = nn.Linear(TE, H)
-        self.time2 = nn.Linear(H, H)
-        self.blocks = nn.ModuleList([ResBlock(H) for _ in range(L)])
-        self.out_norm = nn.LayerNorm(H, eps=LAYERNORM_EPS)
-        self.out = nn.Linear(H, N * E)
-        self.dec1 = nn.Linear(2 * E, E)
-        self.dec2 = nn.Linear(E, D)
+        add_mlp_trunk(self, N, D, E, H, L, TE)
 
     def config(self) -> dict:
         return {"W": self.W, "D": self.D, "N": self.N, "E": self.E, "H": self.H, "L": self.L, "C": self.C,
