@@ -550,25 +550,41 @@ def _git_commit() -> str:
         return "unknown"
 
 
+def add_architecture_args(p: argparse.ArgumentParser, L_default: int = 0) -> None:
+    """--arch and the network's sizes (train.py's and --random-model's); make_net() builds from them."""
+    p.add_argument("--arch", choices=sorted(ARCHITECTURES), default=MlpWin.ARCHITECTURE,
+                   help="the network (docs/model-file.md, \"Architectures\"); train.py's --init-from takes the model's")
+    p.add_argument("--E", type=int, default=64, help="mlpwin-v1, tcnmlp-v1: per-frame embedding")
+    p.add_argument("--H", type=int, default=512, help="mlpwin-v1, tcnmlp-v1: trunk width")
+    p.add_argument("--L", type=int, default=L_default,
+                   help="residual blocks (0 = the architecture's default: mlpwin-v1 and tcnmlp-v1's trunk 2, tcn-v1 5)")
+    p.add_argument("--C", type=int, default=0, help="tcn-v1, tcnmlp-v1: channels (0 = default: 128, 64)")
+    p.add_argument("--N", type=int, default=20, help="tcnmlp-v1: newest frames the MLP trunk sees")
+    p.add_argument("--B", type=int, default=5, help="tcnmlp-v1: causal blocks of the context network")
+    p.add_argument("--K", type=int, default=3, help="tcn-v1, tcnmlp-v1: convolution kernel size in frames")
+    p.add_argument("--R", type=int, default=5, help="tcn-v1, tcnmlp-v1: dilation cycle (block b has dilation 2^(b mod R))")
+    p.add_argument("--TE", type=int, default=64, help="width of the diffusion step's sinusoid")
+    p.add_argument("--T", type=int, default=100, help="diffusion steps")
+
+
+def make_net(a: argparse.Namespace, W: int, D: int) -> nn.Module:
+    """The network of add_architecture_args()'s arguments over W frames of D features."""
+    if a.arch == TcnCausal.ARCHITECTURE:
+        return TcnCausal(W, D, C=a.C or 128, K=a.K, L=a.L or 5, R=a.R, TE=a.TE, T=a.T)
+    if a.arch == TcnMlp.ARCHITECTURE:
+        return TcnMlp(W, D, N=a.N, E=a.E, H=a.H, L=a.L or 2, C=a.C or 64, K=a.K, B=a.B, R=a.R, TE=a.TE, T=a.T)
+    return MlpWin(W, D, E=a.E, H=a.H, L=a.L or 2, TE=a.TE, T=a.T)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--random-model", metavar="OUT",
                     help="write a random-initialised model (identity normalisation) for benchmarks")
     ap.add_argument("--restamp", metavar="FILE", nargs="+",
                     help="add the checksum to model files written before it (tensors and metadata unchanged)")
-    ap.add_argument("--arch", choices=sorted(ARCHITECTURES), default=ARCHITECTURE)
     ap.add_argument("--W", type=int, default=20)
     ap.add_argument("--D", type=int, default=191)
-    ap.add_argument("--E", type=int, default=64)
-    ap.add_argument("--H", type=int, default=512)
-    ap.add_argument("--L", type=int, default=2)
-    ap.add_argument("--C", type=int, default=0, help="tcn-v1, tcnmlp-v1: channels (0 = default: 128, 64)")
-    ap.add_argument("--K", type=int, default=3, help="tcn-v1, tcnmlp-v1: kernel size")
-    ap.add_argument("--R", type=int, default=5, help="tcn-v1, tcnmlp-v1: dilation cycle (block b has dilation 2^(b mod R))")
-    ap.add_argument("--N", type=int, default=20, help="tcnmlp-v1: newest frames the trunk sees")
-    ap.add_argument("--B", type=int, default=5, help="tcnmlp-v1: causal blocks of the context")
-    ap.add_argument("--TE", type=int, default=64)
-    ap.add_argument("--T", type=int, default=100)
+    add_architecture_args(ap, L_default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--skeleton-bvh", default=os.path.join(_repo_root(), "tests", "data", "walk_60.bvh"))
     a = ap.parse_args()
@@ -580,12 +596,7 @@ def main() -> None:
     if not a.random_model:
         ap.error("give --random-model OUT or --restamp FILE...")
     torch.manual_seed(a.seed)
-    if a.arch == TcnCausal.ARCHITECTURE:
-        net = TcnCausal(a.W, a.D, C=a.C or 128, K=a.K, L=a.L, R=a.R, TE=a.TE, T=a.T)
-    elif a.arch == TcnMlp.ARCHITECTURE:
-        net = TcnMlp(a.W, a.D, N=a.N, E=a.E, H=a.H, L=a.L, C=a.C or 64, K=a.K, B=a.B, R=a.R, TE=a.TE, T=a.T)
-    else:
-        net = MlpWin(a.W, a.D, a.E, a.H, a.L, a.TE, a.T)
+    net = make_net(a, a.W, a.D)
     skeleton = skeleton_from_bvh(a.skeleton_bvh)
     prov = {"data": "none (random initialisation)", "seed": a.seed, "git_commit": _git_commit(),
             "command": "python3 training/model_net.py " + " ".join(sys.argv[1:])}

@@ -73,7 +73,7 @@ import numpy as np  # noqa: E402  (numpy loads OpenBLAS too)
 import torch  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from model_net import ARCHITECTURES, MlpWin, TcnCausal, TcnMlp, cosine_alpha_bars, ddim_sample, load_model, write_model  # noqa: E402
+from model_net import MlpWin, TcnMlp, add_architecture_args, cosine_alpha_bars, ddim_sample, load_model, make_net, write_model  # noqa: E402
 
 
 def parse_args():
@@ -93,18 +93,7 @@ def parse_args():
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--weight-decay", type=float, default=1e-4)
     p.add_argument("--warmup", type=int, default=500, help="linear learning-rate warm-up steps")
-    p.add_argument("--arch", choices=sorted(ARCHITECTURES), default=MlpWin.ARCHITECTURE,
-                   help="the network (docs/model-file.md, \"Architectures\"); --init-from takes the model's")
-    p.add_argument("--E", type=int, default=64, help="mlpwin-v1: per-frame embedding")
-    p.add_argument("--H", type=int, default=512, help="mlpwin-v1: trunk width")
-    p.add_argument("--L", type=int, default=0,
-                   help="residual blocks (0 = the architecture's default: mlpwin-v1 and tcnmlp-v1's trunk 2, tcn-v1 5)")
-    p.add_argument("--C", type=int, default=0, help="tcn-v1, tcnmlp-v1: channels (0 = default: 128, 64)")
-    p.add_argument("--N", type=int, default=20, help="tcnmlp-v1: newest frames the MLP trunk sees")
-    p.add_argument("--B", type=int, default=5, help="tcnmlp-v1: causal blocks of the context network")
-    p.add_argument("--K", type=int, default=3, help="tcn-v1: convolution kernel size in frames")
-    p.add_argument("--R", type=int, default=5, help="tcn-v1: dilation cycle (block b has dilation 2^(b mod R))")
-    p.add_argument("--T", type=int, default=100)
+    add_architecture_args(p)
     p.add_argument("--uncond-prob", type=float, default=0.1, help="fraction of samples with no condition (for guidance)")
     p.add_argument("--hand-drop-prob", type=float, default=0.15, help="per hand: probability of a tracking-loss span")
     p.add_argument("--full-prefix-prob", type=float, default=0.6,
@@ -477,15 +466,8 @@ def main():
             x[:, :, pos_cols] = x[:, :, pos_cols] * sc
         return (x - mean_d) / std_d
 
-    def make_net():
-        if a.arch == TcnCausal.ARCHITECTURE:
-            return TcnCausal(W, D, C=a.C or 128, K=a.K, L=a.L or 5, R=a.R, T=a.T).to(dev)
-        if a.arch == TcnMlp.ARCHITECTURE:
-            return TcnMlp(W, D, N=a.N, E=a.E, H=a.H, L=a.L or 2, C=a.C or 64, K=a.K, B=a.B, R=a.R, T=a.T).to(dev)
-        return MlpWin(W, D, E=a.E, H=a.H, L=a.L or 2, T=a.T).to(dev)
-
-    net = make_net()
-    ema = make_net()
+    net = make_net(a, W, D).to(dev)
+    ema = make_net(a, W, D).to(dev)
     if init is not None:
         net.load_state_dict(init[0].state_dict())
         print(f"initialised from {a.init_from}", flush=True)
