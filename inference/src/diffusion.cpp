@@ -197,28 +197,7 @@ bool DiffusionReconstructor::emitted_at(std::int64_t t_ns, GlobalPose& out, std:
   constexpr std::int64_t kTolNs = 1'000'000;  // 1 ms: treat as the same frame
   const Emitted& oldest = emitted(0);
   const Emitted& newest = emitted(emitted_count_ - 1);
-  if (t_ns > newest.t_ns + kTolNs) return false;
-  if (t_ns < oldest.t_ns - kTolNs) {
-    // Before the first emitted frame: pad with it, as the training windows pad a clip's start with
-    // its first frame. Once older frames have been dropped from the ring, there is no padding.
-    if (emitted_dropped_) return false;
-    contact = oldest.contact;
-    if (exact != nullptr) {
-      *exact = &oldest;
-      return true;
-    }
-    for (size_t j = 0; j < out.positions.size(); ++j) {
-      out.positions[j] = oldest.global.positions[j];
-      out.rotations[j] = oldest.global.rotations[j];
-    }
-    return true;
-  }
-  // Last emitted frame at or before t_ns (binary search over the ring, times increase).
-  int lo = 0, hi = emitted_count_ - 1;
-  while (lo < hi) {
-    const int mid = (lo + hi + 1) / 2;
-    if (emitted(mid).t_ns <= t_ns) lo = mid; else hi = mid - 1;
-  }
+  // The frame `e` as the answer: its address in *exact, or its pose copied into `out`.
   auto copy = [&](const Emitted& e) {
     contact = e.contact;
     if (exact != nullptr) {
@@ -231,6 +210,19 @@ bool DiffusionReconstructor::emitted_at(std::int64_t t_ns, GlobalPose& out, std:
     }
     return true;
   };
+  if (t_ns > newest.t_ns + kTolNs) return false;
+  if (t_ns < oldest.t_ns - kTolNs) {
+    // Before the first emitted frame: pad with it, as the training windows pad a clip's start with
+    // its first frame. Once older frames have been dropped from the ring, there is no padding.
+    if (emitted_dropped_) return false;
+    return copy(oldest);
+  }
+  // Last emitted frame at or before t_ns (binary search over the ring, times increase).
+  int lo = 0, hi = emitted_count_ - 1;
+  while (lo < hi) {
+    const int mid = (lo + hi + 1) / 2;
+    if (emitted(mid).t_ns <= t_ns) lo = mid; else hi = mid - 1;
+  }
   const Emitted& a = emitted(lo);
   if (std::llabs(a.t_ns - t_ns) <= kTolNs || lo + 1 >= emitted_count_) return copy(a);
   const Emitted& b = emitted(lo + 1);

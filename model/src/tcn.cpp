@@ -103,9 +103,7 @@ void Tcn::forward(std::span<const float> x, std::span<const float> m, int t, std
 
 void Tcn::forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                          DenoiserScratch& scratch) const {
-  auto* s = dynamic_cast<TcnScratch*>(&scratch);
-  BODYD_REQUIRE(s != nullptr, kWrongScratch);
-  forward_newest(x, m, t, out, *s);
+  forward_newest(x, m, t, out, own_scratch(scratch));
 }
 
 void Tcn::forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,

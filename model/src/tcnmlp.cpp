@@ -183,9 +183,7 @@ void TcnMlp::forward(std::span<const float> x, std::span<const float> m, int t, 
 
 void TcnMlp::forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                             DenoiserScratch& scratch) const {
-  auto* s = dynamic_cast<TcnMlpScratch*>(&scratch);
-  BODYD_REQUIRE(s != nullptr, kWrongScratch);
-  forward_newest(x, m, t, out, *s);
+  forward_newest(x, m, t, out, own_scratch(scratch));
 }
 
 void TcnMlp::forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,

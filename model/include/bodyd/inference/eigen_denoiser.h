@@ -91,12 +91,16 @@ class EigenDenoiser : public Denoiser {
   // The Denoiser entry point: `scratch` must be a Scratch (a bug otherwise: abort).
   void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                DenoiserScratch& scratch) const override {
-    auto* s = dynamic_cast<Scratch*>(&scratch);
-    BODYD_REQUIRE(s != nullptr, Net::kWrongScratch);
-    static_cast<const Net&>(*this).forward(x, m, t, out, *s);
+    static_cast<const Net&>(*this).forward(x, m, t, out, own_scratch(scratch));
   }
 
  protected:
+  // `scratch` as this network's Scratch (a bug otherwise: abort).
+  static Scratch& own_scratch(DenoiserScratch& scratch) {
+    auto* s = dynamic_cast<Scratch*>(&scratch);
+    BODYD_REQUIRE(s != nullptr, Net::kWrongScratch);
+    return *s;
+  }
   explicit EigenDenoiser(const Model& model)
       : config_(Config::from(model.config)),
         alpha_bar_(model.alpha_bar),
