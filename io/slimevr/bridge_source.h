@@ -3,6 +3,7 @@
 #pragma once
 
 #include "bodyd/io/slimevr/slimevr_bridge.h"
+#include "bodyd/io/open_source.h"
 #include "bodyd/io/source.h"
 
 #include <cstdint>
@@ -66,5 +67,11 @@ class BridgeSource final : public TrackerSource {
   std::shared_ptr<BridgeServer> server_;
   bool started_ = false;
 };
+
+// The source `scheme`:`path` on the shared server of `path` (sources steamvr: and monado:); with
+// an empty path, nullptr and `error` says the spec and `path_error` (why the path is unknown).
+[[nodiscard]] std::unique_ptr<TrackerSource> open_bridge_source(std::string_view scheme, const SourceSpec& spec,
+                                                                const std::string& path, const std::string& path_error,
+                                                                std::string& error);
 
 }  // namespace bodyd::drivers::slimevr

@@ -4,6 +4,7 @@
 #include "bodyd/io/output.h"
 #include "bodyd/io/open_source.h"
 #include "bodyd/io/slimevr/slimevr_bridge.h"
+#include "bodyd/test/sinks.h"
 #include "bodyd/test/temp_dir.h"
 
 #include <gtest/gtest.h>
@@ -126,32 +127,6 @@ TEST(BridgeSpecs, FramesCountTheirOwnLength) {
   EXPECT_EQ(m.qw, 1.0f);
 }
 
-// What the bridge pushes, kept for the test.
-struct SamplesKept final : drivers::SampleSink {
-  std::mutex mutex;
-  std::vector<drivers::SourceSample> samples;
-  void push(const drivers::SourceSample& s) override {
-    std::lock_guard lock(mutex);
-    samples.push_back(s);
-  }
-  bool push_wait(const drivers::SourceSample& s, std::chrono::nanoseconds) override {
-    push(s);
-    return true;
-  }
-  // The samples once `n` have come (or after 2 s: fewer).
-  std::vector<drivers::SourceSample> wait_for(std::size_t n) {
-    for (int i = 0; i < 200; ++i) {
-      {
-        std::lock_guard lock(mutex);
-        if (samples.size() >= n) return samples;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    std::lock_guard lock(mutex);
-    return samples;
-  }
-};
-
 // Body trackers by their SlimeVR roles (issue 44): the waist (1) feeds the hips as a device pose;
 // a Position that is not tracked (data_source IMU, SteamVR's rotation-only fallback, status
 // OCCLUDED) gives a body tracker its rotation alone (has_position false) where it makes the
@@ -162,7 +137,7 @@ TEST(BridgeSource, BodyTrackersByRoleAndRotationOnlyWhenNotTracked) {
   test::TempDir dir;
   const std::string path = (dir.path / "run" / "SlimeVRDriver").string();
   sv::BridgeServer server(path);
-  SamplesKept sink;
+  test::CollectingSink sink;  // what the bridge pushes
   server.attach_sink(&sink, 3);
   server.set_trackers({{1, "bodyd-waist", "bodyd waist", sv::role::kWaist}});  // the steamvr output's
   ASSERT_EQ(server.start(), "");

@@ -299,6 +299,23 @@ TEST(Metrics, TrackedLagIsTheHeadAndHandsAlone) {
 namespace {
 // Two clips, the walk's frames then its first 20, each frame the truth changed by `change(clip,
 // frame, pose)` as the reconstruction.
+using JointValues = std::vector<std::pair<std::string, double>>;
+
+// Whether both list the 21 joints of the walk, in one order.
+::testing::AssertionResult same_21_joints(const JointValues& a, const JointValues& b) {
+  if (a.size() != 21 || b.size() != 21) return ::testing::AssertionFailure() << a.size() << " and " << b.size() << " joints";
+  for (size_t k = 0; k < a.size(); ++k)
+    if (a[k].first != b[k].first) return ::testing::AssertionFailure() << a[k].first << " vs " << b[k].first;
+  return ::testing::AssertionSuccess();
+}
+
+// The mean over the joints (the metric's value: every joint weighs the same).
+double joint_mean(const JointValues& values) {
+  double sum = 0.0;
+  for (const auto& [joint, value] : values) sum += value;
+  return sum / static_cast<double>(values.size());
+}
+
 void two_clips(MetricsAccumulator& acc, const std::function<void(int, int, GlobalPose&)>& change) {
   const int lengths[2] = {walk().frame_count(), 20};
   for (int clip = 0; clip < 2; ++clip) {
@@ -323,17 +340,13 @@ TEST(Metrics, PositionErrorByJointFindsTheMovedJointAndItsHeight) {
   });
   const double share = static_cast<double>(moved_frames) / (moved_frames + exact_frames);
   const auto pe = acc.pe_by_joint(), height = acc.height_error_by_joint();
-  ASSERT_EQ(pe.size(), 21u);
-  ASSERT_EQ(height.size(), 21u);
-  double mean = 0.0;
+  ASSERT_TRUE(same_21_joints(pe, height));
   for (size_t k = 0; k < pe.size(); ++k) {
-    mean += pe[k].second / 21.0;
-    EXPECT_EQ(pe[k].first, height[k].first);
     const bool moved = pe[k].first == "LowerLeg_R";
     EXPECT_NEAR(pe[k].second, moved ? 5.0 * share : 0.0, 1e-9) << pe[k].first;
     EXPECT_NEAR(height[k].second, moved ? -4.0 * share : 0.0, 1e-9) << pe[k].first;
   }
-  EXPECT_NEAR(mean, acc.result().mpjpe_cm, 1e-9);
+  EXPECT_NEAR(joint_mean(pe), acc.result().mpjpe_cm, 1e-9);
 }
 
 // jitter_by_joint: one elbow shaken by +-1 cm alternately (third difference 8 cm, jerk 8 cm x
@@ -344,12 +357,8 @@ TEST(Metrics, JitterByJointFindsTheShakenJoint) {
   const auto elbow = static_cast<size_t>(walk().skeleton.find("LowerArm_L"));
   two_clips(acc, [&](int, int f, GlobalPose& pred) { pred.positions[elbow].y() += (f % 2 == 0 ? 0.01 : -0.01); });
   const auto pred = acc.jitter_by_joint(), truth = acc.truth_jitter_by_joint();
-  ASSERT_EQ(pred.size(), 21u);
-  ASSERT_EQ(truth.size(), 21u);
-  double mean = 0.0;
+  ASSERT_TRUE(same_21_joints(pred, truth));
   for (size_t k = 0; k < pred.size(); ++k) {
-    mean += pred[k].second / 21.0;
-    EXPECT_EQ(pred[k].first, truth[k].first);
     // The shaken elbow's is 2160 give or take the true elbow's own (the triangle inequality per
     // quadruple); every other joint is the truth's.
     if (pred[k].first == "LowerArm_L") {
@@ -359,8 +368,6 @@ TEST(Metrics, JitterByJointFindsTheShakenJoint) {
       EXPECT_NEAR(pred[k].second, truth[k].second, 1e-9) << pred[k].first;
     }
   }
-  EXPECT_NEAR(mean, acc.result().jitter_m_s3, 1e-9);
-  double truth_mean = 0.0;
-  for (const auto& [joint, value] : truth) truth_mean += value / 21.0;
-  EXPECT_NEAR(truth_mean, acc.truth_result().jitter_m_s3, 1e-9);
+  EXPECT_NEAR(joint_mean(pred), acc.result().jitter_m_s3, 1e-9);
+  EXPECT_NEAR(joint_mean(truth), acc.truth_result().jitter_m_s3, 1e-9);
 }

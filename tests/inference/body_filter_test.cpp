@@ -11,6 +11,7 @@
 
 #include "bodyd/test/alloc_counter.h"
 #include "../test_paths.h"
+#include "default_model.h"
 
 #include <gtest/gtest.h>
 
@@ -76,7 +77,6 @@ BodyFilterOptions on(double cutoff_hz = 2.0) {
 std::shared_ptr<const inference::Model> tiny_model() {
   return inference::load_model(test::fixtures() / "tiny_model.safetensors");
 }
-std::filesystem::path default_model_path() { return test::source_dir() / "models" / "bodyd-default.safetensors"; }
 
 std::vector<TrackerSample> trackers(const Motion& m) {
   SimOptions o;
@@ -241,14 +241,7 @@ TEST(Diffusion, BodyFilterDoesNotAllocateAndResetStartsItOver) {
   EXPECT_TRUE(identical(first, run(r, samples, 60)));
 }
 
-class DefaultModelBodyFilter : public ::testing::Test {
- protected:
-  void SetUp() override {
-    if (!std::filesystem::exists(default_model_path())) GTEST_SKIP() << "no default model at " << default_model_path();
-    model_ = inference::load_model(default_model_path());
-  }
-  std::shared_ptr<const inference::Model> model_;
-};
+class DefaultModelBodyFilter : public test::DefaultModelTest {};
 
 // With the body filter on, the head and hands are still exactly on clean trackers (the filter
 // acts before the tracked joints are fitted), and the untracked joints are smoother.

@@ -10,6 +10,7 @@
 
 #include "bodyd/test/alloc_counter.h"
 #include "../test_paths.h"
+#include "default_model.h"
 
 #include <gtest/gtest.h>
 
@@ -27,7 +28,6 @@ namespace {
 std::shared_ptr<const inference::Model> tiny_model() {
   return inference::load_model(test::fixtures() / "tiny_model.safetensors");
 }
-std::filesystem::path default_model_path() { return test::source_dir() / "models" / "bodyd-default.safetensors"; }
 
 struct Outputs {
   std::vector<BodyPose> poses;
@@ -269,14 +269,7 @@ TEST(Diffusion, RejectsAModelOnAnotherSkeleton) {
   EXPECT_THROW(DiffusionReconstructor r(model), std::invalid_argument);
 }
 
-class DefaultModel : public ::testing::Test {
- protected:
-  void SetUp() override {
-    if (!std::filesystem::exists(default_model_path())) GTEST_SKIP() << "no default model at " << default_model_path();
-    model_ = inference::load_model(default_model_path());
-  }
-  std::shared_ptr<const inference::Model> model_;
-};
+class DefaultModel : public test::DefaultModelTest {};
 
 TEST_F(DefaultModel, HandsOnTheTrackersAndABelievableBody) {
   const Motion clip = read_bvh(test::fixtures() / "walk_60.bvh");

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cstddef>
 #include <mutex>
+#include <thread>
 #include <vector>
 
 namespace bodyd::test {
@@ -29,6 +30,11 @@ class CollectingSink final : public drivers::SampleSink {
   std::size_t size() const {
     std::lock_guard lock(mutex_);
     return samples_.size();
+  }
+  // The samples once `n` have come (or after 2 s: fewer).
+  std::vector<drivers::SourceSample> wait_for(std::size_t n) const {
+    for (int i = 0; i < 200 && size() < n; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    return samples();
   }
 
  private:

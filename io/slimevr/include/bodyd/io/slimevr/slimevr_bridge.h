@@ -277,13 +277,4 @@ class BridgeServer : NonCopyable {
 // keyed by the path; the server lives while someone holds it).
 [[nodiscard]] std::shared_ptr<BridgeServer> shared_bridge(const std::string& path);
 
-// ---- the sources -------------------------------------------------------------------------------
-
-// steamvr:[SOCKET] (default default_driver_socket_dir()/SlimeVRDriver) and monado:[DIR]
-// (DIR/SlimeVRInput, DIR default_socket_dir()).
-[[nodiscard]] std::unique_ptr<TrackerSource> open_steamvr_source(std::string_view spec, std::string_view argument,
-                                                                 std::string& error);
-[[nodiscard]] std::unique_ptr<TrackerSource> open_monado_source(std::string_view spec, std::string_view argument,
-                                                                std::string& error);
-
 }  // namespace bodyd::drivers::slimevr
