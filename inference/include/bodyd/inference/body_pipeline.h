@@ -91,7 +91,8 @@ class BodyPipeline {
   // who stands still looking down at a menu must not get a bent body.
   static constexpr double kMaxStillHeadChangeDeg = 15.0;
   // The still second is looked for only at the start of a session, this long from the first
-  // valid head sample (arrival time): a still second later may be a user looking at a menu.
+  // valid head sample (arrival time: the host's in the daemon, as a replay's time base may loop):
+  // a still second later may be a user looking at a menu.
   static constexpr std::int64_t kStillSecondWindowNs = 10'000'000'000;
 
   explicit BodyPipeline(const SampleConditioner::Offsets& offsets = {}) : conditioner_(offsets) {}
