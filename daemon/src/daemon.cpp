@@ -2,8 +2,9 @@
 // outputs (output.h, zmq_publisher, the registry in outputs.cpp), the control socket
 // (control_server), the command hand-off (command_channel), statistics (stats), the
 // pose -> message conversion (pose_wire), what every sample goes through before the
-// reconstructor (sample_conditioning), the calibration's state (calibration_state) and the
-// status reply (status).
+// reconstructor and the calibrations around it (the body pipeline bodyd-eval shares,
+// bodyd/inference/body_pipeline.h; sample_conditioning), the calibration's state
+// (calibration_state) and the status reply (status).
 #include "bodyd/daemon/daemon.h"
 
 #include "bodyd/base/log_rate.h"
@@ -13,6 +14,7 @@
 #include "bodyd/io/output.h"
 #include "bodyd/daemon/sample_queue.h"
 #include "bodyd/daemon/tracker_recorder.h"
+#include "bodyd/inference/body_pipeline.h"
 #include "bodyd/inference/calibration.h"
 #include "bodyd/io/open_source.h"
 #include "bodyd/protocol/pose_message.h"
@@ -186,19 +188,21 @@ struct Daemon::Impl final : ControlTarget {
   std::int64_t next_no_head_warning_ns = 0;
   std::atomic<std::uint64_t> loop_iterations{0};
 
-  // Every sample's mounting, offset and re-centring (sample_conditioning.h), and the latest
-  // valid head sample as the reconstructor got it.
-  SampleConditioner conditioner;
+  // What every sample goes through before the reconstructor, and the calibrations around it
+  // (body_pipeline.h, shared with bodyd-eval): its mounting, offset and re-centring
+  // (`conditioner`, the pipeline's), the auto calibration's height and still second, the
+  // calibration pose's application. And the latest valid head sample as the reconstructor got it.
+  BodyPipeline pipeline;
+  SampleConditioner& conditioner = pipeline.conditioner();
   LatestHead latest_head;
 
   TrackerRecorder recorder;  // --record-trackers (reconstruction thread once started)
 
   // Calibration (calibration_state.h). `calibration` is the reconstruction thread's (and
   // start()'s); summary.calibration its copy for the control thread (publish_calibration).
-  // The auto calibration (config.auto_calibrate) uses the same detector and
-  // calibrate_from_head_height() as bodyd-eval --body-scale (inference/calibration.h).
+  // The auto calibration (config.auto_calibrate) is the pipeline's, as in bodyd-eval
+  // --body-scale: it runs while calibration.auto_waiting() (the two change together).
   CalibrationState calibration;
-  StandingHeightDetector height_detector;
 
   // Device mounting (docs/daemon.md "Device mounting"): device poses (PoseFrame::Device) become
   // joint poses through the conditioner's mounting before the per-device offsets. Each role's
@@ -210,23 +214,18 @@ struct Daemon::Impl final : ControlTarget {
   BodyJointsInPose body_joints;  // where body trackers' joints sit in the calibration pose
   MountingOrigins mounting_origin{MountingOrigin::Default, MountingOrigin::Default, MountingOrigin::Default};
   // The calibration pose: started by the control thread (calibrate_pose), fed raw samples and
-  // ticked here, its reply handed back through pose_results (shared_mutex).
+  // ticked here, its reply handed back through pose_results (shared_mutex); what it measured is
+  // applied by the pipeline.
   std::optional<CalibrationPoseWait> pose_wait;
   std::uint64_t pose_id = 0;
-  // The auto calibration's head refinement: a calibrator fed raw samples while it waits, for the
-  // first kAutoHeadRefineWindowNs of head samples.
-  std::optional<PoseCalibrator> auto_pose;
-  std::int64_t auto_pose_first_ns = INT64_MIN;  // arrival of its first head sample
   std::array<bool, kRoleCount> body_device_unused{};  // body roles whose device poses were not used (uncalibrated)
-  bool auto_refine_head = false;                 // it refines the head (auto height calibration, default head)
-  static constexpr std::int64_t kAutoHeadRefineWindowNs = 10'000'000'000;
 
   Impl(DaemonConfig c, ReconstructorFactory f)
       : config(std::move(c)),
         factory(std::move(f)),
         queue(std::max(config.queue_capacity, kMinQueueCapacity), queue_max_age(config)),
         rate_gate(config.rate_hz),
-        conditioner(config.offsets) {
+        pipeline(config.offsets) {
     for (const auto& o : config.offsets) offsets_configured |= o.has_value();
     if (config.mounting_file == "none") config.mounting_file.clear();  // the calibration is not kept
   }
@@ -330,13 +329,13 @@ struct Daemon::Impl final : ControlTarget {
       spdlog::warn("head time went back by {:.3f} s: the reconstruction starts over", (last_pose_t_ns - s.t_ns) * 1e-9);
       stats.time_restarts.add();
       recon->reset();
-      if (calibration.auto_waiting()) height_detector.reset();  // its times went back too
+      pipeline.time_restarted();  // the auto height calibration's times went back too
       last_pose_t_ns = INT64_MIN;
       rate_gate = RateGate(rate_gate.rate_hz());
       for (auto& slot : outputs) slot->gate = RateGate(slot->gate.rate_hz());
     }
     if (s.role == Role::Head && s.valid) latest_head.update(s, in.arrival_ns);
-    if (calibration.auto_waiting() && s.role == Role::Head) auto_calibrate(s);
+    if (std::optional<AutoHeightEvent> h = pipeline.before_push(s, *recon)) report_auto_height(*h, s.t_ns);
     const std::int64_t refused_before = recon->refused_samples();
     recon->push(s);
     if (recon->refused_samples() != refused_before) stats.samples_refused.add();
@@ -424,31 +423,22 @@ struct Daemon::Impl final : ControlTarget {
   }
 
   // Reconstruction thread: the raw sample (before mounting, offsets, re-centring) to the
-  // calibration pose in progress and to the auto calibration's head refinement.
+  // calibration pose in progress and to the auto calibration's still second (the pipeline's).
   void feed_pose_calibrators(const TrackerSample& raw, std::int64_t arrival_ns) {
     if (pose_wait)
       if (std::optional<CalibrationPoseWait::Outcome> o = pose_wait->push(raw, arrival_ns))
         finish_pose_wait(std::move(*o));
-    if (auto_pose) {
-      if (std::optional<PoseCalibration> c = auto_pose->push(raw)) {
-        auto_pose.reset();
-        refine_head_mounting(*c);
-      } else if (raw.role == Role::Head && raw.valid) {
-        // Only at the start of a session (host time: a replay's time base may loop): a still second
-        // later may be a user looking at a menu.
-        if (auto_pose_first_ns == INT64_MIN) auto_pose_first_ns = arrival_ns;
-        else if (arrival_ns - auto_pose_first_ns > kAutoHeadRefineWindowNs) {
-          auto_pose.reset();
-          if (auto_refine_head)
-            spdlog::info("auto calibration: no still second of the headset and controllers in the first {} s: the "
-                         "default head mounting stays (`bodyd-ctl calibrate --pose` measures it)",
-                         kAutoHeadRefineWindowNs / 1'000'000'000);
-          if (any_body_tracker_unmeasured())
-            spdlog::info("auto calibration: no still second in the first {} s: body trackers not measured yet stay "
-                         "unused until `bodyd-ctl calibrate --pose`",
-                         kAutoHeadRefineWindowNs / 1'000'000'000);
-        }
-      }
+    const RawSampleEvents events = pipeline.observe_raw(raw, arrival_ns, *recon);
+    if (events.still_second) report_still_second(*events.still_second);
+    if (events.still_second_expired) {
+      if (pipeline.still_second_refines_head())
+        spdlog::info("auto calibration: no still second of the headset and controllers in the first {} s: the "
+                     "default head mounting stays (`bodyd-ctl calibrate --pose` measures it)",
+                     BodyPipeline::kStillSecondWindowNs / 1'000'000'000);
+      if (any_body_tracker_unmeasured())
+        spdlog::info("auto calibration: no still second in the first {} s: body trackers not measured yet stay "
+                     "unused until `bodyd-ctl calibrate --pose`",
+                     BodyPipeline::kStillSecondWindowNs / 1'000'000'000);
     }
   }
 
@@ -466,54 +456,49 @@ struct Daemon::Impl final : ControlTarget {
     pose_results[pose_id] = std::move(result);
   }
 
-  // The auto calibration's refinement of the headset's mounting (its pitch) from a still
-  // second, kept only when plausible: within kMaxAutoHeadChangeDeg of the default (a user who
-  // stands still looking down at a menu must not get a bent body).
-  static constexpr double kMaxAutoHeadChangeDeg = 15.0;
   // calibrate --from-head: a standing head sways at a few cm/s; a slow walk moves at 0.5 m/s.
   static constexpr double kMaxStandingHeadSpeedMS = 0.2;
-  void refine_head_mounting(const PoseCalibration& c) {
-    if (!c.device_frames) return;
-    apply_auto_body_mountings(c);
-    if (mounting_origin[0] != MountingOrigin::Default || !auto_refine_head) return;
-    const RigidTransform& T = c.mounting.T_device_joint[0];
-    const double change_deg = mounting_difference(T, default_mount.T_device_joint[0]).angle_deg;
-    if (change_deg > kMaxAutoHeadChangeDeg) {
-      spdlog::info("auto calibration: the headset's still second is {:.1f} deg from looking ahead (looking up or down?): "
-                   "the default head mounting stays (`bodyd-ctl calibrate --pose` measures it)",
-                   change_deg);
-      return;
-    }
-    conditioner.set_mounting(Role::Head, T);
-    mounting_origin[0] = MountingOrigin::Auto;
-    publish_mounting_status();
-    spdlog::info("auto calibration: the headset sits {:.1f} deg from the default on the head (from a still second)", change_deg);
-    recorder.comment(
-        fmt::format("t_ns {}: mounting head {} (auto)", c.t_ns, transform_text(conditioner.mounting().T_device_joint[0])));
-  }
 
-  // The auto calibration's still second also measures the body trackers it saw (the pose passed
-  // the calibration pose's checks: arms hanging, every tracker near its joint and on its side).
-  // Without it an uncalibrated body tracker is not used at all. Kept in the mounting file.
-  void apply_auto_body_mountings(const PoseCalibration& c) {
+  // What the auto calibration's still second applied (body_pipeline.h): the body trackers it
+  // measured (without it an uncalibrated body tracker is not used at all; kept in the mounting
+  // file) and the headset's refinement, kept only when plausible (within
+  // BodyPipeline::kMaxStillHeadChangeDeg of the default: a user who stands still looking down at
+  // a menu must not get a bent body).
+  void report_still_second(const StillSecondEvent& e) {
+    const PoseCalibration& c = e.calibration;
     std::string measured;
     for (Role r : kRoles) {
       const auto i = static_cast<std::size_t>(r);
-      if (is_xr_role(r) || !c.measured[i] || mounting_origin[i] != MountingOrigin::Default) continue;
-      conditioner.set_mounting(r, c.mounting.T_device_joint[i]);
+      if (!e.body_measured[i]) continue;
       mounting_origin[i] = MountingOrigin::Auto;
       measured += fmt::format("{}{} ({:.0f} cm from its joint in the pose)", measured.empty() ? "" : ", ", role_name(r), c.offset_cm[i]);
     }
-    if (measured.empty()) return;
-    recon->reset();  // the inputs jumped
-    publish_mounting_status();
-    spdlog::info("auto calibration: body trackers measured from a still second: {}", measured);
-    recorder.comment(fmt::format("t_ns {}: mounting {} (auto)", c.t_ns, mounting_text(conditioner.mounting())));
-    if (!config.mounting_file.empty()) {
-      MountingState st = mounting_state_to_keep();
-      std::lock_guard lock(shared_mutex);
-      auto_to_keep = std::move(st);
+    if (!measured.empty()) {
+      spdlog::info("auto calibration: body trackers measured from a still second: {}", measured);
+      recorder.comment(fmt::format("t_ns {}: mounting {} (auto)", c.t_ns, mounting_text(e.mounting_after_body)));
+      if (!config.mounting_file.empty()) {
+        MountingState st = mounting_state_to_keep(e.mounting_after_body);
+        std::lock_guard lock(shared_mutex);
+        auto_to_keep = std::move(st);
+      }
     }
+    switch (e.head) {
+      case StillSecondEvent::Head::Kept:
+        break;
+      case StillSecondEvent::Head::TooFar:
+        spdlog::info("auto calibration: the headset's still second is {:.1f} deg from looking ahead (looking up or down?): "
+                     "the default head mounting stays (`bodyd-ctl calibrate --pose` measures it)",
+                     e.head_change_deg);
+        break;
+      case StillSecondEvent::Head::Refined:
+        mounting_origin[0] = MountingOrigin::Auto;
+        spdlog::info("auto calibration: the headset sits {:.1f} deg from the default on the head (from a still second)",
+                     e.head_change_deg);
+        recorder.comment(
+            fmt::format("t_ns {}: mounting head {} (auto)", c.t_ns, transform_text(conditioner.mounting().T_device_joint[0])));
+        break;
+    }
+    if (!measured.empty() || e.head == StillSecondEvent::Head::Refined) publish_mounting_status();
   }
 
   // Main thread: writes what the auto calibration measured to the mounting file, off the
@@ -537,24 +522,25 @@ struct Daemon::Impl final : ControlTarget {
     return false;
   }
 
-  // What the mounting file is to keep now.
-  MountingState mounting_state_to_keep() {
+  // What the mounting file is to keep now, with `mounting`.
+  MountingState mounting_state_to_keep(const Mounting& mounting) {
     MountingState st;
-    st.mounting = conditioner.mounting();
+    st.mounting = mounting;
     for (Role r : kRoles) st.measured[static_cast<int>(r)] = mounting_origin[static_cast<int>(r)] != MountingOrigin::Default;
     st.head_height_m = calibration.height_calibrated() ? recon->head_height_m() : 0.0;
     st.calibrated = utc_now();
     return st;
   }
 
-  // Applies a calibration pose's result: mountings, the height. Returns the control reply and
-  // what the mounting file is to keep (the control thread writes it).
+  // Applies a calibration pose's result through the pipeline (mountings, a fresh history, the
+  // height) and says so. Returns the control reply and what the mounting file is to keep (the
+  // control thread writes it).
   PoseResult apply_pose_calibration(const PoseCalibration& c) {
+    const std::string height_error = pipeline.apply_calibration_pose(c, *recon).height_error;
     json roles = json::object();
     for (Role r : kRoles) {
       const int i = static_cast<int>(r);
       if (!c.measured[i]) continue;
-      conditioner.set_mounting(r, c.mounting.T_device_joint[i]);
       mounting_origin[i] = MountingOrigin::Pose;
       if (!is_xr_role(r)) {
         // A body tracker has no default to compare with: how far it sits from its joint.
@@ -570,12 +556,9 @@ struct Daemon::Impl final : ControlTarget {
                                           {"sd_deg", c.rotation_sd_deg[i]},
                                           {"motion_deg", c.motion_deg[i]}};
     }
-    recon->reset();  // the inputs jumped
-    std::string height_error = calibrate_from_head_height(*recon, c.head_height_m);
     if (height_error.empty()) {
       calibration.manual();
       publish_calibration();
-      auto_pose.reset();
     }
     refresh_skeleton();
     publish_mounting_status();
@@ -586,7 +569,7 @@ struct Daemon::Impl final : ControlTarget {
                                  mounting_text(mounting)));
     PoseResult result;
     if (!config.mounting_file.empty()) {
-      MountingState& st = result.to_keep.emplace(mounting_state_to_keep());
+      MountingState& st = result.to_keep.emplace(mounting_state_to_keep(mounting));
       st.head_height_m = height_error.empty() ? recon->head_height_m() : 0.0;
     }
     std::lock_guard lock(shared_mutex);
@@ -618,36 +601,36 @@ struct Daemon::Impl final : ControlTarget {
     mounting_status = std::move(m);
   }
 
-  // Feeds the head sample `s` (as the reconstructor gets it) to the detector; when it reports,
-  // calibrates before `s` is pushed (so `s` counts at the new size), as bodyd-eval does.
-  void auto_calibrate(const TrackerSample& s) {
-    const std::optional<StandingHeight> h = height_detector.push(s);
-    if (!h) {
-      if (height_detector.done()) {
+  // What the auto height calibration did (the pipeline applies the height before the head sample
+  // at `t_ns` is pushed, so the sample counts at the new size, as in bodyd-eval).
+  void report_auto_height(const AutoHeightEvent& e, std::int64_t t_ns) {
+    switch (e.outcome) {
+      case AutoHeightEvent::Outcome::NotFound:
         calibration.auto_refused();
         publish_calibration();
         spdlog::warn("auto calibration: no plausible standing head height in the first {:.1f} s (sitting?): the "
                      "model's size stays; stand up and run `bodyd-ctl calibrate --from-head`",
                      StandingHeightOptions{}.fallback_after_s);
-      }
-      return;
+        return;
+      case AutoHeightEvent::Outcome::Refused:
+        calibration.auto_refused();
+        publish_calibration();
+        spdlog::warn("auto calibration refused: {}", e.error);
+        return;
+      case AutoHeightEvent::Outcome::Applied:
+        break;
     }
-    if (std::string e = calibrate_from_head_height(*recon, h->head_height_m); !e.empty()) {
-      calibration.auto_refused();
-      publish_calibration();
-      spdlog::warn("auto calibration refused: {}", e);
-      return;
-    }
-    calibration.auto_measured(h->fallback);
+    const StandingHeight& h = e.height;
+    calibration.auto_measured(h.fallback);
     publish_calibration();
     refresh_skeleton();
     const std::string how =
-        h->fallback ? fmt::format("no still half second: the head's {:.0f}th percentile height {:.3f} m over the first {:.1f} s",
-                                  StandingHeightOptions{}.fallback_percentile, h->measured_m,
-                                  StandingHeightOptions{}.fallback_after_s)
-                    : fmt::format("the head held still at {:.3f} m", h->measured_m);
+        h.fallback ? fmt::format("no still half second: the head's {:.0f}th percentile height {:.3f} m over the first {:.1f} s",
+                                 StandingHeightOptions{}.fallback_percentile, h.measured_m,
+                                 StandingHeightOptions{}.fallback_after_s)
+                   : fmt::format("the head held still at {:.3f} m", h.measured_m);
     spdlog::info("auto calibrated: standing head height {:.3f} m ({})", recon->head_height_m(), how);
-    recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {} (auto: {})", s.t_ns, recon->head_height_m(), how));
+    recorder.comment(fmt::format("t_ns {}: calibrate head_height_m {} (auto: {})", t_ns, recon->head_height_m(), how));
   }
 
   // The control socket set the standing head height (`cleared`: back to the model's own). A
@@ -655,8 +638,12 @@ struct Daemon::Impl final : ControlTarget {
   // the skeleton is published again, the log says so (`what`, then the height) and the
   // recording notes it.
   void control_head_height_applied(std::string_view what, bool cleared = false) {
-    if (cleared) calibration.cleared();
-    else calibration.manual();
+    if (cleared) {
+      calibration.cleared();
+    } else {
+      calibration.manual();
+      pipeline.stop_auto_height();
+    }
     publish_calibration();
     refresh_skeleton();
     spdlog::info("{} {:.3f} m", what, recon->head_height_m());
@@ -1046,13 +1033,14 @@ std::string Daemon::start() {
       spdlog::warn("{}: the default device mounting is used", merror);
     }
   }
-  // The first still second of the session refines the headset's default mounting (with the auto
-  // height calibration) and measures the body trackers not measured yet (auto_calibrate on).
-  bool body_unmeasured = false;
-  for (Role r : kRoles) body_unmeasured |= !is_xr_role(r) && d.mounting_origin[static_cast<int>(r)] == MountingOrigin::Default;
-  d.auto_refine_head = d.calibration.auto_waiting() && d.mounting_origin[0] == MountingOrigin::Default;
-  if (d.auto_refine_head || (body_unmeasured && d.config.auto_calibrate))
-    d.auto_pose.emplace(d.body_reference, d.default_mount, PoseCalibrationOptions{}, d.body_joints);
+  // The auto calibration (auto_calibrate on): the user's size from the head's first still half
+  // second, unless a height is known; and the first still second of the session refines the
+  // headset's default mounting (with the auto height calibration) and measures the body
+  // trackers not measured yet.
+  if (d.calibration.auto_waiting()) d.pipeline.start_auto_height();
+  if (d.config.auto_calibrate)
+    d.pipeline.start_still_second(d.body_reference, d.default_mount, d.body_joints,
+                                  d.calibration.auto_waiting() && d.mounting_origin[0] == MountingOrigin::Default);
   d.publish_calibration();
   d.publish_mounting_status();
   d.refresh_skeleton();

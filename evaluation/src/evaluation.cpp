@@ -1,9 +1,9 @@
 #include "bodyd/inference/evaluation.h"
 
 #include "bodyd/base/percentile.h"
+#include "bodyd/inference/body_pipeline.h"
 #include "bodyd/inference/factory.h"
 #include "bodyd/inference/ik.h"
-#include "bodyd/inference/sample_conditioning.h"
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -160,89 +160,40 @@ void remap(const std::vector<int>& map, const BodyPose& in, Pose& pose, GlobalPo
   }
 }
 
-// The daemon's auto calibration around a reconstructor: head samples go to a detector first; when
-// it reports a standing height, calibrate_from_head_height() is applied (resetting the inner
-// reconstructor) before the sample is pushed, so the sample counts at the new scale.
-class Calibrating final : public Reconstructor {
+// A reconstructor behind the daemon's body pipeline (bodyd/inference/body_pipeline.h): every
+// sample goes through the daemon's conditioning and calibrations on its way in, a sample's time
+// standing for its arrival. What the calibrations applied is kept for the report.
+class ThroughPipeline final : public Reconstructor {
  public:
-  Calibrating(std::unique_ptr<Reconstructor> inner, const StandingHeightOptions& o)
-      : inner_(std::move(inner)), detector_(o) {}
+  explicit ThroughPipeline(std::unique_ptr<Reconstructor> inner) : inner_(std::move(inner)) {}
+  // Set up before the first sample (the mounting, the calibrations the options ask for).
+  BodyPipeline& pipeline() { return pipeline_; }
   std::string_view name() const override { return inner_->name(); }
   const Skeleton& skeleton() const override { return inner_->skeleton(); }
   void push(const TrackerSample& s) override {
-    if (const std::optional<StandingHeight> h = detector_.push(s)) {
-      if (calibrate_from_head_height(*inner_, h->head_height_m).empty()) found_ = *h;
-    }
-    inner_->push(s);
+    const SampleEvents events = pipeline_.push(s, s.t_ns, *inner_);
+    if (events.raw.calibration_pose) pose_found_ = events.raw.calibration_pose->calibration;
+    if (events.height && events.height->outcome == AutoHeightEvent::Outcome::Applied) height_found_ = events.height->height;
   }
   bool reconstruct(std::int64_t t_ns, BodyPose& out) override { return inner_->reconstruct(t_ns, out); }
   void reset() override {
     inner_->reset();
-    detector_.reset();
+    pipeline_.time_restarted();
   }
-  // Forwarded (issue 45: this decorator once forgot it, so the report's refused count read 0).
+  // Forwarded (issue 45: a decorator once forgot it, so the report's refused count read 0).
   std::int64_t refused_samples() const override { return inner_->refused_samples(); }
   void set_head_height_m(double h) override { inner_->set_head_height_m(h); }
   double head_height_m() const override { return inner_->head_height_m(); }
-  // The standing height applied, if any.
-  const std::optional<StandingHeight>& found() const { return found_; }
+  // The calibration pose found (its height applied or not), and the auto height calibration's
+  // standing height applied, if any.
+  const std::optional<PoseCalibration>& pose_found() const { return pose_found_; }
+  const std::optional<StandingHeight>& height_found() const { return height_found_; }
 
  private:
   std::unique_ptr<Reconstructor> inner_;
-  StandingHeightDetector detector_;
-  std::optional<StandingHeight> found_;
-};
-
-// Device poses mapped to joints, as the daemon does (daemon.cpp handle_sample): through the default
-// mounting until a calibration pose has been measured (the clip's first still second), then
-// through the measured one; with `calibrate_height` its height is applied too.
-class Mounted final : public Reconstructor {
- public:
-  // `oracle`: `mounting` is the truth, every role's known (body trackers used at once);
-  // otherwise it is the defaults, and body trackers wait for the calibration pose.
-  Mounted(std::unique_ptr<Reconstructor> inner, const Mounting& mounting, std::optional<PoseCalibrator> calibrator,
-          bool calibrate_height, bool oracle)
-      : inner_(std::move(inner)), calibrator_(std::move(calibrator)), calibrate_height_(calibrate_height) {
-    conditioner_.set_default_mounting(mounting);
-    if (oracle)
-      for (Role r : kRoles) conditioner_.set_mounting(r, mounting.T_device_joint[static_cast<size_t>(r)]);
-  }
-  std::string_view name() const override { return inner_->name(); }
-  const Skeleton& skeleton() const override { return inner_->skeleton(); }
-  void push(const TrackerSample& s) override {
-    if (calibrator_) {
-      if (std::optional<PoseCalibration> c = calibrator_->push(s)) {
-        for (Role r : kRoles)
-          if (c->measured[static_cast<size_t>(r)]) conditioner_.set_mounting(r, c->mounting.T_device_joint[static_cast<size_t>(r)]);
-        inner_->reset();  // the inputs jumped, as in the daemon
-        if (calibrate_height_) (void)calibrate_from_head_height(*inner_, c->head_height_m);
-        found_ = std::move(c);
-      }
-    }
-    // The daemon's conditioning (bodyd/inference/sample_conditioning.h): a body tracker's device
-    // pose waits for its mounting; the mounting; the rotation made unit length.
-    if (!conditioner_.uses(s)) return;
-    TrackerSample c = s;
-    conditioner_.condition(c);
-    SampleConditioner::finish(c);
-    inner_->push(c);
-  }
-  bool reconstruct(std::int64_t t_ns, BodyPose& out) override { return inner_->reconstruct(t_ns, out); }
-  void reset() override {
-    inner_->reset();
-    if (calibrator_) calibrator_->reset();
-  }
-  void set_head_height_m(double h) override { inner_->set_head_height_m(h); }
-  double head_height_m() const override { return inner_->head_height_m(); }
-  std::int64_t refused_samples() const override { return inner_->refused_samples(); }
-  const std::optional<PoseCalibration>& found() const { return found_; }
-
- private:
-  std::unique_ptr<Reconstructor> inner_;
-  SampleConditioner conditioner_;
-  std::optional<PoseCalibrator> calibrator_;
-  bool calibrate_height_;
-  std::optional<PoseCalibration> found_;
+  BodyPipeline pipeline_;
+  std::optional<PoseCalibration> pose_found_;
+  std::optional<StandingHeight> height_found_;
 };
 
 EvalReport::MountingError mounting_error(const Mounting& est, const Mounting& truth,
@@ -434,42 +385,42 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
 
       for (size_t m = 0; m < options.methods.size(); ++m) {
         const std::string& method = options.methods[m];
-        std::unique_ptr<Reconstructor> reconstructor =
-            make_reconstructor_of(method, model, &clip.skeleton, options.reconstructor);
-        Calibrating* calibrating = nullptr;
-        Mounted* mounted = nullptr;
+        auto reconstructor = std::make_unique<ThroughPipeline>(
+            make_reconstructor_of(method, model, &clip.skeleton, options.reconstructor));
+        // The calibrations of the options (EvalOptions): "ik" is given the clip's own skeleton,
+        // so it is never calibrated.
+        const bool calibrate_height = options.calibrate && method != "ik";
+        BodyPipeline& pipeline = reconstructor->pipeline();
         if (options.device_frames) {
-          std::optional<PoseCalibrator> calibrator;
-          if (options.calibrate_pose)
-            calibrator.emplace(options.body_reference, defaults, options.pose_calibration,
-                               body_joints_in_pose(reconstructor->skeleton()));
           const bool oracle = options.oracle_mounting && options.true_mounting;
           const Mounting start = oracle ? options.true_mounting(index) : defaults;
-          auto wrapped = std::make_unique<Mounted>(std::move(reconstructor), start, std::move(calibrator),
-                                                   options.calibrate && method != "ik", oracle);
-          mounted = wrapped.get();
-          reconstructor = std::move(wrapped);
-        } else if (options.calibrate && method != "ik") {
-          auto wrapped = std::make_unique<Calibrating>(std::move(reconstructor), options.calibration);
-          calibrating = wrapped.get();
-          reconstructor = std::move(wrapped);
+          pipeline.conditioner().set_default_mounting(start);
+          if (oracle)
+            for (Role r : kRoles) pipeline.conditioner().set_mounting(r, start.T_device_joint[static_cast<size_t>(r)]);
+          if (options.calibrate_pose)
+            pipeline.hold_calibration_pose(PoseCalibrator(options.body_reference, defaults, options.pose_calibration,
+                                                          body_joints_in_pose(reconstructor->skeleton())),
+                                           calibrate_height);
+        } else if (calibrate_height) {
+          pipeline.start_auto_height(options.calibration);
         }
         const OnlineRun run = run_online(*reconstructor, samples, frame_times);
-        if (mounted != nullptr && m == 0) {
+        const std::optional<PoseCalibration>& pose_found = reconstructor->pose_found();
+        if (options.device_frames && m == 0) {
           const Mounting truth = options.true_mounting ? options.true_mounting(index) : defaults;
           add_error(report.default_mounting_error, mounting_error(defaults, truth, tracked_body, rotation_only));
-          if (mounted->found()) {
+          if (pose_found) {
             ++report.pose_calibrated_clips;
             std::array<bool, kRoleCount> measured_body{};
             for (Role r : kRoles)
-              measured_body[static_cast<size_t>(r)] = tracked_body[static_cast<size_t>(r)] && mounted->found()->measured[static_cast<size_t>(r)];
+              measured_body[static_cast<size_t>(r)] = tracked_body[static_cast<size_t>(r)] && pose_found->measured[static_cast<size_t>(r)];
             add_error(report.calibrated_mounting_error,
-                      mounting_error(mounted->found()->mounting, truth, measured_body, rotation_only));
+                      mounting_error(pose_found->mounting, truth, measured_body, rotation_only));
             for (Role r : kRoles)
               if (tracked_body[static_cast<size_t>(r)] && !measured_body[static_cast<size_t>(r)]) ++report.body_trackers_unmeasured;
-            pose_time_sum_s += static_cast<double>(mounted->found()->t_ns - samples.front().t_ns) * 1e-9;
+            pose_time_sum_s += static_cast<double>(pose_found->t_ns - samples.front().t_ns) * 1e-9;
             if (options.calibrate) {
-              const PoseCalibration& c = *mounted->found();
+              const PoseCalibration& c = *pose_found;
               const double truth_m = standing_head_height_m(clip.skeleton);
               ++report.calibrated_clips;
               calibration_error_sum_cm += 100.0 * std::abs(c.head_height_m - truth_m);
@@ -480,9 +431,9 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
             }
           }
         }
-        if (calibrating != nullptr && calibrating->found() && !clip_calibrated) {
+        if (reconstructor->height_found() && !clip_calibrated) {
           clip_calibrated = true;
-          const StandingHeight& h = *calibrating->found();
+          const StandingHeight& h = *reconstructor->height_found();
           const double truth_m = standing_head_height_m(clip.skeleton);
           ++report.calibrated_clips;
           if (h.fallback) ++report.fallback_clips;

@@ -81,15 +81,16 @@ struct EvalOptions {
   // simulated and truth is computed, to act a user body_scale x the data's size.
   double body_scale = 1.0;
   // Calibrate every method but "ik" (which is given the clip's own skeleton) as the daemon's auto
-  // calibration does: a StandingHeightDetector over the head samples, then
-  // calibrate_from_head_height() at the sample that completes the first still stretch.
+  // calibration does (its body pipeline, body_pipeline.h): a StandingHeightDetector over the head
+  // samples, then calibrate_from_head_height() at the sample that completes the first still stretch.
   bool calibrate = false;
   StandingHeightOptions calibration;
   // Device frames (docs/evaluation.md "Device frames"): the source's samples are device poses
   // (a headset at the eyes, controllers' grips) and every method maps them to joints through a
-  // mounting: the default from `body_reference`, and with `calibrate_pose` the one a
-  // PoseCalibrator measures from the clip's first still second (with `calibrate`, its height is
-  // applied too, instead of the StandingHeightDetector's). `true_mounting` gives the mounting the
+  // mounting, in the daemon's body pipeline: the default from `body_reference`, and with
+  // `calibrate_pose` the one a PoseCalibrator measures from the clip's first still second, as a
+  // calibration pose held from the start (with `calibrate`, its height is applied too, instead of
+  // the StandingHeightDetector's). `true_mounting` gives the mounting the
   // source used for a clip, to report the estimate's error.
   bool device_frames = false;
   BodyReference body_reference;
