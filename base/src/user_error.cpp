@@ -17,6 +17,10 @@ std::string Problem::message() const {
   return out;
 }
 
+Problem Problem::under(std::string context) const {
+  return Problem{std::move(context), Problem{where, what, {}}.message(), todo};
+}
+
 UserError::UserError(Problem problem) : std::runtime_error(problem.message()), problem_(std::move(problem)) {}
 
 UserError::UserError(std::string where, std::string what, std::string todo)

@@ -87,10 +87,20 @@ TEST(RequireDeathTest, StopsWithFileLineAndWhat) {
 // ---- UserError -------------------------------------------------------------------------------------
 
 TEST(UserError, MessageIsWhereWhatTodoWithoutEmptyParts) {
-  EXPECT_EQ((Problem{"walk.bvh:12", "expected '{'", "re-export it"}.message()), "walk.bvh:12: expected '{'; re-export it");
+  EXPECT_EQ((Problem{"walk.bvh:12", "expected '{'", "re-export it"}.message()),
+            "walk.bvh:12: expected '{'; re-export it");
   EXPECT_EQ((Problem{"", "no input", "give --split FILE"}.message()), "no input; give --split FILE");
   EXPECT_EQ((Problem{"a.log", "read error", ""}.message()), "a.log: read error");
   EXPECT_EQ((Problem{"", "no frames", ""}.message()), "no frames");
+}
+
+TEST(UserError, AProblemUnderAnOuterContextKeepsItsWords) {
+  const Problem inner{"m.safetensors", "tensor \"w\" is missing", "export it again"};
+  const Problem outer = inner.under("method 'diffusion'");
+  EXPECT_EQ(outer.where, "method 'diffusion'");
+  EXPECT_EQ(outer.todo, "export it again");
+  EXPECT_EQ(outer.message(), "method 'diffusion': m.safetensors: tensor \"w\" is missing; export it again");
+  EXPECT_EQ((Problem{"", "no frames", ""}.under("clip a").message()), "clip a: no frames");
 }
 
 TEST(UserError, WhatIsTheMessageAndTheProblemKeepsItsParts) {

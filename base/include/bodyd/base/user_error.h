@@ -27,6 +27,10 @@ struct Problem {
 
   // "WHERE: WHAT; TODO", leaving out an empty part and its separator.
   [[nodiscard]] std::string message() const;
+  // The same problem seen from an outer `context` (a method, a step, a clip) that caught it: the
+  // context becomes where, the old where joins what, the todo stays. Its message is
+  // "CONTEXT: WHERE: WHAT; TODO".
+  [[nodiscard]] Problem under(std::string context) const;
 };
 
 class UserError : public std::runtime_error {
