@@ -14,6 +14,7 @@
 // after its due time (target < 50 ms) and the whole replay's length (95 ms of log; < 1000 ms);
 // with --hid-clip, for a simulated 100 Hz HID tracker, the largest time from a report's read
 // (the sample's stamp) to its push into the sink (target < 50 ms).
+#include "bodyd/base/user_error.h"
 #include "bodyd/io/devices/fake_devices.h"
 #include "bodyd/io/devices/hid_source.h"
 #include "bodyd/io/osc/network_source.h"
@@ -112,8 +113,13 @@ struct Case {
 std::unique_ptr<TrackerSource> must_open(const std::string& spec) {
   std::string error;
   auto source = open_source(spec, SourceOptions{}, error);
-  if (!source) throw std::runtime_error(spec + ": " + error);
+  if (!source) throw UserError(spec, error);
   return source;
+}
+
+// Starts `source` into `sink`; a source that cannot start (a busy port, say) says why.
+void must_start(TrackerSource& source, SampleSink& sink) {
+  if (std::string e = source.start(sink, 0); !e.empty()) throw UserError("", e);
 }
 
 int connect_to(int port) {
@@ -143,7 +149,7 @@ std::unique_ptr<TrackerSource> start_simulated_hid(const TrackerTrajectory& traj
   o.devices = {c.id};
   o.rescan_interval_ms = 50;
   auto source = make_hid_source(o, transport);
-  if (std::string e = source->start(sink, 0); !e.empty()) throw std::runtime_error(e);
+  must_start(*source, sink);
   return source;
 }
 
@@ -184,26 +190,26 @@ int main(int argc, char** argv) {
         o.loop = true;
         FullSink full;
         auto source = make_replay_source("bench", head_samples(10, 11'000'000), o);
-        if (std::string e = source->start(full, 0); !e.empty()) throw std::runtime_error(e);
+        must_start(*source, full);
         cases[0].ms.push_back(time_stop(*source, [] { std::this_thread::sleep_for(20ms); }));
       }
       {
         std::vector<TrackerSample> far = head_samples(2, 60'000'000'000);  // a minute apart
         KeepingSink sink;
         auto source = make_replay_source("bench", far, ReplayOptions{});
-        if (std::string e = source->start(sink, 0); !e.empty()) throw std::runtime_error(e);
+        must_start(*source, sink);
         cases[1].ms.push_back(time_stop(*source, [] { std::this_thread::sleep_for(20ms); }));
       }
       {
         KeepingSink sink;
         auto source = must_open("udp:127.0.0.1:0");
-        if (std::string e = source->start(sink, 0); !e.empty()) throw std::runtime_error(e);
+        must_start(*source, sink);
         cases[2].ms.push_back(time_stop(*source, [] { std::this_thread::sleep_for(10ms); }));
       }
       {
         KeepingSink sink;
         auto source = must_open("vrchat:127.0.0.1:0");
-        if (std::string e = source->start(sink, 0); !e.empty()) throw std::runtime_error(e);
+        must_start(*source, sink);
         auto* network = dynamic_cast<NetworkSource*>(source.get());
         const int port = network ? network->oscquery_port() : 0;
         const int fd = port > 0 ? connect_to(port) : -1;
@@ -224,7 +230,9 @@ int main(int argc, char** argv) {
         while (sink.samples().size() < 30 && monotonic_ns() - start < 10'000'000'000) std::this_thread::sleep_for(5ms);
         source->stop();
         const std::vector<SourceSample> got = sink.samples();
-        if (got.empty()) throw std::runtime_error("the simulated HID tracker sent nothing");
+        if (got.empty())
+          throw UserError("hid:bench", "the simulated HID tracker sent nothing in 10 s",
+                          "run it again on a less loaded machine; if it persists, report it");
         for (const SourceSample& s : got)
           worst_hid_push_ms = std::max(worst_hid_push_ms, (s.arrival_ns - s.sample.t_ns) * 1e-6);
       }
@@ -233,12 +241,15 @@ int main(int argc, char** argv) {
         KeepingSink sink;
         auto source = make_replay_source("bench", samples, ReplayOptions{});
         const std::int64_t start = monotonic_ns();
-        if (std::string e = source->start(sink, 0); !e.empty()) throw std::runtime_error(e);
+        must_start(*source, sink);
         while (sink.samples().size() < samples.size() && monotonic_ns() - start < 10'000'000'000)
           std::this_thread::sleep_for(1ms);
         source->stop();
         const std::vector<SourceSample> got = sink.samples();
-        if (got.size() != samples.size()) throw std::runtime_error("the paced replay lost samples");
+        if (got.size() != samples.size())
+          throw UserError(
+              "replay", fmt::format("the paced replay delivered {} of {} samples in 10 s", got.size(), samples.size()),
+              "run it again on a less loaded machine; if it persists, report it");
         for (std::size_t i = 0; i < got.size(); ++i) {
           const std::int64_t due = got[0].arrival_ns + (samples[i].t_ns - samples[0].t_ns);
           worst_late_ms = std::max(worst_late_ms, (got[i].arrival_ns - due) * 1e-6);

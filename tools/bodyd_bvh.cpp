@@ -1,4 +1,5 @@
 // bodyd-bvh: what a BVH file holds (frames, frame rate, joints), for one or many files.
+#include "bodyd/base/user_error.h"
 #include "bodyd/inference/evaluation.h"
 #include "bodyd/motion/bvh.h"
 #include "bodyd/motion/mounting.h"
@@ -57,7 +58,7 @@ int main(int argc, char** argv) {
       const bodyd::BodyReference r = bodyd::measure_body_reference(clips, provenance);
       std::ofstream out(reference_out);
       out << bodyd::body_reference_json(r);
-      if (!out) throw std::runtime_error(reference_out + ": cannot write");
+      if (!out) throw bodyd::UserError(reference_out, "cannot write", "check that the folder exists and is writable");
       fmt::print("{}: {} relaxed still standing frames from {} of {} clips; head pitch sd {:.2f} deg, roll sd {:.2f} "
                  "deg; wrists sd {:.2f} / {:.2f} deg\n",
                  reference_out, r.frames, r.clips, clips.size(), r.head_pitch_sd_deg, r.head_roll_sd_deg,
@@ -74,7 +75,7 @@ int main(int argc, char** argv) {
   for (const std::string& path : paths) {
     try {
       std::error_code ec;
-      if (std::filesystem::is_directory(path, ec)) throw bodyd::BvhError(path + ": is a directory, not a BVH file");
+      if (std::filesystem::is_directory(path, ec)) throw bodyd::BvhError(path, "is a directory, not a BVH file");
       const bodyd::Motion m = bodyd::read_bvh(path);
       if (json) {
         out.push_back({{"path", path}, {"frames", m.frame_count()}, {"fps", m.fps()}, {"joints", m.skeleton.size()}});

@@ -21,7 +21,7 @@ void write_file(const std::filesystem::path& path, const std::vector<std::uint8_
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
   out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
   out.close();
-  if (!out) throw bodyd::render::RenderError(fmt::format("{}: cannot write the file", path.string()));
+  if (!out) throw bodyd::render::RenderError(path.string(), "cannot write the file", "check the free disk space");
   fmt::print("wrote {} ({} bytes)\n", path.string(), bytes.size());
 }
 
@@ -77,7 +77,9 @@ int main(int argc, char** argv) {
     const bodyd::render::Comparison cmp = bodyd::render::load_comparison(truth_path, sources);
     std::error_code ec;
     std::filesystem::create_directories(out_dir, ec);
-    if (ec) throw bodyd::render::RenderError(fmt::format("{}: cannot create the directory: {}", out_dir.string(), ec.message()));
+    if (ec)
+      throw bodyd::render::RenderError(out_dir.string(), fmt::format("cannot create the directory: {}", ec.message()),
+                                       "check --out");
     write_file(out_dir / (cmp.clip_name + ".contact_sheet.png"), bodyd::render::contact_sheet_png(cmp, sheet));
     write_file(out_dir / (cmp.clip_name + ".error_plot.png"), bodyd::render::error_plot_png(cmp));
     if (apng) write_file(out_dir / (cmp.clip_name + ".anim.png"), bodyd::render::animation_apng(cmp, {anim_every}));

@@ -1,6 +1,6 @@
 #include "bodyd/daemon/sample_queue.h"
 
-#include <stdexcept>
+#include "bodyd/base/require.h"
 
 namespace bodyd::daemon {
 namespace {
@@ -16,8 +16,9 @@ T read_locked(std::mutex& mutex, const T& field) {
 
 SampleQueue::SampleQueue(std::size_t capacity, std::chrono::nanoseconds max_age)
     : ring_(capacity), may_drop_stale_(capacity, 0), max_age_(max_age) {
-  if (capacity == 0) throw std::invalid_argument("SampleQueue: capacity must be > 0");
-  if (max_age < std::chrono::nanoseconds::zero()) throw std::invalid_argument("SampleQueue: max_age must be >= 0");
+  // The Daemon clamps the user's queue_capacity and queue_max_age_ms to their checked ranges.
+  BODYD_REQUIRE(capacity > 0, "SampleQueue: capacity must be > 0");
+  BODYD_REQUIRE(max_age >= std::chrono::nanoseconds::zero(), "SampleQueue: max_age must be >= 0");
 }
 
 void SampleQueue::push_locked(const drivers::SourceSample& sample, bool may_drop_stale) {

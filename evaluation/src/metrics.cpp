@@ -1,8 +1,10 @@
 #include "bodyd/inference/metrics.h"
 
+#include "bodyd/base/require.h"
+#include "bodyd/base/user_error.h"
+
 #include <cmath>
 #include <limits>
-#include <stdexcept>
 #include <string>
 
 namespace bodyd {
@@ -20,8 +22,8 @@ constexpr int kHistory = 4;  // frames kept for differences up to the third
 int body_joint(const Skeleton& skeleton, std::string_view name) {
   const int j = skeleton.find(name);
   if (j < 0)
-    throw std::invalid_argument("metrics: the skeleton has no joint '" + std::string(name) +
-                                "' (the metrics need the 21 body joints of docs/conventions.md)");
+    throw UserError("", "metrics: the skeleton has no joint '" + std::string(name) + "'",
+                    "the metrics need the 21 body joints of docs/conventions.md (\"Skeleton and joint sets\")");
   return j;
 }
 
@@ -78,8 +80,8 @@ MetricsAccumulator::MetricsAccumulator(const Skeleton& skeleton) : sets_(joint_s
 }
 
 void MetricsAccumulator::begin_clip(double fps) {
-  if (!(fps > 0.0) || !std::isfinite(fps))
-    throw std::invalid_argument("metrics: fps must be positive, got " + std::to_string(fps));
+  // Clips come from the BVH reader, which refuses frame times outside [0.0001, 1] s.
+  BODYD_REQUIRE(fps > 0.0 && std::isfinite(fps), "metrics: fps must be positive, got " + std::to_string(fps));
   fps_ = fps;
   for (auto* terms : {&joint_jitter_, &truth_joint_jitter_, &joint_pe_, &joint_height_error_})
     for (Term& t : *terms) {
@@ -106,7 +108,7 @@ void MetricsAccumulator::add_frame(const GlobalPose& predicted, const GlobalPose
 
 void MetricsAccumulator::add_frame(const GlobalPose& predicted, const GlobalPose& truth,
                                    const std::array<bool, 2>& hand_valid) {
-  if (!in_clip_) throw std::logic_error("metrics: add_frame() outside begin_clip()/end_clip()");
+  BODYD_REQUIRE(in_clip_, "metrics: add_frame() outside begin_clip()/end_clip()");
   const size_t n = sets_.all.size();
   const int f = clip_frames_;
   const auto slot = [n](int frame) { return static_cast<size_t>(frame % kHistory) * n; };

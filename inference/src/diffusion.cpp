@@ -9,7 +9,6 @@
 #include <cmath>
 #include <limits>
 #include <optional>
-#include <stdexcept>
 
 namespace bodyd {
 
@@ -94,15 +93,17 @@ DiffusionReconstructor::DiffusionReconstructor(std::shared_ptr<const inference::
       filter_(options.filter),
       head_correction_(smoothing_options(options.filter.head_correction_cutoff_hz)),
       anchor_filter_(smoothing_options(options.filter.anchor_cutoff_hz)) {
-  if (std::string err = validate(options.filter); !err.empty()) throw std::invalid_argument(err);
-  if (std::string err = validate(options.body_filter); !err.empty()) throw std::invalid_argument(err);
-  if (std::string err = validate_foot_lock(options); !err.empty()) throw std::invalid_argument(err);
+  // The options come from the user's flags and config keys; the model from the user's file.
+  if (std::string err = validate(options.filter); !err.empty()) throw UserError("", err);
+  if (std::string err = validate(options.body_filter); !err.empty()) throw UserError("", err);
+  if (std::string err = validate_foot_lock(options); !err.empty()) throw UserError("", err);
   if (std::string err = features::check_skeleton(skeleton_); !err.empty())
-    throw std::invalid_argument(fmt::format("{}: model skeleton: {}", model_->source, err));
+    throw UserError(model_->source, "model skeleton: " + err, "use a model trained on the bodyd skeleton");
   if (network_->dim() != features::kDim)
-    throw std::invalid_argument(fmt::format("{}: model has D = {}, the features have {}", model_->source,
-                                            network_->dim(), features::kDim));
-  if (!(model_->fps > 0)) throw std::invalid_argument(fmt::format("{}: model fps must be > 0", model_->source));
+    throw UserError(model_->source,
+                    fmt::format("model has D = {}, the features have {}", network_->dim(), features::kDim),
+                    "use a model trained for this version");
+  if (!(model_->fps > 0)) throw UserError(model_->source, "model fps must be > 0");
   W_ = network_->frames();
   frame_dt_ns_ = static_cast<std::int64_t>(std::llround(kNsPerS / model_->fps));
   // Reference height: the skeleton's standing head height (the same definition as the IK baseline's).

@@ -17,12 +17,12 @@ constexpr const char* kNeedsModel =
 std::vector<std::string> known_methods() { return {"diffusion", "ik"}; }
 
 std::shared_ptr<const inference::Model> load_reconstructor_model(const std::filesystem::path& model_path) {
-  if (model_path.empty()) throw ReconstructorError(kNeedsModel);
+  if (model_path.empty()) throw ReconstructorError("", kNeedsModel);
   try {
     return inference::load_model(model_path);
   } catch (const inference::ModelFileError& e) {
     // No advice here: the caller (the daemon, a tool) adds the one hint that fits it.
-    throw ReconstructorError(fmt::format("cannot load the model: {}", e.what()));
+    throw ReconstructorError(e.problem().under("cannot load the model"));
   }
 }
 
@@ -39,15 +39,18 @@ std::unique_ptr<Reconstructor> make_reconstructor_of(std::string_view method,
                                                      const ReconstructorOptions& options) {
   if (method == "ik") {
     if (skeleton_hint == nullptr)
-      throw ReconstructorError("method 'ik' needs a skeleton: pass the skeleton of the motion data (a BVH file)");
+      throw ReconstructorError("", "method 'ik' needs a skeleton", "pass the skeleton of the motion data (a BVH file)");
     try {
       return std::make_unique<IkReconstructor>(*skeleton_hint);
+    } catch (const UserError& e) {
+      throw ReconstructorError(e.problem().under("method 'ik'"));
     } catch (const std::invalid_argument& e) {
-      throw ReconstructorError(fmt::format("method 'ik': {}", e.what()));
+      // standing_reference() still throws this (daemon.cpp catches it by that name).
+      throw ReconstructorError("method 'ik'", e.what());
     }
   }
   if (method == "diffusion") {
-    if (model == nullptr) throw ReconstructorError(kNeedsModel);
+    if (model == nullptr) throw ReconstructorError("", kNeedsModel);
     DiffusionOptions d;
     d.steps = options.diffusion_steps;
     d.guidance = options.guidance;
@@ -64,12 +67,16 @@ std::unique_ptr<Reconstructor> make_reconstructor_of(std::string_view method,
     if (options.leg_position_blend) d.leg_position_blend = *options.leg_position_blend;
     try {
       return std::make_unique<DiffusionReconstructor>(std::move(model), d);
+    } catch (const UserError& e) {
+      throw ReconstructorError(e.problem().under("method 'diffusion'"));
     } catch (const std::invalid_argument& e) {
-      throw ReconstructorError(fmt::format("method 'diffusion': {}", e.what()));
+      // standing_head_height_m() (standing_reference()) still throws this (daemon.cpp catches it
+      // by that name).
+      throw ReconstructorError("method 'diffusion'", e.what());
     }
   }
-  throw ReconstructorError(fmt::format("unknown reconstruction method '{}' (known: {})", method,
-                                       fmt::join(known_methods(), ", ")));
+  throw ReconstructorError("", fmt::format("unknown reconstruction method '{}'", method),
+                           fmt::format("use one of: {}", fmt::join(known_methods(), ", ")));
 }
 
 }  // namespace bodyd

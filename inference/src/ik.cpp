@@ -1,5 +1,7 @@
 #include "bodyd/inference/ik.h"
 
+#include "bodyd/base/user_error.h"
+
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -41,6 +43,9 @@ constexpr JointRotation kStandingFrame[] = {
     {"Foot_R", -0.2805547, -0.4501805, 0.1264618, 0.8382327},
     {"Toes_R", 0.0066382, -0.1573309, 0.0017022, 0.9875222},
 };
+
+constexpr const char* kUseTheBodydSkeleton =
+    "use motion data on the bodyd skeleton (docs/conventions.md, \"Skeleton and joint sets\")";
 // Height of the lower Toes joint in that frame (metres).
 constexpr double kStandingToesHeightM = 0.045;
 
@@ -125,15 +130,17 @@ IkReconstructor::IkReconstructor(const Skeleton& skeleton, const IkOptions& opti
   hips_ = require(skeleton, "Hips", "ik");
   head_ = require(skeleton, "Head", "ik");
   for (int j = skeleton.parents[static_cast<size_t>(head_)]; j != hips_; j = skeleton.parents[static_cast<size_t>(j)]) {
-    if (j < 0) throw std::invalid_argument("ik: 'Head' is not a descendant of 'Hips'");
+    if (j < 0) throw UserError("", "'Head' is not a descendant of 'Hips'", kUseTheBodydSkeleton);
     spine_.insert(spine_.begin(), j);
   }
   const char* names[2][3] = {{"UpperArm_L", "LowerArm_L", "Hand_L"}, {"UpperArm_R", "LowerArm_R", "Hand_R"}};
   for (int side = 0; side < 2; ++side) {
     const auto chain = find_two_bone_chain(skeleton, names[side][0], names[side][1], names[side][2]);
     if (!chain)
-      throw std::invalid_argument(std::string("ik: the skeleton has no arm chain ") + names[side][0] + " -> " +
-                                  names[side][1] + " -> " + names[side][2]);
+      throw UserError("",
+                      std::string("the skeleton has no arm chain ") + names[side][0] + " -> " + names[side][1] +
+                          " -> " + names[side][2],
+                      kUseTheBodydSkeleton);
     arms_[static_cast<size_t>(side)] = *chain;
   }
   head_height_m_ = reference_.head_height_m;

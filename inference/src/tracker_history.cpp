@@ -1,22 +1,21 @@
 #include "bodyd/inference/tracker_history.h"
 
+#include "bodyd/base/require.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
-#include <stdexcept>
 #include <string>
 
 namespace bodyd {
 
 TrackerHistory::TrackerHistory(const TrackerHistoryOptions& options) : options_(options) {
-  if (options_.capacity < 2)
-    throw std::invalid_argument("TrackerHistory: capacity must be at least 2 samples, got " +
-                                std::to_string(options_.capacity));
-  if (!(options_.max_abs_position_m > 0))
-    throw std::invalid_argument("TrackerHistory: max_abs_position_m must be > 0");
-  if (options_.timeout_ns < 0)
-    throw std::invalid_argument("TrackerHistory: timeout_ns must not be negative, got " +
-                                std::to_string(options_.timeout_ns));
+  // No user option reaches these (the reconstructors pass their own): a bad one is a bug.
+  BODYD_REQUIRE(options_.capacity >= 2,
+                "TrackerHistory: capacity must be at least 2 samples, got " + std::to_string(options_.capacity));
+  BODYD_REQUIRE(options_.max_abs_position_m > 0, "TrackerHistory: max_abs_position_m must be > 0");
+  BODYD_REQUIRE(options_.timeout_ns >= 0,
+                "TrackerHistory: timeout_ns must not be negative, got " + std::to_string(options_.timeout_ns));
   for (Ring& ring : rings_) ring.samples.resize(static_cast<std::size_t>(options_.capacity));
 }
 

@@ -60,8 +60,10 @@ std::shared_ptr<const Denoiser> make_denoiser(const Model& model, Weights weight
   const std::string name = it == model.metadata.end() ? std::string() : it->second;
   const Architecture* arch = find_architecture(name);
   if (arch == nullptr) {
-    throw ModelFileError(fmt::format("model file '{}': architecture \"{}\" is unknown (this build runs: {})", model.source,
-                                     name, architecture_names()));
+    throw ModelFileError(
+        fmt::format("model file '{}'", model.source),
+        fmt::format("architecture \"{}\" is unknown (this build runs: {})", name, architecture_names()),
+        "use a bodyd that knows it or a model of a known architecture");
   }
   return arch->make(model, weights);
 }

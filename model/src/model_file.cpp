@@ -2,6 +2,7 @@
 #include "bodyd/inference/model_file.h"
 
 #include "bodyd/base/little_endian.h"
+#include "bodyd/base/require.h"
 #include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/features.h"
 
@@ -33,8 +34,9 @@ constexpr std::uint64_t kMaxModelFileBytes = std::uint64_t{2} << 30;
 
 using Json = nlohmann::json;
 
-[[noreturn]] void fail(const std::string& source, const std::string& what) {
-  throw ModelFileError(fmt::format("model file '{}': {}", source, what));
+// where: "model file 'SOURCE'".
+[[noreturn]] void fail(const std::string& source, const std::string& what, std::string todo = {}) {
+  throw ModelFileError(fmt::format("model file '{}'", source), what, std::move(todo));
 }
 
 // SHA-256 of the concatenated parts, as 64 lower-case hex digits.
@@ -46,7 +48,7 @@ std::string sha256_hex(std::initializer_list<std::span<const std::byte>> parts) 
   for (const auto& part : parts) ok = ok && EVP_DigestUpdate(ctx, part.data(), part.size()) == 1;
   ok = ok && EVP_DigestFinal_ex(ctx, digest, &length) == 1;
   EVP_MD_CTX_free(ctx);
-  if (!ok || length != 32) throw std::logic_error("model file: SHA-256 from OpenSSL failed");
+  BODYD_REQUIRE(ok && length == 32, "SHA-256 from OpenSSL failed");
   std::string hex;
   for (unsigned int i = 0; i < length; ++i) hex += fmt::format("{:02x}", digest[i]);
   return hex;
@@ -119,12 +121,13 @@ ModelConfig parse_config(const std::string& source, const std::string& text, con
   }
   for (std::string_view key : {kConfigFrames, kConfigFeatures, kConfigSteps}) {
     // A row without them is a bug of this build, not of the file.
-    if (!c.find(key)) throw std::logic_error(fmt::format("architecture {}: its config lacks \"{}\"", arch.name, key));
+    BODYD_REQUIRE(c.find(key).has_value(), fmt::format("architecture {}: its config lacks \"{}\"", arch.name, key));
   }
   if (c.dim() != features::kDim) {
-    fail(source, fmt::format("config \"D\" is {} but this build's features have kDim = {} (feature_version {}); "
-                             "use a model trained for this version",
-                             c.dim(), features::kDim, features::kVersion));
+    fail(source,
+         fmt::format("config \"D\" is {} but this build's features have kDim = {} (feature_version {})", c.dim(),
+                     features::kDim, features::kVersion),
+         "use a model trained for this version");
   }
   return c;
 }
@@ -333,9 +336,11 @@ void verify_checksum(std::span<const std::byte> length_and_header, std::span<con
       }
     }
   }
-  fail(source, fmt::format("checksum mismatch: {} changed after the file was written (stored sha256:{}..., "
-                           "contents hash to sha256:{}...); the file is corrupt: copy or export it again",
-                           what, expected.substr(0, 12), actual.substr(0, 12)));
+  fail(source,
+       fmt::format("checksum mismatch: {} changed after the file was written (stored sha256:{}..., contents hash to "
+                   "sha256:{}...); the file is corrupt",
+                   what, expected.substr(0, 12), actual.substr(0, 12)),
+       "copy or export it again");
 }
 }  // namespace
 
@@ -414,7 +419,7 @@ std::optional<int> ModelConfig::find(std::string_view key) const {
 
 int ModelConfig::at(std::string_view key) const {
   if (auto v = find(key)) return *v;
-  throw ModelFileError(fmt::format("model config: key \"{}\" is missing (config: {})", key, to_string()));
+  throw ModelFileError("model config", fmt::format("key \"{}\" is missing (config: {})", key, to_string()));
 }
 
 void ModelConfig::set(std::string_view key, int value) {
@@ -435,7 +440,8 @@ std::string ModelConfig::to_string() const {
 
 const TensorF32& Model::tensor(std::string_view name) const {
   auto it = tensors.find(name);
-  if (it == tensors.end()) throw ModelFileError(fmt::format("model file '{}': tensor \"{}\" is missing", source, name));
+  if (it == tensors.end())
+    throw ModelFileError(fmt::format("model file '{}'", source), fmt::format("tensor \"{}\" is missing", name));
   return it->second;
 }
 
@@ -450,26 +456,27 @@ Model parse_model(std::span<const std::byte> bytes, const std::string& source) {
   }
   // parse_tensor_file verified the checksum if there is one; a model file must have one.
   if (!file.metadata.contains(kChecksumKey)) {
-    fail(source, fmt::format("metadata \"{}\" is missing (written before checksums were added); stamp it with "
-                             "python3 training/model_net.py --restamp FILE",
-                             kChecksumKey));
+    fail(source, fmt::format("metadata \"{}\" is missing (written before checksums were added)", kChecksumKey),
+         "stamp it with python3 training/model_net.py --restamp FILE");
   }
   const std::string& version = require_meta(source, file, "format_version");
   if (version != kModelFormatVersion) {
-    fail(source, fmt::format("format_version \"{}\" is not supported (this build reads \"{}\"); use a matching bodyd or re-export the model",
-                             version, kModelFormatVersion));
+    fail(source,
+         fmt::format("format_version \"{}\" is not supported (this build reads \"{}\")", version, kModelFormatVersion),
+         "use a matching bodyd or re-export the model");
   }
   const std::string& arch = require_meta(source, file, "architecture");
   const Architecture* architecture = find_architecture(arch);
   if (architecture == nullptr) {
-    fail(source, fmt::format("architecture \"{}\" is unknown (this build runs: {}); use a bodyd that knows it or a model "
-                             "of a known architecture", arch, architecture_names()));
+    fail(source, fmt::format("architecture \"{}\" is unknown (this build runs: {})", arch, architecture_names()),
+         "use a bodyd that knows it or a model of a known architecture");
   }
   m.feature_version = parse_int_meta(source, "feature_version", require_meta(source, file, "feature_version"));
   if (m.feature_version != features::kVersion) {
-    fail(source, fmt::format("feature_version {} does not match this build's features::kVersion {}; retrain or export the model "
-                             "with the current features",
-                             m.feature_version, features::kVersion));
+    fail(source,
+         fmt::format("feature_version {} does not match this build's features::kVersion {}", m.feature_version,
+                     features::kVersion),
+         "retrain or export the model with the current features");
   }
   m.config = parse_config(source, require_meta(source, file, "config"), *architecture);
   m.skeleton = parse_skeleton(source, require_meta(source, file, "skeleton"));

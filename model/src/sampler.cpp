@@ -8,20 +8,29 @@
 #include <cstdio>
 #include <cstdlib>
 #include <numbers>
-#include <stdexcept>
 
 #include "bodyd/base/random.h"
 #include "bodyd/base/require.h"
+#include "bodyd/base/user_error.h"
 
 namespace bodyd::inference {
 namespace {
 
 std::uint64_t rotl(std::uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
 
+std::shared_ptr<const Denoiser> checked_network(std::shared_ptr<const Denoiser> network) {
+  BODYD_REQUIRE(network != nullptr, "Sampler needs a network");
+  return network;
+}
+
 }  // namespace
 
 std::vector<int> ddim_timesteps(int T, int K) {
-  if (T < 1 || K < 1 || K > T) throw std::invalid_argument(fmt::format("DDIM steps K must be in [1, T={}], got {}", T, K));
+  // T comes from a checked model file (>= 1); K is the user's --steps.
+  BODYD_REQUIRE(T >= 1, fmt::format("DDIM needs T >= 1 diffusion steps, got {}", T));
+  if (K < 1 || K > T)
+    throw UserError("", fmt::format("DDIM steps K must be in [1, T={}], got {}", T, K),
+                    fmt::format("ask for 1 to {} steps per frame (--steps)", T));
   if (K == 1) return {T - 1};
   std::vector<int> taus(static_cast<std::size_t>(K));
   for (int k = 0; k < K; ++k) {
@@ -66,15 +75,17 @@ float Rng::normal() {
 }
 
 Sampler::Sampler(std::shared_ptr<const Denoiser> network, const SamplerOptions& options, std::uint64_t seed)
-    : network_(network ? std::move(network) : throw std::invalid_argument("Sampler needs a network")),
+    : network_(checked_network(std::move(network))),
       options_(options),
       timesteps_(ddim_timesteps(network_->steps(), options.steps)),
       rng_(seed),
       scratch_(network_->make_scratch(options.guidance == 1.0f ? 1 : 2)) {
-  if (!std::isfinite(options.guidance)) throw std::invalid_argument("sampler guidance scale must be finite");
-  if (!std::isfinite(options.eta) || options.eta < 0.0f) {
-    throw std::invalid_argument(fmt::format("sampler eta must be finite and >= 0, got {}", options.eta));
-  }
+  if (!std::isfinite(options.guidance))
+    throw UserError("", fmt::format("sampler guidance scale must be finite, got {}", options.guidance),
+                    "give a number (--guidance; 1 = off)");
+  // eta is bodyd's own choice (0 everywhere), never the user's.
+  BODYD_REQUIRE(std::isfinite(options.eta) && options.eta >= 0.0f,
+                fmt::format("sampler eta must be finite and >= 0, got {}", options.eta));
   const auto window = static_cast<std::size_t>(network_->window_size());
   x_in_.assign(2 * window, 0.0f);
   m_in_.assign(2 * window, 0.0f);  // the second window's mask stays 0 (unconditional pass)

@@ -50,9 +50,10 @@ std::atomic<std::uint64_t> next_tcnmlp_id{1};
 
 const TcnMlpConfig& checked(const TcnMlpConfig& c, const Model& model) {
   if (c.N > c.W)
-    throw ModelFileError(fmt::format("model file '{}': tcnmlp-v1 config N = {} is more than W = {} (the trunk's "
-                                     "frames are the window's newest)",
-                                     model.source, c.N, c.W));
+    throw ModelFileError(fmt::format("model file '{}'", model.source),
+                         fmt::format("tcnmlp-v1 config N = {} is more than W = {} (the trunk's frames are the window's "
+                                     "newest)",
+                                     c.N, c.W));
   return c;
 }
 }  // namespace

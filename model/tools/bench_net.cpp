@@ -6,6 +6,7 @@
 //
 // A default-size random model for benchmarking (no training needed):
 //   python3 training/model_net.py --random-model /tmp/random.safetensors
+#include "bodyd/base/user_error.h"
 #include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/model_file.h"
 #include "bodyd/inference/sampler.h"
@@ -127,7 +128,7 @@ int main(int argc, char** argv) {
     });
     fmt::print("sample online (K={}):     median {:8.1f} us  p90 {:8.1f} us  min {:8.1f} us\n", steps, onl.median_us,
                onl.p90_us, onl.min_us);
-  } catch (const std::invalid_argument& e) {
+  } catch (const bodyd::UserError& e) {
     std::fprintf(stderr, "bodyd-bench-net: %s\n", e.what());
     return 1;
   }

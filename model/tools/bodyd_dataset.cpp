@@ -1,5 +1,6 @@
 // bodyd-dataset: BVH clips -> training windows (.npy) + metadata (.json), using the runtime's feature code.
 #include "bodyd/base/little_endian.h"
+#include "bodyd/base/user_error.h"
 #include "bodyd/inference/dataset.h"
 #include "bodyd/motion/split_file.h"
 
@@ -22,7 +23,7 @@ void write_npy(const std::filesystem::path& path, const std::vector<float>& data
   header.append((64 - total % 64) % 64, ' ');
   header += '\n';
   std::ofstream out(path, std::ios::binary);
-  if (!out) throw std::runtime_error(fmt::format("{}: cannot open for writing", path.string()));
+  if (!out) throw UserError(path.string(), "cannot open for writing", "check that --out names a writable folder");
   const unsigned char magic[8] = {0x93, 'N', 'U', 'M', 'P', 'Y', 1, 0};
   out.write(reinterpret_cast<const char*>(magic), 8);
   const auto len = static_cast<uint16_t>(header.size());
@@ -31,7 +32,7 @@ void write_npy(const std::filesystem::path& path, const std::vector<float>& data
   out.write(reinterpret_cast<const char*>(len_le), 2);
   out.write(header.data(), static_cast<std::streamsize>(header.size()));
   out.write(reinterpret_cast<const char*>(data.data()), static_cast<std::streamsize>(data.size() * sizeof(float)));
-  if (!out) throw std::runtime_error(fmt::format("{}: write failed", path.string()));
+  if (!out) throw UserError(path.string(), "write failed", "check the free disk space");
 }
 
 }  // namespace
@@ -57,7 +58,7 @@ int main(int argc, char** argv) {
       auto s = read_split(split);
       files.insert(files.end(), s.begin(), s.end());
     }
-    if (files.empty()) throw std::runtime_error("no input: give --split FILE or BVH files");
+    if (files.empty()) throw UserError("", "no input", "give --split FILE or BVH files");
     std::filesystem::create_directories(out_dir);
     std::vector<float> data;
     size_t windows = 0, frames = 0;
@@ -67,7 +68,8 @@ int main(int argc, char** argv) {
     for (const auto& f : files) {
       Motion m = read_bvh(f);
       if (std::string err = features::check_skeleton(m.skeleton); !err.empty())
-        throw std::runtime_error(fmt::format("{}: {}", f.string(), err));
+        throw UserError(f.string(), err,
+                        "export clips with the bodyd skeleton (docs/conventions.md, \"Skeleton and joint sets\")");
       if (fps == 0) {
         fps = m.fps();
         nlohmann::json offsets = nlohmann::json::array();
@@ -75,7 +77,8 @@ int main(int argc, char** argv) {
         // joint_Root's and Hips' offsets are overridden by position channels; the rest are shared by all files.
         skeleton_json = {{"names", m.skeleton.names}, {"parents", m.skeleton.parents}, {"offsets_m", offsets}};
       } else if (std::abs(m.fps() - fps) > 1e-3) {
-        throw std::runtime_error(fmt::format("{}: {} fps differs from the first file's {} fps", f.string(), m.fps(), fps));
+        throw UserError(f.string(), fmt::format("{} fps differs from the first file's {} fps", m.fps(), fps),
+                        "export every clip at one frame rate, or make one dataset per rate");
       }
       const int n = features::append_windows(features::clip_features(m), window, stride, data);
       clips.push_back({{"path", f.string()}, {"frames", m.frame_count()}, {"windows", n}});

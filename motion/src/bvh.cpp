@@ -107,7 +107,7 @@ class Tokenizer {
   }
 
   [[noreturn]] void fail(const std::string& what) const {
-    throw BvhError(fmt::format("{}:{}: {}", source_, token_line_, what));
+    throw BvhError(fmt::format("{}:{}", source_, token_line_), what);
   }
 
  private:
@@ -247,7 +247,7 @@ void parse_joint(Tokenizer& tok, Motion& m, int parent, std::string name, const 
 Motion parse_bvh(std::string_view text, const std::string& source, const BvhReadOptions& opt) {
   Tokenizer tok(text, source);
   if (!(std::isfinite(opt.unit_to_m) && opt.unit_to_m > 0.0 && opt.unit_to_m <= 1e3))
-    throw BvhError(fmt::format("{}: unit_to_m {} must be in (0, 1000]", source, opt.unit_to_m));
+    throw BvhError(source, fmt::format("unit_to_m {} must be in (0, 1000]", opt.unit_to_m));
   Motion m;
   tok.expect_literal("HIERARCHY");
   tok.expect_literal("ROOT");
@@ -328,32 +328,32 @@ Motion parse_bvh(std::string_view text, const std::string& source, const BvhRead
   std::string_view extra;
   if (tok.next_line(extra))
     tok.fail(fmt::format("more frame lines than 'Frames: {}' declares", frames));
-  if (std::string err = sk.validate(); !err.empty()) throw BvhError(fmt::format("{}: {}", source, err));
+  if (std::string err = sk.validate(); !err.empty()) throw BvhError(source, err);
   return m;
 }
 
 Motion read_bvh(const std::filesystem::path& path, const BvhReadOptions& options) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw BvhError(fmt::format("{}: cannot open file", path.string()));
+  if (!in) throw BvhError(path.string(), "cannot open file", "check the path and that the file is readable");
   std::stringstream ss;
   ss << in.rdbuf();
-  if (in.bad()) throw BvhError(fmt::format("{}: read error", path.string()));
+  if (in.bad()) throw BvhError(path.string(), "read error");
   return parse_bvh(ss.str(), path.string(), options);
 }
 
 std::string format_bvh(const Motion& m, double m_to_unit) {
   const Skeleton& sk = m.skeleton;
-  if (std::string err = sk.validate(); !err.empty()) throw BvhError("cannot write BVH: " + err);
+  if (std::string err = sk.validate(); !err.empty()) throw BvhError("", "cannot write BVH: " + err);
   if (m.channels.size() != static_cast<size_t>(sk.size()))
-    throw BvhError("cannot write BVH: channel layout does not match the skeleton");
+    throw BvhError("", "cannot write BVH: channel layout does not match the skeleton");
   std::vector<EulerOrder> orders(m.channels.size());
   for (size_t j = 0; j < m.channels.size(); ++j) {
     std::string order;
     for (Channel c : m.channels[j])
       if (is_rotation(c)) order += static_cast<char>('X' + axis_of(c));
     if (!order.empty() && !parse_euler_order(order, orders[j]))
-      throw BvhError(fmt::format("cannot write BVH: joint '{}' needs three distinct rotation channels, has '{}'",
-                                 sk.names[j], order));
+      throw BvhError("", fmt::format("cannot write BVH: joint '{}' needs three distinct rotation channels, has '{}'",
+                                     sk.names[j], order));
   }
   std::string out;
   out.reserve(4096 + m.frames.size() * m.channels.size() * 60);
@@ -402,9 +402,9 @@ std::string format_bvh(const Motion& m, double m_to_unit) {
 void write_bvh(const std::filesystem::path& path, const Motion& motion, double m_to_unit) {
   const std::string text = format_bvh(motion, m_to_unit);
   std::ofstream out(path, std::ios::binary);
-  if (!out) throw BvhError(fmt::format("{}: cannot open for writing", path.string()));
+  if (!out) throw BvhError(path.string(), "cannot open for writing", "check that the folder exists and is writable");
   out << text;
-  if (!out) throw BvhError(fmt::format("{}: write failed", path.string()));
+  if (!out) throw BvhError(path.string(), "write failed", "check the free disk space");
 }
 
 }  // namespace bodyd

@@ -153,7 +153,7 @@ BodyReference measure_body_reference(std::span<const Motion> clips, std::string 
     clips_used += used ? 1 : 0;
   }
   if (samples.empty())
-    throw BodyReferenceError("no relaxed still standing frame in the clips (standing still, upright, arms hanging): "
+    throw BodyReferenceError("", "no relaxed still standing frame in the clips (standing still, upright, arms hanging)",
                              "measure the reference on the training split");
   // Each clip counts once (a long still stretch of one take must not outweigh the others): the
   // per-clip means, then their mean over the clips within kOutlierDeg of a first mean (a take
@@ -189,7 +189,8 @@ BodyReference measure_body_reference(std::span<const Motion> clips, std::string 
               deg(geodesic_angle(per_clip[i].left, left0)) <= kOutlierDeg &&
               deg(geodesic_angle(per_clip[i].right, right0)) <= kOutlierDeg;
   if (std::count(keep.begin(), keep.end(), true) == 0)
-    throw BodyReferenceError("the relaxed still standing frames disagree (no clip within 25 degrees of their mean)");
+    throw BodyReferenceError("", "the relaxed still standing frames disagree (no clip within 25 degrees of their mean)",
+                             "measure the reference on more clips, e.g. the training split");
   BodyReference r;
   r.head_in_facing = mean_of(per_clip, keep, &Sample::head);
   r.hand_in_facing = {mean_of(per_clip, keep, &Sample::left), mean_of(per_clip, keep, &Sample::right)};
@@ -256,14 +257,16 @@ std::string body_reference_json(const BodyReference& r) {
 }
 
 BodyReference parse_body_reference(std::string_view text, const std::string& source) {
+  constexpr const char* kRegenerate =
+      "regenerate it with bodyd-bvh --reference (docs/conventions.md, \"Device frames\")";
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(text);
   } catch (const nlohmann::json::exception& e) {
-    throw BodyReferenceError(fmt::format("{}: not JSON: {}", source, e.what()));
+    throw BodyReferenceError(source, fmt::format("not JSON: {}", e.what()), kRegenerate);
   }
   const auto fail = [&](const std::string& what) -> BodyReferenceError {
-    return BodyReferenceError(fmt::format("{}: {} (regenerate it with bodyd-bvh reference; docs/conventions.md)", source, what));
+    return BodyReferenceError(source, what, kRegenerate);
   };
   if (!j.is_object() || j.value("format", "") != "bodyd-body-reference v1")
     throw fail("\"format\" is not \"bodyd-body-reference v1\"");
@@ -307,7 +310,9 @@ BodyReference parse_body_reference(std::string_view text, const std::string& sou
 
 BodyReference read_body_reference(const std::filesystem::path& path) {
   std::ifstream in(path);
-  if (!in) throw BodyReferenceError(path.string() + ": cannot open the body reference (is bodyd installed completely?)");
+  if (!in)
+    throw BodyReferenceError(path.string(), "cannot open the body reference",
+                             "check that bodyd is installed completely, or give a readable file");
   std::stringstream ss;
   ss << in.rdbuf();
   return parse_body_reference(ss.str(), path.string());
@@ -317,9 +322,10 @@ std::filesystem::path find_body_reference(const std::string& path) {
   if (!path.empty()) return path;
   const paths::DataFile f = paths::find_data_file(kBodyReferenceFile);
   if (!f.found)
-    throw BodyReferenceError(fmt::format("the body reference {} is not installed (looked in {}): reinstall bodyd, or "
-                                         "make one with bodyd-bvh --reference",
-                                         kBodyReferenceFile, paths::tried_text(f)));
+    throw BodyReferenceError(
+        "",
+        fmt::format("the body reference {} is not installed (looked in {})", kBodyReferenceFile, paths::tried_text(f)),
+        "reinstall bodyd, or make one with bodyd-bvh --reference");
   return f.path;
 }
 

@@ -1,9 +1,10 @@
 #include "bodyd/motion/split_file.h"
 
+#include "bodyd/base/user_error.h"
+
 #include <fmt/format.h>
 
 #include <fstream>
-#include <stdexcept>
 #include <string>
 
 namespace bodyd {
@@ -18,7 +19,9 @@ std::string_view split_line_path(std::string_view line) {
 
 std::vector<std::filesystem::path> read_split(const std::filesystem::path& split_file) {
   std::ifstream in(split_file);
-  if (!in) throw std::runtime_error(fmt::format("{}: cannot open the split file", split_file.string()));
+  if (!in)
+    throw UserError(split_file.string(), "cannot open the split file",
+                    "check the path (docs/evaluation.md, \"Split files\")");
   const std::filesystem::path base = split_file.parent_path().parent_path();
   std::vector<std::filesystem::path> paths;
   std::string line;
@@ -29,12 +32,15 @@ std::vector<std::filesystem::path> read_split(const std::filesystem::path& split
     if (listed.empty()) continue;
     const std::filesystem::path p = base / listed;
     if (!std::filesystem::exists(p))
-      throw std::runtime_error(fmt::format("{}:{}: '{}' does not exist (paths are relative to {})", split_file.string(),
-                                           line_no, p.string(), base.string()));
+      throw UserError(fmt::format("{}:{}", split_file.string(), line_no),
+                      fmt::format("'{}' does not exist (paths are relative to {})", p.string(), base.string()),
+                      "fix the line or restore the clip");
     paths.push_back(p);
   }
-  if (in.bad()) throw std::runtime_error(fmt::format("{}: read error", split_file.string()));
-  if (paths.empty()) throw std::runtime_error(fmt::format("{}: the split lists no files", split_file.string()));
+  if (in.bad()) throw UserError(split_file.string(), "read error");
+  if (paths.empty())
+    throw UserError(split_file.string(), "the split lists no files",
+                    "list one clip path per line (docs/evaluation.md, \"Split files\")");
   return paths;
 }
 

@@ -61,7 +61,7 @@ std::string parse_double(std::string_view field, double& out) {
 TrackerLogParser::TrackerLogParser(std::string source_name) : source_(std::move(source_name)) {}
 
 void TrackerLogParser::fail(const std::string& what) const {
-  throw TrackerLogError(fmt::format("{}:{}: {}", source_, line_ < 1 ? 1 : line_, what));
+  throw TrackerLogError(fmt::format("{}:{}", source_, line_ < 1 ? 1 : line_), what);
 }
 
 std::optional<TrackerSample> TrackerLogParser::feed_line(std::string_view raw) {
@@ -231,7 +231,7 @@ TrackerLog read_tracker_log(const std::filesystem::path& path) {
 
 TrackerLogReader::TrackerLogReader(const std::filesystem::path& path)
     : in_(path, std::ios::binary), parser_(path.string()) {
-  if (!in_) throw TrackerLogError(fmt::format("{}: cannot open file", path.string()));
+  if (!in_) throw TrackerLogError(path.string(), "cannot open file", "check the path and that the file is readable");
   while (!parser_.header_seen()) {
     if (!read_line(line_)) {
       parser_.finish();  // throws: no version or no header
@@ -243,7 +243,7 @@ TrackerLogReader::TrackerLogReader(const std::filesystem::path& path)
 
 bool TrackerLogReader::read_line(std::string& out_line) {
   if (!std::getline(in_, out_line)) {
-    if (in_.bad()) throw TrackerLogError(fmt::format("{}: read error", parser_.source_name()));
+    if (in_.bad()) throw TrackerLogError(parser_.source_name(), "read error");
     return false;
   }
   return true;
@@ -270,15 +270,16 @@ std::string tracker_log_preamble(const TrackerLogMetadata& metadata) {
   for (const auto& [key, value] : metadata) {
     if (value.find_first_of("\r\n") != std::string::npos)
       throw TrackerLogError(
-          fmt::format("cannot write tracker log: metadata {} value contains a line break", quote(key)));
+          "", fmt::format("cannot write tracker log: metadata {} value contains a line break", quote(key)));
     if (key.empty()) {  // a free-form comment line, as the reader keeps it
       out += fmt::format("# {}\n", value);
       continue;
     }
     for (char c : key)
       if (!is_key_char(c))
-        throw TrackerLogError(fmt::format(
-            "cannot write tracker log: metadata key {} may hold only letters, digits, '_', '-', '.'", quote(key)));
+        throw TrackerLogError(
+            "", fmt::format("cannot write tracker log: metadata key {} may hold only letters, digits, '_', '-', '.'",
+                            quote(key)));
     out += fmt::format("# {}: {}\n", key, value);
   }
   out += kTrackerLogHeader;
@@ -288,12 +289,12 @@ std::string tracker_log_preamble(const TrackerLogMetadata& metadata) {
 
 void append_tracker_sample(std::string& out, const TrackerSample& s) {
   if (static_cast<int>(s.role) >= kRoleCount)
-    throw TrackerLogError(fmt::format("cannot write tracker log: sample at t_ns {} has no valid role", s.t_ns));
+    throw TrackerLogError("", fmt::format("cannot write tracker log: sample at t_ns {} has no valid role", s.t_ns));
   auto it = std::back_inserter(out);
   if (!limits::time_plausible(s.t_ns))
-    throw TrackerLogError(fmt::format("cannot write tracker log: {} sample t_ns {} is outside the plausible range "
-                                      "+-{} ns",
-                                      role_name(s.role), s.t_ns, limits::kMaxAbsTimeNs));
+    throw TrackerLogError("", fmt::format("cannot write tracker log: {} sample t_ns {} is outside the plausible range "
+                                          "+-{} ns",
+                                          role_name(s.role), s.t_ns, limits::kMaxAbsTimeNs));
   if (!s.valid) {
     fmt::format_to(it, "{},{},0,,,,,,,\n", s.t_ns, role_name(s.role));
     return;
@@ -302,13 +303,13 @@ void append_tracker_sample(std::string& out, const TrackerSample& s) {
   const Quat& q = s.rotation;
   if (s.has_position && (!limits::position_plausible(p.x()) || !limits::position_plausible(p.y()) ||
                          !limits::position_plausible(p.z())))
-    throw TrackerLogError(fmt::format("cannot write tracker log: {} sample at t_ns {} has position ({}, {}, {}) m, "
-                                      "outside the plausible range +-{} m per coordinate",
-                                      role_name(s.role), s.t_ns, p.x(), p.y(), p.z(), limits::kMaxAbsPositionM));
+    throw TrackerLogError("", fmt::format("cannot write tracker log: {} sample at t_ns {} has position ({}, {}, {}) m, "
+                                          "outside the plausible range +-{} m per coordinate",
+                                          role_name(s.role), s.t_ns, p.x(), p.y(), p.z(), limits::kMaxAbsPositionM));
   if (!q.coeffs().allFinite() || !(std::abs(q.norm() - 1.0) <= kTrackerLogQuatNormTolerance))
-    throw TrackerLogError(fmt::format(
-        "cannot write tracker log: {} sample at t_ns {} has a non-finite or non-unit quaternion",
-        role_name(s.role), s.t_ns));
+    throw TrackerLogError(
+        "", fmt::format("cannot write tracker log: {} sample at t_ns {} has a non-finite or non-unit quaternion",
+                        role_name(s.role), s.t_ns));
   if (!s.has_position) {
     fmt::format_to(it, "{},{},1,,,,{},{},{},{}\n", s.t_ns, role_name(s.role), q.x(), q.y(), q.z(), q.w());
     return;
@@ -325,22 +326,25 @@ std::string format_tracker_log(const std::vector<TrackerSample>& samples, const 
   for (const auto& [key, value] : metadata)
     if (key == kTrackerLogPoseFrameKey) {
       const std::optional<PoseFrame> f = pose_frame_from_name(value);
-      if (!f) throw TrackerLogError(fmt::format("cannot write tracker log: pose_frame '{}' is not joint or device", value));
+      if (!f)
+        throw TrackerLogError("",
+                              fmt::format("cannot write tracker log: pose_frame '{}' is not joint or device", value));
       declared = *f;
     }
   std::array<std::optional<std::int64_t>, kRoleCount> last{};
   for (const TrackerSample& s : samples) {
     if (s.valid && s.frame != declared)
-      throw TrackerLogError(fmt::format(
-          "cannot write tracker log: {} sample at t_ns {} is a {} pose but the metadata says pose_frame {} "
-          "(add the line '{}: {}')",
-          role_name(s.role), s.t_ns, pose_frame_name(s.frame), pose_frame_name(declared), kTrackerLogPoseFrameKey,
-          pose_frame_name(s.frame)));
+      throw TrackerLogError(
+          "",
+          fmt::format("cannot write tracker log: {} sample at t_ns {} is a {} pose but the "
+                      "metadata says pose_frame {}",
+                      role_name(s.role), s.t_ns, pose_frame_name(s.frame), pose_frame_name(declared)),
+          fmt::format("add the metadata line '{}: {}'", kTrackerLogPoseFrameKey, pose_frame_name(s.frame)));
     append_tracker_sample(out, s);  // checks the role before it indexes `last`
     auto& l = last[static_cast<size_t>(s.role)];
     if (l && s.t_ns <= *l)
-      throw TrackerLogError(fmt::format("cannot write tracker log: {} sample t_ns {} is not after the previous {}",
-                                        role_name(s.role), s.t_ns, *l));
+      throw TrackerLogError("", fmt::format("cannot write tracker log: {} sample t_ns {} is not after the previous {}",
+                                            role_name(s.role), s.t_ns, *l));
     l = s.t_ns;
   }
   return out;
@@ -350,10 +354,11 @@ void write_tracker_log(const std::filesystem::path& path, const std::vector<Trac
                        const TrackerLogMetadata& metadata) {
   const std::string text = format_tracker_log(samples, metadata);
   std::ofstream out(path, std::ios::binary);
-  if (!out) throw TrackerLogError(fmt::format("{}: cannot open for writing", path.string()));
+  if (!out)
+    throw TrackerLogError(path.string(), "cannot open for writing", "check that the folder exists and is writable");
   out << text;
   out.flush();
-  if (!out) throw TrackerLogError(fmt::format("{}: write failed", path.string()));
+  if (!out) throw TrackerLogError(path.string(), "write failed", "check the free disk space");
 }
 
 }  // namespace bodyd

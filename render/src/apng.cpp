@@ -44,15 +44,15 @@ void put_chunk(std::vector<std::uint8_t>& out, std::string_view type, std::span<
 
 std::vector<PngChunk> parse_png_chunks(std::span<const std::uint8_t> png) {
   if (png.size() < kPngSignature.size() || !std::equal(kPngSignature.begin(), kPngSignature.end(), png.begin())) {
-    throw RenderError("PNG: no PNG signature at byte 0");
+    throw RenderError("PNG", "no PNG signature at byte 0");
   }
   std::vector<PngChunk> chunks;
   size_t at = kPngSignature.size();
   while (at < png.size()) {
-    if (png.size() - at < 12) throw RenderError(fmt::format("PNG: chunk at byte {} is cut short", at));
+    if (png.size() - at < 12) throw RenderError("PNG", fmt::format("chunk at byte {} is cut short", at));
     const std::uint32_t length = read_u32be(&png[at]);
     if (length > png.size() - at - 12) {
-      throw RenderError(fmt::format("PNG: chunk at byte {} claims {} bytes, past the end", at, length));
+      throw RenderError("PNG", fmt::format("chunk at byte {} claims {} bytes, past the end", at, length));
     }
     PngChunk chunk;
     chunk.type.assign(reinterpret_cast<const char*>(&png[at + 4]), 4);
@@ -60,34 +60,34 @@ std::vector<PngChunk> parse_png_chunks(std::span<const std::uint8_t> png) {
                       png.begin() + static_cast<std::ptrdiff_t>(at + 8 + length));
     const std::uint32_t crc = read_u32be(&png[at + 8 + length]);
     if (crc != static_cast<std::uint32_t>(crc32(0L, &png[at + 4], static_cast<uInt>(4 + length)))) {
-      throw RenderError(fmt::format("PNG: chunk '{}' at byte {} has a wrong CRC", chunk.type, at));
+      throw RenderError("PNG", fmt::format("chunk '{}' at byte {} has a wrong CRC", chunk.type, at));
     }
     at += 12 + length;
     chunks.push_back(std::move(chunk));
   }
-  if (chunks.empty() || chunks.front().type != "IHDR") throw RenderError("PNG: the first chunk is not IHDR");
-  if (chunks.back().type != "IEND") throw RenderError("PNG: the last chunk is not IEND");
+  if (chunks.empty() || chunks.front().type != "IHDR") throw RenderError("PNG", "the first chunk is not IHDR");
+  if (chunks.back().type != "IEND") throw RenderError("PNG", "the last chunk is not IEND");
   return chunks;
 }
 
 std::vector<std::uint8_t> assemble_apng(const std::vector<std::vector<std::uint8_t>>& pngs, std::uint16_t delay_num,
                                         std::uint16_t delay_den) {
-  if (pngs.empty()) throw RenderError("APNG: no frames");
+  if (pngs.empty()) throw RenderError("APNG", "no frames");
   std::vector<std::vector<PngChunk>> frames;
   frames.reserve(pngs.size());
   for (size_t i = 0; i < pngs.size(); ++i) {
     try {
       frames.push_back(parse_png_chunks(pngs[i]));
     } catch (const RenderError& e) {
-      throw RenderError(fmt::format("APNG frame {}: {}", i, e.what()));
+      throw RenderError(e.problem().under(fmt::format("APNG frame {}", i)));
     }
     const auto& chunks = frames.back();
-    if (chunks.front().data.size() != 13) throw RenderError(fmt::format("APNG frame {}: IHDR is not 13 bytes", i));
+    if (chunks.front().data.size() != 13) throw RenderError(fmt::format("APNG frame {}", i), "IHDR is not 13 bytes");
     if (chunks.front().data != frames.front().front().data) {
-      throw RenderError(fmt::format("APNG frame {}: its IHDR (size, depth, colour type) differs from frame 0's", i));
+      throw RenderError(fmt::format("APNG frame {}", i), "its IHDR (size, depth, colour type) differs from frame 0's");
     }
     for (const PngChunk& c : chunks) {
-      if (c.type == "PLTE") throw RenderError(fmt::format("APNG frame {}: palette images are not supported", i));
+      if (c.type == "PLTE") throw RenderError(fmt::format("APNG frame {}", i), "palette images are not supported");
     }
   }
   const std::vector<std::uint8_t>& ihdr = frames.front().front().data;

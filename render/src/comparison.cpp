@@ -1,5 +1,6 @@
 #include "bodyd/render/comparison.h"
 
+#include "bodyd/base/require.h"
 #include "bodyd/protocol/recording.h"
 
 #include <fmt/format.h>
@@ -30,9 +31,10 @@ std::vector<int> map_joints(const Skeleton& truth, const std::vector<std::string
     }
   }
   if (!missing.empty()) {
-    throw RenderError(fmt::format("{}: its skeleton lacks joints of the ground truth {} ({}); a prediction must use the "
-                                  "truth's skeleton (joint names)",
-                                  path.string(), truth_path.string(), missing));
+    throw RenderError(
+        path.string(),
+        fmt::format("its skeleton lacks joints of the ground truth {} ({})", truth_path.string(), missing),
+        "a prediction must use the truth's skeleton (joint names)");
   }
   return map;
 }
@@ -62,12 +64,12 @@ Track load_bvh_prediction(const std::filesystem::path& path, const Motion& truth
   try {
     pred = read_bvh(path);
   } catch (const BvhError& e) {
-    throw RenderError(e.what());
+    throw RenderError(e.problem());
   }
   if (pred.frame_count() != truth.frame_count()) {
-    throw RenderError(fmt::format("{}: {} frames, but the ground truth has {}; a prediction must cover every frame of "
-                                  "its clip (bodyd-eval --out-dir writes such files)",
-                                  path.string(), pred.frame_count(), truth.frame_count()));
+    throw RenderError(path.string(),
+                      fmt::format("{} frames, but the ground truth has {}", pred.frame_count(), truth.frame_count()),
+                      "a prediction must cover every frame of its clip (bodyd-eval --out-dir writes such files)");
   }
   const std::vector<int> map = map_joints(truth.skeleton, pred.skeleton.names, path, "the truth");
   std::vector<GlobalPose> pred_global = global_frames(pred);
@@ -88,7 +90,7 @@ Track load_bvh_prediction(const std::filesystem::path& path, const Motion& truth
 Track load_recording_prediction(const std::filesystem::path& path, const Motion& truth, const std::string& label) {
   protocol::PoseRecording rec;
   if (auto status = protocol::load_pose_recording(path, rec, /*allow_truncated_tail=*/true); !status) {
-    throw RenderError(status.error);
+    throw RenderError("", status.error);
   }
   // Poses whose skeleton the recording holds, converted to the truth's joint order.
   struct Timed {
@@ -119,9 +121,10 @@ Track load_recording_prediction(const std::filesystem::path& path, const Motion&
     poses.push_back(std::move(timed));
   }
   if (poses.empty()) {
-    throw RenderError(fmt::format("{}: no pose with a known skeleton ({} poses, {} skeletons); record the stream for at "
-                                  "least a second so the skeleton is included",
-                                  path.string(), rec.poses.size(), rec.skeletons.size()));
+    throw RenderError(
+        path.string(),
+        fmt::format("no pose with a known skeleton ({} poses, {} skeletons)", rec.poses.size(), rec.skeletons.size()),
+        "record the stream for at least a second so the skeleton is included");
   }
   const int n = truth.frame_count();
   Track track{label, path, {}};
@@ -134,11 +137,13 @@ Track load_recording_prediction(const std::filesystem::path& path, const Motion&
   const double span_s = static_cast<double>(poses.back().t_ns - t0) * 1e-9;
   const double clip_s = (n - 1) * truth.frame_time_s;
   if (span_s + 0.5 * truth.frame_time_s < clip_s) {
-    throw RenderError(fmt::format("{}: the recording spans {:.3f} s ({} poses{}), the ground truth clip {:.3f} s ({} "
-                                  "frames); record the whole clip",
-                                  path.string(), span_s, poses.size(),
-                                  without_skeleton ? fmt::format(", {} before any skeleton skipped", without_skeleton) : "",
-                                  clip_s, n));
+    throw RenderError(
+        path.string(),
+        fmt::format("the recording spans {:.3f} s ({} poses{}), the ground truth clip {:.3f} s ({} frames)", span_s,
+                    poses.size(),
+                    without_skeleton ? fmt::format(", {} before any skeleton skipped", without_skeleton) : "", clip_s,
+                    n),
+        "record the whole clip");
   }
   size_t next = 0;
   for (int f = 0; f < n; ++f) {
@@ -151,10 +156,8 @@ Track load_recording_prediction(const std::filesystem::path& path, const Motion&
 
 FrameErrors per_frame_errors(const JointSets& sets, const std::vector<GlobalPose>& prediction,
                              const std::vector<GlobalPose>& truth) {
-  if (prediction.size() != truth.size()) {
-    throw std::invalid_argument(
-        fmt::format("per_frame_errors: {} predicted frames, {} true frames", prediction.size(), truth.size()));
-  }
+  BODYD_REQUIRE(prediction.size() == truth.size(),
+                fmt::format("per_frame_errors: {} predicted frames, {} true frames", prediction.size(), truth.size()));
   auto mean_cm = [](const std::vector<int>& joints, const GlobalPose& p, const GlobalPose& g) {
     double sum = 0.0;
     for (int j : joints) sum += (p.positions.at(static_cast<size_t>(j)) - g.positions.at(static_cast<size_t>(j))).norm();
@@ -173,7 +176,7 @@ FrameErrors per_frame_errors(const JointSets& sets, const std::vector<GlobalPose
 }
 
 Comparison make_comparison(const std::string& clip_name, const Motion& truth, std::vector<Track> predictions) {
-  if (truth.frame_count() == 0) throw RenderError(fmt::format("{}: the ground truth has no frames", clip_name));
+  if (truth.frame_count() == 0) throw RenderError(clip_name, "the ground truth has no frames");
   Comparison cmp;
   cmp.clip_name = clip_name;
   cmp.skeleton = truth.skeleton;
@@ -182,8 +185,10 @@ Comparison make_comparison(const std::string& clip_name, const Motion& truth, st
   JointSets sets;
   try {
     sets = joint_sets(truth.skeleton);
-  } catch (const std::invalid_argument& e) {
-    throw RenderError(fmt::format("{}: {} (the ground truth must use the bodyd skeleton, docs/conventions.md)", clip_name, e.what()));
+  } catch (const UserError& e) {
+    throw RenderError(
+        clip_name, e.problem().what,
+        "the ground truth must use the bodyd skeleton (docs/conventions.md, \"Skeleton and joint sets\")");
   }
   MetricsAccumulator truth_only(truth.skeleton);
   truth_only.begin_clip(cmp.fps);
@@ -192,13 +197,13 @@ Comparison make_comparison(const std::string& clip_name, const Motion& truth, st
   cmp.truth_quality = truth_only.last_clip_truth();
   for (Track& track : predictions) {
     if (track.frames.size() != cmp.truth.frames.size()) {
-      throw RenderError(fmt::format("{}: {} frames, but the ground truth has {}", track.source.string(), track.frames.size(),
-                                    cmp.truth.frames.size()));
+      throw RenderError(track.source.string(), fmt::format("{} frames, but the ground truth has {}",
+                                                           track.frames.size(), cmp.truth.frames.size()));
     }
     for (const GlobalPose& p : track.frames) {
       if (p.positions.size() != static_cast<size_t>(truth.skeleton.size()) || p.rotations.size() != p.positions.size()) {
-        throw RenderError(fmt::format("{}: poses have {} joints, the ground truth's skeleton {}", track.source.string(),
-                                      p.positions.size(), truth.skeleton.size()));
+        throw RenderError(track.source.string(), fmt::format("poses have {} joints, the ground truth's skeleton {}",
+                                                             p.positions.size(), truth.skeleton.size()));
       }
     }
     MethodResult result;
@@ -218,7 +223,7 @@ Comparison load_comparison(const std::filesystem::path& truth_path, const std::v
   try {
     truth = read_bvh(truth_path);
   } catch (const BvhError& e) {
-    throw RenderError(e.what());
+    throw RenderError(e.problem());
   }
   const std::string clip = truth_path.stem().string();
   std::vector<Track> tracks;

@@ -1,5 +1,6 @@
 #include "bodyd/render/draw.h"
 
+#include "bodyd/base/require.h"
 #include "bodyd/render/apng.h"
 
 #include <cairo.h>
@@ -9,7 +10,6 @@
 #include <array>
 #include <cmath>
 #include <memory>
-#include <stdexcept>
 
 namespace bodyd::render {
 namespace {
@@ -31,8 +31,8 @@ class Canvas {
   Canvas(int width, int height)
       : surface_(cairo_image_surface_create(CAIRO_FORMAT_RGB24, width, height)), cr_(cairo_create(surface_.get())) {
     if (cairo_status(cr_.get()) != CAIRO_STATUS_SUCCESS) {
-      throw std::runtime_error(fmt::format("cairo: cannot create a {}x{} image: {}", width, height,
-                                           cairo_status_to_string(cairo_status(cr_.get()))));
+      throw RenderError("cairo", fmt::format("cannot create a {}x{} image: {}", width, height,
+                                             cairo_status_to_string(cairo_status(cr_.get()))));
     }
     // Fixed font options, so text does not depend on the desktop's settings.
     cairo_font_options_t* fo = cairo_font_options_create();
@@ -59,7 +59,7 @@ class Canvas {
         },
         &out);
     if (status != CAIRO_STATUS_SUCCESS) {
-      throw std::runtime_error(fmt::format("cairo: cannot encode PNG: {}", cairo_status_to_string(status)));
+      throw RenderError("cairo", fmt::format("cannot encode PNG: {}", cairo_status_to_string(status)));
     }
     return out;
   }
@@ -307,7 +307,8 @@ ImageSize contact_sheet_size(const Comparison& cmp, const SheetOptions& options)
 }
 
 std::vector<std::uint8_t> contact_sheet_png(const Comparison& cmp, const SheetOptions& options) {
-  if (options.columns < 1) throw RenderError("contact sheet: columns must be at least 1");
+  // bodyd-render's --columns is checked where it is parsed.
+  BODYD_REQUIRE(options.columns >= 1, "contact sheet: columns must be at least 1");
   const Joints jn(cmp.skeleton);
   const std::vector<int> frames = sheet_frames(cmp.frame_count(), options);
   const ImageSize size = contact_sheet_size(cmp, options);
@@ -455,9 +456,8 @@ std::vector<std::uint8_t> error_plot_png(const Comparison& cmp) {
 }
 
 std::vector<std::uint8_t> animation_frame_png(const Comparison& cmp, int frame) {
-  if (frame < 0 || frame >= cmp.frame_count()) {
-    throw std::out_of_range(fmt::format("animation frame {} of a clip of {} frames", frame, cmp.frame_count()));
-  }
+  BODYD_REQUIRE(frame >= 0 && frame < cmp.frame_count(),
+                fmt::format("animation frame {} of a clip of {} frames", frame, cmp.frame_count()));
   const Joints jn(cmp.skeleton);
   const ImageSize size = kAnimationFrameSize;
   Canvas canvas(size.width, size.height);
@@ -488,7 +488,8 @@ std::vector<std::uint8_t> animation_frame_png(const Comparison& cmp, int frame) 
 }
 
 std::vector<std::uint8_t> animation_apng(const Comparison& cmp, const AnimationOptions& options) {
-  if (options.every < 1) throw RenderError("animation: every must be at least 1");
+  // bodyd-render's --anim-every is checked where it is parsed.
+  BODYD_REQUIRE(options.every >= 1, "animation: every must be at least 1");
   std::vector<std::vector<std::uint8_t>> pngs;
   for (int f = 0; f < cmp.frame_count(); f += options.every) pngs.push_back(animation_frame_png(cmp, f));
   const double delay_ms = std::round(1000.0 * options.every / cmp.fps);

@@ -1,5 +1,6 @@
 // bodyd-sim: simulated tracker log (head + two hands) from a BVH clip.
 // Options and models: docs/simulator.md; output format: docs/tracker-log.md.
+#include "bodyd/base/user_error.h"
 #include "bodyd/motion/bvh.h"
 #include "bodyd/motion/tracker_log.h"
 #include "bodyd/simulators/sim_flags.h"
@@ -105,16 +106,10 @@ int main(int argc, char** argv) {
                    opt.rate_of(r), invalid, n ? 100.0 * static_cast<double>(invalid) / static_cast<double>(n) : 0.0);
       }
     }
-  } catch (const bodyd::BvhError& e) {
-    fmt::print(stderr, "bodyd-sim: {}\n", e.what());
-    return 1;
-  } catch (const bodyd::BodyReferenceError& e) {
-    fmt::print(stderr, "bodyd-sim: {}\n", e.what());
-    return 1;
-  } catch (const bodyd::SimError& e) {
+  } catch (const bodyd::SimError& e) {  // about the clip, which it does not name
     fmt::print(stderr, "bodyd-sim: {}: {}\n", bvh_path, e.what());
     return 1;
-  } catch (const bodyd::TrackerLogError& e) {
+  } catch (const bodyd::UserError& e) {  // the BVH, body reference or tracker log, named
     fmt::print(stderr, "bodyd-sim: {}\n", e.what());
     return 1;
   }

@@ -68,16 +68,18 @@ double SimOptions::dropout_fraction() const {
 
 TrackerTrajectory::TrackerTrajectory(const Motion& motion) {
   const Skeleton& sk = motion.skeleton;
-  if (std::string err = sk.validate(); !err.empty()) throw SimError("cannot simulate trackers: " + err);
-  if (motion.frames.empty()) throw SimError("cannot simulate trackers: the clip has no frames");
+  if (std::string err = sk.validate(); !err.empty()) throw SimError("", "cannot simulate trackers: " + err);
+  if (motion.frames.empty()) throw SimError("", "cannot simulate trackers: the clip has no frames");
   if (!finite_in(motion.frame_time_s, 1e-6, 10.0))
-    throw SimError(fmt::format("cannot simulate trackers: frame time {} s is not usable", motion.frame_time_s));
+    throw SimError("", fmt::format("cannot simulate trackers: frame time {} s is not usable", motion.frame_time_s));
   std::array<int, kRoleCount> joint{};
   for (Role r : kRoles) {
     joint[static_cast<size_t>(r)] = sk.find(role_joint_name(r));
     if (joint[static_cast<size_t>(r)] < 0)
-      throw SimError(fmt::format("cannot simulate trackers: the skeleton has no joint '{}' (tracked by role {})",
-                                 role_joint_name(r), role_name(r)));
+      throw SimError("",
+                     fmt::format("cannot simulate trackers: the skeleton has no joint '{}' (tracked by role {})",
+                                 role_joint_name(r), role_name(r)),
+                     "use motion data on the bodyd skeleton (docs/conventions.md, \"Skeleton and joint sets\")");
   }
   frames_ = motion.frame_count();
   frame_time_s_ = motion.frame_time_s;
@@ -89,25 +91,25 @@ TrackerTrajectory::TrackerTrajectory(const Motion& motion) {
   for (int f = 0; f < frames_; ++f) {
     const Pose& pose = motion.frames[static_cast<size_t>(f)];
     if (pose.local_rotations.size() != nj || pose.local_translations.size() != nj)
-      throw SimError(fmt::format("cannot simulate trackers: frame {} has {} rotations and {} translations for {} "
-                                 "joints",
-                                 f, pose.local_rotations.size(), pose.local_translations.size(), nj));
+      throw SimError("", fmt::format("cannot simulate trackers: frame {} has {} rotations and {} translations for {} "
+                                     "joints",
+                                     f, pose.local_rotations.size(), pose.local_translations.size(), nj));
     forward_kinematics(sk, pose, global);
     for (Role r : kRoles) {
       const auto ri = static_cast<size_t>(r);
       const auto j = static_cast<size_t>(joint[ri]);
       if (!global.positions[j].allFinite() || !global.rotations[j].coeffs().allFinite())
-        throw SimError(fmt::format("cannot simulate trackers: joint '{}' is not finite in frame {}",
-                                   role_joint_name(r), f));
+        throw SimError(
+            "", fmt::format("cannot simulate trackers: joint '{}' is not finite in frame {}", role_joint_name(r), f));
       // A tracker log holds positions within limits::kMaxAbsPositionM; a clip whose joints lie
       // beyond (a BVH value the reader let through, or a skeleton built in code) is refused here
       // rather than written as a log no reader accepts.
       const Vec3& p = global.positions[j];
       if (!limits::position_plausible(p.x()) || !limits::position_plausible(p.y()) ||
           !limits::position_plausible(p.z()))
-        throw SimError(fmt::format("cannot simulate trackers: joint '{}' is at ({:.6g}, {:.6g}, {:.6g}) m in frame "
-                                   "{}, outside the plausible range +-{} m of a tracker position",
-                                   role_joint_name(r), p.x(), p.y(), p.z(), f, limits::kMaxAbsPositionM));
+        throw SimError("", fmt::format("cannot simulate trackers: joint '{}' is at ({:.6g}, {:.6g}, {:.6g}) m in frame "
+                                       "{}, outside the plausible range +-{} m of a tracker position",
+                                       role_joint_name(r), p.x(), p.y(), p.z(), f, limits::kMaxAbsPositionM));
       positions_m_[ri].push_back(global.positions[j]);
       rotations_[ri].push_back(global.rotations[j].normalized());
     }
@@ -208,7 +210,7 @@ std::vector<TrackerSample> with_calibration_pose(const std::vector<TrackerSample
       head0 = &s;
       break;
     }
-  if (head0 == nullptr) throw SimError("no valid head sample to stand the calibration pose at");
+  if (head0 == nullptr) throw SimError("", "no valid head sample to stand the calibration pose at");
   const TrackerSample joint0 = device_to_joint(*head0, mounting.T_device_joint[0]);
   const double heading = yaw_of((joint0.rotation * reference.head_in_facing.conjugate()).normalized(), Vec3::UnitZ());
   return with_held_pose(samples, calibration_pose_joints(reference, joint0.position_m, heading), mounting, rate_hz, seconds);
@@ -217,7 +219,7 @@ std::vector<TrackerSample> with_calibration_pose(const std::vector<TrackerSample
 std::vector<TrackerSample> with_held_pose(const std::vector<TrackerSample>& samples,
                                           const std::array<RigidTransform, kRoleCount>& joints, const Mounting& mounting,
                                           double rate_hz, double seconds, bool body_roles) {
-  if (samples.empty()) throw SimError("no samples to hold a pose before");
+  if (samples.empty()) throw SimError("", "no samples to hold a pose before");
   // The roles held: the body trackers first (as the hands, before the head), then the hands, the head.
   std::array<bool, kRoleCount> carried{}, with_position{};
   for (const TrackerSample& s : samples) {
@@ -252,12 +254,12 @@ std::vector<TrackerSample> with_held_pose(const std::vector<TrackerSample>& samp
 }
 
 std::vector<TrackerSample> simulate_trackers(const Motion& motion, const SimOptions& options) {
-  if (std::string err = options.validate(); !err.empty()) throw SimError("bad simulator options: " + err);
+  if (std::string err = options.validate(); !err.empty()) throw SimError("", "bad simulator options: " + err);
   return simulate_trackers(TrackerTrajectory(motion), options);
 }
 
 std::vector<TrackerSample> simulate_trackers(const TrackerTrajectory& traj, const SimOptions& opt) {
-  if (std::string err = opt.validate(); !err.empty()) throw SimError("bad simulator options: " + err);
+  if (std::string err = opt.validate(); !err.empty()) throw SimError("", "bad simulator options: " + err);
   const double duration_s = static_cast<double>(traj.duration_ns()) * 1e-9;
   const std::int64_t latency_ns = std::llround(opt.latency_ms * 1e6);
   const double pos_sigma_m = opt.position_noise_mm * 1e-3;

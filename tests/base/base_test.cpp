@@ -8,6 +8,7 @@
 #include "bodyd/base/random.h"
 #include "bodyd/base/require.h"
 #include "bodyd/base/spec_options.h"
+#include "bodyd/base/user_error.h"
 
 #include <gtest/gtest.h>
 
@@ -81,6 +82,37 @@ TEST(RequireDeathTest, StopsWithFileLineAndWhat) {
   EXPECT_DEATH(BODYD_REQUIRE(1 + 1 == 3, "arithmetic broke: " + detail),
                "base_test.cpp:[0-9]+: bug: arithmetic broke: joint 3 \\(1 \\+ 1 == 3\\)");
   BODYD_REQUIRE(1 + 1 == 2, "never printed");  // a true condition does nothing
+}
+
+// ---- UserError -------------------------------------------------------------------------------------
+
+TEST(UserError, MessageIsWhereWhatTodoWithoutEmptyParts) {
+  EXPECT_EQ((Problem{"walk.bvh:12", "expected '{'", "re-export it"}.message()),
+            "walk.bvh:12: expected '{'; re-export it");
+  EXPECT_EQ((Problem{"", "no input", "give --split FILE"}.message()), "no input; give --split FILE");
+  EXPECT_EQ((Problem{"a.log", "read error", ""}.message()), "a.log: read error");
+  EXPECT_EQ((Problem{"", "no frames", ""}.message()), "no frames");
+}
+
+TEST(UserError, AProblemUnderAnOuterContextKeepsItsWords) {
+  const Problem inner{"m.safetensors", "tensor \"w\" is missing", "export it again"};
+  const Problem outer = inner.under("method 'diffusion'");
+  EXPECT_EQ(outer.where, "method 'diffusion'");
+  EXPECT_EQ(outer.todo, "export it again");
+  EXPECT_EQ(outer.message(), "method 'diffusion': m.safetensors: tensor \"w\" is missing; export it again");
+  EXPECT_EQ((Problem{"", "no frames", ""}.under("clip a").message()), "clip a: no frames");
+}
+
+TEST(UserError, WhatIsTheMessageAndTheProblemKeepsItsParts) {
+  const UserError e("--rate", "\"fast\" is not a number", "give Hz, e.g. --rate 90");
+  EXPECT_STREQ(e.what(), "--rate: \"fast\" is not a number; give Hz, e.g. --rate 90");
+  EXPECT_EQ(e.problem().where, "--rate");
+  EXPECT_EQ(e.problem().what, "\"fast\" is not a number");
+  EXPECT_EQ(e.problem().todo, "give Hz, e.g. --rate 90");
+  // A user error is a std::runtime_error, so a program's start that catches std::exception still
+  // prints it.
+  const std::runtime_error& base = e;
+  EXPECT_STREQ(base.what(), e.what());
 }
 
 // ---- splitmix64 ------------------------------------------------------------------------------------

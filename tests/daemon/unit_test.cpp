@@ -112,7 +112,12 @@ TEST(SampleQueue, WithoutMaxAgeOrWithPushWaitNothingIsDroppedForAge) {
   ASSERT_TRUE(q.pop(out, 0ms));
   EXPECT_EQ(out.arrival_ns, 5'000'000'000);
   EXPECT_EQ(q.dropped_stale(), 0u);
-  EXPECT_THROW(SampleQueue(4, -1ms), std::invalid_argument);
+}
+
+TEST(SampleQueueDeathTest, NoCapacityOrANegativeAgeIsABug) {
+  // The Daemon clamps the configured queue_capacity and queue_max_age_ms: only bodyd's code can pass these.
+  EXPECT_DEATH(SampleQueue(4, -1ms), "bug: SampleQueue: max_age must be >= 0");
+  EXPECT_DEATH(SampleQueue(0), "bug: SampleQueue: capacity must be > 0");
 }
 
 TEST(SampleQueue, PushWaitTimesOutWhenFullAndSucceedsWhenDrained) {

@@ -45,9 +45,16 @@ TEST(Metrics, JointSetsAreThoseOfTheConventions) {
   try {
     (void)joint_sets(bad);
     FAIL();
-  } catch (const std::invalid_argument& e) {
+  } catch (const UserError& e) {
     EXPECT_NE(std::string(e.what()).find("Toes_R"), std::string::npos);
   }
+}
+
+TEST(MetricsDeathTest, AFrameOutsideAClipOrAClipAtNoFpsIsABug) {
+  // Clips come from the BVH reader (frame times in [0.0001, 1] s): only bodyd's code can break these.
+  MetricsAccumulator acc(walk().skeleton);
+  EXPECT_DEATH(acc.add_frame(frame(0), frame(0)), "bug: metrics: add_frame\\(\\) outside begin_clip");
+  EXPECT_DEATH(acc.begin_clip(0.0), "bug: metrics: fps must be positive");
 }
 
 TEST(Metrics, ConstantOffsetOfTwoCentimetres) {

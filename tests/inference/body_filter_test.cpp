@@ -19,7 +19,6 @@
 #include <filesystem>
 #include <limits>
 #include <random>
-#include <stdexcept>
 #include <vector>
 
 using namespace bodyd;
@@ -192,13 +191,13 @@ TEST(Diffusion, BodyFilterIsOnByDefaultAndRefusesBadOptions) {
   EXPECT_TRUE(identical(rc, rd));   // the default is the filter on at its default cutoffs
   DiffusionOptions bad;
   bad.body_filter.rot_min_cutoff_hz = -1.0;
-  EXPECT_THROW(DiffusionReconstructor(tiny_model(), bad), std::invalid_argument);
+  EXPECT_THROW(DiffusionReconstructor(tiny_model(), bad), UserError);
   // The foot lock's options are checked too: a NaN or out-of-range value never reaches the state.
   EXPECT_EQ(validate_foot_lock(DiffusionOptions{}), "");
   DiffusionOptions lock = {};
   lock.foot_unlock_distance_m = std::numeric_limits<double>::quiet_NaN();
   EXPECT_NE(validate_foot_lock(lock).find("foot_unlock_distance_m"), std::string::npos);
-  EXPECT_THROW(DiffusionReconstructor(tiny_model(), lock), std::invalid_argument);
+  EXPECT_THROW(DiffusionReconstructor(tiny_model(), lock), UserError);
   lock = {};
   lock.contact_on = 1.5f;
   EXPECT_NE(validate_foot_lock(lock).find("contact_on"), std::string::npos);
@@ -210,7 +209,7 @@ TEST(Diffusion, BodyFilterIsOnByDefaultAndRefusesBadOptions) {
     DiffusionOptions arms;
     arms.elbow_pole_bias_m = bias;
     EXPECT_NE(validate_foot_lock(arms).find("elbow_pole_bias_m"), std::string::npos) << bias;
-    EXPECT_THROW(DiffusionReconstructor(tiny_model(), arms), std::invalid_argument) << bias;
+    EXPECT_THROW(DiffusionReconstructor(tiny_model(), arms), UserError) << bias;
   }
 }
 

@@ -266,7 +266,7 @@ TEST(Diffusion, TrackingFlagsSurviveACalibration) {
 TEST(Diffusion, RejectsAModelOnAnotherSkeleton) {
   auto model = std::make_shared<inference::Model>(*tiny_model());
   model->skeleton.names[5] = "Kopf";
-  EXPECT_THROW(DiffusionReconstructor r(model), std::invalid_argument);
+  EXPECT_THROW(DiffusionReconstructor r(model), UserError);
 }
 
 class DefaultModel : public test::DefaultModelTest {};

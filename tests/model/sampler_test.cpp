@@ -1,6 +1,8 @@
 // DDIM sampler: step schedule, PyTorch parity (given the initial noise), imputation exactness,
 // determinism, and the generator.
 #include "bodyd/inference/sampler.h"
+
+#include "bodyd/base/user_error.h"
 #include "bodyd/inference/mlpwin.h"
 #include "test_util.h"
 
@@ -32,8 +34,9 @@ TEST(Sampler, Timesteps) {
   std::iota(all.rbegin(), all.rend(), 0);
   EXPECT_EQ(inference::ddim_timesteps(10, 10), all);
   EXPECT_EQ(inference::ddim_timesteps(100, 7), (std::vector<int>{99, 82, 66, 49, 33, 16, 0}));
-  EXPECT_THROW((void)inference::ddim_timesteps(10, 11), std::invalid_argument);
-  EXPECT_THROW((void)inference::ddim_timesteps(10, 0), std::invalid_argument);
+  // K is the user's --steps: a user error; T < 1 cannot come from a checked model file.
+  EXPECT_THROW((void)inference::ddim_timesteps(10, 11), UserError);
+  EXPECT_THROW((void)inference::ddim_timesteps(10, 0), UserError);
 }
 
 TEST(Sampler, MatchesPyTorchGivenTheNoise) {
@@ -117,13 +120,20 @@ TEST(Sampler, GuidanceOneSkipsTheUnconditionalPass) {
   EXPECT_GT(relative_error(a, b), 1e-3);
 }
 
-TEST(Sampler, InvalidOptionsThrow) {
+TEST(Sampler, TheUsersOptionsOutOfRangeThrow) {
+  // Steps and guidance come from the user's flags (--steps, --guidance).
   const auto net = tiny_network();
-  EXPECT_THROW(Sampler(net, SamplerOptions{0, 1.0f, 0.0f}), std::invalid_argument);
-  EXPECT_THROW(Sampler(net, SamplerOptions{11, 1.0f, 0.0f}), std::invalid_argument);
-  EXPECT_THROW(Sampler(net, SamplerOptions{4, NAN, 0.0f}), std::invalid_argument);
-  EXPECT_THROW(Sampler(net, SamplerOptions{4, 1.0f, -0.1f}), std::invalid_argument);
-  EXPECT_THROW(Sampler(nullptr, SamplerOptions{}), std::invalid_argument);
+  EXPECT_THROW(Sampler(net, SamplerOptions{0, 1.0f, 0.0f}), UserError);
+  EXPECT_THROW(Sampler(net, SamplerOptions{11, 1.0f, 0.0f}), UserError);
+  EXPECT_THROW(Sampler(net, SamplerOptions{4, NAN, 0.0f}), UserError);
+}
+
+TEST(SamplerDeathTest, ANullNetworkOrABadEtaIsABug) {
+  // No user sets eta (bodyd passes 0) or passes the network: bodyd's own code broke.
+  const auto net = tiny_network();
+  EXPECT_DEATH(Sampler(net, SamplerOptions{4, 1.0f, -0.1f}), "bug: sampler eta must be finite and >= 0");
+  EXPECT_DEATH(Sampler(nullptr, SamplerOptions{}), "bug: Sampler needs a network");
+  EXPECT_DEATH((void)inference::ddim_timesteps(0, 1), "bug: DDIM needs T >= 1");
 }
 
 TEST(Rng, NormalMoments) {

@@ -37,7 +37,7 @@ class SplitFile : public ::testing::Test {
   std::string message(const fs::path& p) {
     try {
       (void)read_split(p);
-    } catch (const std::runtime_error& e) {
+    } catch (const UserError& e) {
       return e.what();
     }
     return "(no error)";

@@ -28,7 +28,8 @@ namespace bodyd::daemon {
 
 class SampleQueue final : public drivers::SampleSink {
  public:
-  // max_age: zero = keep every sample until the queue is full.
+  // max_age: zero = keep every sample until the queue is full. A capacity of 0 or a negative
+  // max_age is a bug (the Daemon clamps the configured ones).
   explicit SampleQueue(std::size_t capacity, std::chrono::nanoseconds max_age = std::chrono::nanoseconds::zero());
 
   void push(const drivers::SourceSample& sample) override;

@@ -33,6 +33,7 @@
 // fewer than 4 frames no jitter); a metric no clip defines is NaN.
 #pragma once
 
+#include "bodyd/base/user_error.h"
 #include "bodyd/motion/skeleton.h"
 
 #include <array>
@@ -113,7 +114,7 @@ struct JointSets {
   std::array<int, 2> toes{};  // Toes_L, Toes_R
   int head = -1;              // Head
 };
-// Throws std::invalid_argument naming the first body joint the skeleton lacks.
+// Throws UserError naming the first body joint the skeleton lacks.
 [[nodiscard]] JointSets joint_sets(const Skeleton& skeleton);
 
 // Accumulates the metrics over clips. Per frame: add_frame(predicted, truth), both global
@@ -124,10 +125,11 @@ class MetricsAccumulator {
  public:
   explicit MetricsAccumulator(const Skeleton& skeleton);
 
-  // Starts a clip at `fps` frames per second (> 0). An unfinished clip is discarded.
+  // Starts a clip at `fps` frames per second (> 0, else a bug). An unfinished clip is discarded.
   void begin_clip(double fps);
   // `hand_valid`: whether the left and right hand trackers were valid at this frame (for the
-  // gap metrics and hand_pe_max_cm); the two-argument form treats both as valid.
+  // gap metrics and hand_pe_max_cm); the two-argument form treats both as valid. Only between
+  // begin_clip() and end_clip() (else a bug).
   void add_frame(const GlobalPose& predicted, const GlobalPose& truth);
   void add_frame(const GlobalPose& predicted, const GlobalPose& truth, const std::array<bool, 2>& hand_valid);
   // Finishes the clip; its metrics join the totals weighted by its frame count. Returns them

@@ -12,6 +12,7 @@
 // buffers are allocated in the constructor; reconstruct() does not allocate.
 #pragma once
 
+#include "bodyd/base/user_error.h"
 #include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/features.h"
 #include "bodyd/inference/model_file.h"
@@ -69,7 +70,7 @@ struct DiffusionOptions {
 
 // Empty when the foot lock's, the legs' and the arms' options are usable (finite, contacts and
 // leg_position_blend in [0, 1], distances, speed, half-life and elbow_pole_bias_m in range),
-// otherwise what is wrong; the constructor throws std::invalid_argument.
+// otherwise what is wrong; the constructor throws UserError.
 [[nodiscard]] std::string validate_foot_lock(const DiffusionOptions& options);
 
 // DiffusionOptions::leg_position_blend on a decoded frame: each leg of `legs` (UpperLeg, LowerLeg,
@@ -83,7 +84,8 @@ void bend_legs_toward_predicted_ankles(const Skeleton& skeleton, const std::arra
 
 class DiffusionReconstructor final : public Reconstructor {
  public:
-  // Throws std::invalid_argument if the model's skeleton does not match the features' skeleton.
+  // Throws UserError if the options are not usable (validate(), validate_foot_lock()) or the
+  // model's skeleton does not match the features' skeleton.
   DiffusionReconstructor(std::shared_ptr<const inference::Model> model, const DiffusionOptions& options = {});
 
   [[nodiscard]] std::string_view name() const override { return "diffusion"; }

@@ -2,6 +2,7 @@
 // tools turn "ik" or "diffusion" into an object.
 #pragma once
 
+#include "bodyd/base/user_error.h"
 #include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/one_euro.h"
 #include "bodyd/inference/reconstructor.h"
@@ -19,9 +20,9 @@ namespace bodyd {
 
 // A reconstructor could not be made (unknown method, missing or bad model file, missing
 // skeleton); the message says which and what to do.
-class ReconstructorError : public std::runtime_error {
+class ReconstructorError : public UserError {
  public:
-  using std::runtime_error::runtime_error;
+  using UserError::UserError;
 };
 
 // The method names make_reconstructor() knows, e.g. {"diffusion", "ik"}.

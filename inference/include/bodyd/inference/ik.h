@@ -59,8 +59,8 @@ struct IkOptions {
 
 class IkReconstructor final : public Reconstructor {
  public:
-  // Throws std::invalid_argument if the skeleton is invalid or lacks a joint of the reference
-  // or of the arm chains.
+  // Throws std::invalid_argument (standing_reference's) if the skeleton is invalid or lacks a
+  // joint of the reference, UserError if it lacks an arm chain or its Head is not below its Hips.
   explicit IkReconstructor(const Skeleton& skeleton, const IkOptions& options = {});
 
   [[nodiscard]] std::string_view name() const override { return "ik"; }

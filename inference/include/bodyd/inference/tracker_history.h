@@ -45,7 +45,7 @@ struct TrackerHistoryOptions {
 
 class TrackerHistory {
  public:
-  // Throws std::invalid_argument for capacity < 2 or a negative timeout.
+  // Capacity < 2, a negative timeout or a max_abs_position_m not > 0 is a bug (BODYD_REQUIRE).
   explicit TrackerHistory(const TrackerHistoryOptions& options = {});
 
   // Stores a sample. A sample older than its role's newest is ignored and counted

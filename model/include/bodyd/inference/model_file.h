@@ -13,6 +13,7 @@
 // immutable and meant to be shared (std::shared_ptr<const Model>) by every session.
 #pragma once
 
+#include "bodyd/base/user_error.h"
 #include "bodyd/motion/skeleton.h"
 
 #include <cstddef>
@@ -33,9 +34,9 @@ namespace bodyd::inference {
 
 // Every problem with a model file: the message names the file, the field or tensor, what is
 // wrong and, where it helps, what to do.
-class ModelFileError : public std::runtime_error {
+class ModelFileError : public UserError {
  public:
-  using std::runtime_error::runtime_error;
+  using UserError::UserError;
 };
 
 inline constexpr std::string_view kModelFormat = "bodyd-model";

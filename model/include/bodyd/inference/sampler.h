@@ -33,7 +33,8 @@ struct SamplerOptions {
 };
 
 // The K DDIM steps from T-1 down to 0: tau_k = floor((T-1) * (K-1-k) / (K-1)), k = 0..K-1;
-// K = 1 gives {T-1}. T=100, K=4: {99, 66, 33, 0}. Throws std::invalid_argument unless 1 <= K <= T.
+// K = 1 gives {T-1}. T=100, K=4: {99, 66, 33, 0}. Throws UserError unless 1 <= K <= T (K is the
+// user's --steps); T < 1 is a bug.
 [[nodiscard]] std::vector<int> ddim_timesteps(int T, int K);
 
 // Small deterministic generator: xoshiro256** (Blackman & Vigna) seeded by splitmix64, standard
@@ -55,8 +56,8 @@ class Rng {
 
 class Sampler {
  public:
-  // Throws std::invalid_argument if options are out of range (steps not in [1, T], guidance
-  // not finite, eta negative or not finite) or network is null.
+  // Throws UserError if the user's options are out of range (steps not in [1, T], guidance not
+  // finite); a null network or an eta negative or not finite is a bug (BODYD_REQUIRE).
   Sampler(std::shared_ptr<const Denoiser> network, const SamplerOptions& options = {}, std::uint64_t seed = 0);
 
   [[nodiscard]] const Denoiser& network() const { return *network_; }

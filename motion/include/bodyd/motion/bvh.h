@@ -6,6 +6,7 @@
 // throws BvhError naming the file, the line and what is wrong.
 #pragma once
 
+#include "bodyd/base/user_error.h"
 #include "bodyd/motion/skeleton.h"
 
 #include <filesystem>
@@ -15,9 +16,9 @@
 
 namespace bodyd {
 
-class BvhError : public std::runtime_error {
+class BvhError : public UserError {
  public:
-  using std::runtime_error::runtime_error;
+  using UserError::UserError;
 };
 
 enum class Channel : int { Xposition, Yposition, Zposition, Xrotation, Yrotation, Zrotation };

@@ -16,6 +16,7 @@
 // kGripToWrist*). A calibration pose (inference/calibration.h) measures the same from the user.
 #pragma once
 
+#include "bodyd/base/user_error.h"
 #include "bodyd/motion/bvh.h"
 #include "bodyd/motion/tracker.h"
 
@@ -86,9 +87,9 @@ struct BodyReference {
   std::string measured_on;
 };
 
-class BodyReferenceError : public std::runtime_error {
+class BodyReferenceError : public UserError {
  public:
-  using std::runtime_error::runtime_error;
+  using UserError::UserError;
 };
 
 // Measures the reference on clips (the joints named in docs/conventions.md). `measured_on` is

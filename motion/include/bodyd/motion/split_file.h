@@ -12,14 +12,16 @@
 // training/train.py's read_clip_list reads its clip lists (--exclude-split) by the same line rule.
 #pragma once
 
+#include "bodyd/base/user_error.h"
+
 #include <filesystem>
 #include <string_view>
 #include <vector>
 
 namespace bodyd {
 
-// The clips of a split file, in its order. Throws std::runtime_error naming the file (and the
-// line) when it cannot be opened, lists a file that does not exist, or lists none.
+// The clips of a split file, in its order. Throws UserError (base/user_error.h) naming the file
+// (and the line) when it cannot be opened, lists a file that does not exist, or lists none.
 [[nodiscard]] std::vector<std::filesystem::path> read_split(const std::filesystem::path& split_file);
 
 // One line of a split file by the rule above: the path it lists, or "" for a skipped line.

@@ -14,6 +14,7 @@
 // renormalised on read, so they agree to a few ulp).
 #pragma once
 
+#include "bodyd/base/user_error.h"
 #include "bodyd/motion/limits.h"
 #include "bodyd/motion/tracker.h"
 
@@ -30,9 +31,9 @@
 
 namespace bodyd {
 
-class TrackerLogError : public std::runtime_error {
+class TrackerLogError : public UserError {
  public:
-  using std::runtime_error::runtime_error;
+  using UserError::UserError;
 };
 
 inline constexpr std::string_view kTrackerLogVersionLine = "# bodyd-tracker-log v1";

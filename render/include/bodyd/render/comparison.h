@@ -7,6 +7,7 @@
 // RenderError with the file and what to do.
 #pragma once
 
+#include "bodyd/base/user_error.h"
 #include "bodyd/inference/metrics.h"
 #include "bodyd/motion/bvh.h"
 
@@ -17,9 +18,9 @@
 
 namespace bodyd::render {
 
-class RenderError : public std::runtime_error {
+class RenderError : public UserError {
  public:
-  using std::runtime_error::runtime_error;
+  using UserError::UserError;
 };
 
 // One motion over the truth's frames: global joint transforms in the truth skeleton's joint order.
@@ -81,7 +82,7 @@ struct PredictionSource {
 [[nodiscard]] Track load_recording_prediction(const std::filesystem::path& path, const Motion& truth,
                                               const std::string& label);
 
-// Per-frame errors of `prediction` against `truth` (equal frame counts and joint order).
+// Per-frame errors of `prediction` against `truth` (equal frame counts, else a bug; same joint order).
 // Distances only; the joint sets come from bodyd::joint_sets().
 [[nodiscard]] FrameErrors per_frame_errors(const JointSets& sets, const std::vector<GlobalPose>& prediction,
                                            const std::vector<GlobalPose>& truth);

@@ -18,7 +18,7 @@ struct ImageSize {
 
 struct SheetOptions {
   int every = 0;         // draw frames 0, every, 2*every, ...; 0: about kAutoPanels frames over the clip
-  int columns = 6;       // frames per row of the sheet
+  int columns = 6;       // frames per row of the sheet, >= 1 (else a bug)
   bool joint_names = false;  // write the truth's joint names in the front views
 };
 inline constexpr int kAutoPanels = 12;
@@ -41,10 +41,11 @@ inline constexpr ImageSize kErrorPlotSize{1200, 860};
 [[nodiscard]] std::vector<std::uint8_t> error_plot_png(const Comparison& comparison);
 
 struct AnimationOptions {
-  int every = 1;  // animate frames 0, every, 2*every, ... at the clip's speed
+  int every = 1;  // animate frames 0, every, 2*every, ... at the clip's speed; >= 1 (else a bug)
 };
 inline constexpr ImageSize kAnimationFrameSize{560, 400};
-// One frame of the animation (front and side views of frame `frame`, legend, per-frame errors).
+// One frame of the animation (front and side views of frame `frame`, legend, per-frame errors);
+// `frame` in [0, frame_count) (else a bug).
 [[nodiscard]] std::vector<std::uint8_t> animation_frame_png(const Comparison& comparison, int frame);
 // The animation as an animated PNG (APNG, looping): frames drawn by animation_frame_png().
 [[nodiscard]] std::vector<std::uint8_t> animation_apng(const Comparison& comparison, const AnimationOptions& options);

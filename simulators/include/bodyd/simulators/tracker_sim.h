@@ -12,6 +12,7 @@
 // platform and changing one role's rate does not change another role's noise.
 #pragma once
 
+#include "bodyd/base/user_error.h"
 #include "bodyd/motion/bvh.h"
 #include "bodyd/motion/mounting.h"
 #include "bodyd/motion/tracker.h"
@@ -26,9 +27,9 @@
 
 namespace bodyd {
 
-class SimError : public std::runtime_error {
+class SimError : public UserError {
  public:
-  using std::runtime_error::runtime_error;
+  using UserError::UserError;
 };
 
 struct SimOptions {
