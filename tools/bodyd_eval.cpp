@@ -6,6 +6,7 @@
 //              [--body-scale S] [--out-dir DIR] [--methods diffusion,ik] [--split FILE.txt] [FILE.bvh...]
 //              [--no-body-filter | --body-filter-min-cutoff-hz F --body-filter-beta B ...] [--contact-on V] ...
 #include "bodyd/base/random.h"
+#include "bodyd/base/user_error.h"
 #include "bodyd/inference/diffusion.h"
 #include "bodyd/inference/evaluation.h"
 #include "bodyd/inference/filter_option_keys.h"
@@ -18,6 +19,7 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
+#include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -167,18 +169,20 @@ int main(int argc, char** argv) {
     std::vector<std::filesystem::path> clips;
     if (!split.empty()) clips = bodyd::read_split(split);
     for (const std::string& f : files) clips.emplace_back(f);
-    if (clips.empty()) throw std::runtime_error("no clips: give BVH files or --split FILE.txt");
+    if (clips.empty()) throw bodyd::UserError("", "no clips", "give BVH files or --split FILE.txt");
 
     bodyd::EvalOptions options;
     options.trackers = bodyd::tracker_set_text({sim.roles, sim.rotation_only});
     options.methods = split_list(methods_text);
-    if (options.methods.empty()) throw std::runtime_error("--methods names no method");
+    if (options.methods.empty()) throw bodyd::UserError("--methods", "names no method", "give diffusion, ik or both");
     options.model_path = model;
-    if (const std::string e = bodyd::validate(method_options.filter); !e.empty()) throw std::runtime_error(e);
+    if (const std::string e = bodyd::validate(method_options.filter); !e.empty())
+      throw bodyd::UserError("", e, "see the --filter-* flags' ranges in docs/daemon.md, \"Tracker filter\"");
     // --body-filter-min-cutoff-hz alone sets the rotations' cutoff too (as it always has here).
     if (filter_flags.at("body_filter.min_cutoff_hz")->count() > 0 && filter_flags.at("body_filter.rot_min_cutoff_hz")->count() == 0)
       method_options.body_filter.rot_min_cutoff_hz = method_options.body_filter.min_cutoff_hz;
-    if (const std::string e = bodyd::validate(method_options.body_filter); !e.empty()) throw std::runtime_error(e);
+    if (const std::string e = bodyd::validate(method_options.body_filter); !e.empty())
+      throw bodyd::UserError("", e, "see the --body-filter-* flags' ranges in docs/daemon.md, \"Body filter\"");
     if (!weights_text.empty()) method_options.weights = bodyd::inference::parse_weights(weights_text);
     options.reconstructor = method_options;
     if (!out_dir.empty()) options.out_dir = out_dir;
@@ -200,17 +204,17 @@ int main(int argc, char** argv) {
       else if (calibration_pose != "none") options.calibrate_pose = true;
       if (calibration_pose != "none" && calibration_pose != "first-still" && calibration_pose != "truth" &&
           calibration_pose != "reference" && calibration_pose != "person") {
-        try {
-          std::size_t used = 0;
-          hold_frame = std::stoi(calibration_pose, &used);
-          if (used != calibration_pose.size() || *hold_frame < 0) throw std::invalid_argument("");
-        } catch (const std::exception&) {
-          throw std::runtime_error("--calibration-pose " + calibration_pose +
-                                   ": expected first-still, none or a frame number (0, 1, ...)");
-        }
+        int frame = -1;
+        const char* end = calibration_pose.data() + calibration_pose.size();
+        const auto [at, ec] = std::from_chars(calibration_pose.data(), end, frame);
+        if (ec != std::errc() || at != end || frame < 0)
+          throw bodyd::UserError("--calibration-pose " + calibration_pose, "not a choice or a frame number",
+                                 "give first-still, none, reference, person, truth or a frame number (0, 1, ...)");
+        hold_frame = frame;
       }
     } else if (calibration_pose != "first-still") {
-      throw std::runtime_error("--calibration-pose goes with --device-frames xr");
+      throw bodyd::UserError("--calibration-pose " + calibration_pose, "needs device frames",
+                             "add --device-frames xr");
     }
     const bodyd::Mounting defaults = bodyd::default_mounting(options.body_reference);
     const auto session_mounting = [&](int index) {
@@ -230,7 +234,9 @@ int main(int argc, char** argv) {
       } else if (hold_frame) {
         // The calibration pose: frame N's device poses held still for 1.2 s before the clip.
         if (*hold_frame >= clip.frame_count())
-          throw std::runtime_error(fmt::format("--calibration-pose {}: the clip has {} frames", *hold_frame, clip.frame_count()));
+          throw bodyd::UserError(fmt::format("--calibration-pose {}", *hold_frame),
+                                 fmt::format("the clip has {} frames", clip.frame_count()),
+                                 "hold a frame every clip has (0 is the first)");
         // The clip's joints at frame N (its truth), held still, seen through the session mounting.
         const bodyd::TrackerTrajectory trajectory(clip);
         const std::int64_t t_frame = std::llround(*hold_frame * clip.frame_time_s * 1e9);
@@ -247,11 +253,10 @@ int main(int argc, char** argv) {
     // this is the last wall, against clips too short for a metric and against bugs.
     auto require_finite = [](double v, const std::string& what) {
       if (!std::isfinite(v))
-        throw std::runtime_error(fmt::format(
-            "{} is {}: no result is printed. A metric is undefined when every clip is too short for it (jitter "
-            "needs 4 frames, velocities 2); otherwise a clip holds values the metrics cannot use, so check the "
-            "clips with bodyd-bvh, and report it if they read fine",
-            what, v));
+        throw bodyd::UserError(what, fmt::format("is {}: no result is printed", v),
+                               "a metric is undefined when every clip is too short for it (jitter needs 4 frames, "
+                               "velocities 2); otherwise a clip holds values the metrics cannot use, so check the "
+                               "clips with bodyd-bvh, and report it if they read fine");
     };
     for (const bodyd::MethodReport& m : report.methods)
       for (const bodyd::MetricKey& k : bodyd::kMetricKeys)
@@ -262,7 +267,7 @@ int main(int argc, char** argv) {
     if (!json_path.empty()) {
       std::ofstream out(json_path);
       out << json;
-      if (!out) throw std::runtime_error(fmt::format("{}: cannot write the JSON report", json_path));
+      if (!out) throw bodyd::UserError(json_path, "cannot write the JSON report", "check the folder exists and is writable");
     }
     fmt::print("{}", bodyd::report_table(report));
     fmt::print("timing ({}): p50 {:.4f} ms, p99 {:.4f} ms per frame\n", report.timing_method,

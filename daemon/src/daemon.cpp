@@ -993,7 +993,7 @@ std::string Daemon::start() {
   d.default_mount = default_mounting(d.body_reference);
   try {
     d.body_joints = body_joints_in_pose(d.recon->skeleton());
-  } catch (const std::invalid_argument& e) {
+  } catch (const UserError& e) {
     // A skeleton without the reference's joints (a reduced test rig): no body tracker can be
     // placed in the pose, so none is measured and their device poses stay unused.
     spdlog::info("body trackers' mountings cannot be measured with this skeleton ({})", e.what());

@@ -1,6 +1,8 @@
 #include "bodyd/inference/evaluation.h"
 
 #include "bodyd/base/percentile.h"
+#include "bodyd/base/require.h"
+#include "bodyd/base/user_error.h"
 #include "bodyd/inference/body_pipeline.h"
 #include "bodyd/inference/factory.h"
 #include "bodyd/inference/ik.h"
@@ -134,8 +136,9 @@ std::vector<int> joint_map(const Skeleton& truth, const Skeleton& predicted, con
   for (size_t j = 0; j < truth.names.size(); ++j) {
     map[j] = predicted.find(truth.names[j]);
     if (map[j] < 0)
-      throw std::runtime_error(fmt::format("method '{}': its skeleton has no joint '{}' of the clip's skeleton",
-                                           method, truth.names[j]));
+      throw UserError(fmt::format("method '{}'", method),
+                      fmt::format("its skeleton has no joint '{}' of the clip's skeleton", truth.names[j]),
+                      "evaluate clips on the model's skeleton (the bundled motion data's)");
   }
   return map;
 }
@@ -317,9 +320,9 @@ Motion scale_motion(const Motion& clip, double s) {
 
 EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOptions& options,
                     const TrackerSource& source) {
-  if (options.methods.empty()) throw std::invalid_argument("evaluate: no methods given");
-  if (!(options.body_scale > 0.0) || !std::isfinite(options.body_scale))
-    throw std::invalid_argument(fmt::format("evaluate: body scale must be > 0, got {}", options.body_scale));
+  // The caller checks its flags (bodyd-eval: --methods, --body-scale's range): a bad one here is a bug.
+  BODYD_REQUIRE(!options.methods.empty(), "evaluate: no methods given");
+  BODYD_REQUIRE(options.body_scale > 0.0 && std::isfinite(options.body_scale), "evaluate: body scale must be > 0");
   if (options.out_dir) std::filesystem::create_directories(*options.out_dir);
 
   EvalReport report;
@@ -357,13 +360,13 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
   for (const std::filesystem::path& path : clips) {
     const Motion clip = options.body_scale == 1.0 ? read_bvh(path) : scale_motion(read_bvh(path), options.body_scale);
     try {
-      if (clip.frame_count() == 0) throw std::runtime_error("the clip has no frames");
+      if (clip.frame_count() == 0) throw UserError("", "the clip has no frames", "leave it out of the clips or the split");
       if (!first_skeleton) {
         first_skeleton = clip.skeleton;
         for (size_t m = 0; m < options.methods.size(); ++m) metrics.emplace_back(clip.skeleton);
       } else if (clip.skeleton.names != first_skeleton->names) {
-        throw std::runtime_error(
-            "its joints (names or order) differ from the first clip's; evaluate clips of one skeleton together");
+        throw UserError("", "its joints (names or order) differ from the first clip's",
+                        "evaluate clips of one skeleton together");
       }
       const std::array<std::string, 3> names = clip_groups(path);
       std::array<GroupAcc*, 3> group{};
@@ -443,8 +446,8 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
           calibration_time_sum_s += static_cast<double>(h.t_ns - frame_times.front()) * 1e-9;
         }
         if (run.unanswered == clip.frame_count())
-          throw std::runtime_error(
-              fmt::format("method '{}' produced no pose for any frame (no valid head sample?)", method));
+          throw UserError(fmt::format("method '{}'", method), "produced no pose for any frame",
+                          "check the clip's trackers: the head must be tracked (no valid head sample?)");
         unanswered[m] += run.unanswered;
         times[m].insert(times[m].end(), run.ms_per_frame.begin(), run.ms_per_frame.end());
 
@@ -472,8 +475,10 @@ EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOpti
       }
     } catch (const ReconstructorError&) {
       throw;  // says which method and what to do; the same for every clip
-    } catch (const std::exception& e) {
-      throw std::runtime_error(fmt::format("{}: {}", path.string(), e.what()));
+    } catch (const UserError& e) {
+      throw UserError(e.problem().under(path.string()));
+    } catch (const std::exception& e) {  // a file system error of --out-dir, a tracker source's failure
+      throw UserError(path.string(), e.what());
     }
     ++report.clips;
     report.frames += clip.frame_count();

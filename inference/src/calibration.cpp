@@ -1,4 +1,7 @@
 #include "bodyd/inference/calibration.h"
+
+#include "bodyd/base/require.h"
+#include "bodyd/base/user_error.h"
 #include "bodyd/inference/ik.h"
 
 #include "bodyd/motion/limits.h"
@@ -49,7 +52,8 @@ std::string validate(const StandingHeightOptions& o) {
 }
 
 StandingHeightDetector::StandingHeightDetector(const StandingHeightOptions& options) : options_(options) {
-  if (std::string e = validate(options_); !e.empty()) throw std::invalid_argument("StandingHeightOptions: " + e);
+  // The options come from code (the defaults, a test's), never a user: a bad one is a bug.
+  BODYD_REQUIRE(validate(options_).empty(), "StandingHeightOptions: " + validate(options_));
   ring_.resize(static_cast<std::size_t>(std::ceil(options_.still_s * 1e9 / kMinSpacingNs)) + 2);
   histogram_.assign(static_cast<std::size_t>(std::ceil(limits::kMaxHeadHeightM / kBinM)) + 1, 0);
 }
@@ -160,7 +164,9 @@ double max_mounting_change_deg(const PoseCalibrationOptions& options, Role r) {
 BodyJointsInPose body_joints_in_pose(const Skeleton& skeleton) {
   const StandingReference ref = standing_reference(skeleton);
   const int head = skeleton.find("Head");
-  if (head < 0 || !(ref.head_height_m > 0.0)) throw std::invalid_argument("body_joints_in_pose: the skeleton has no Head joint");
+  if (head < 0 || !(ref.head_height_m > 0.0))
+    throw UserError("body trackers' joints in the calibration pose", "the skeleton has no Head joint",
+                    "use motion data on the bodyd skeleton (docs/conventions.md)");
   BodyJointsInPose b;
   const Vec3 head_p = ref.global.positions[static_cast<std::size_t>(head)];
   for (Role r : kRoles) {
@@ -178,7 +184,7 @@ BodyJointsInPose body_joints_in_pose(const Skeleton& skeleton) {
 PoseCalibrator::PoseCalibrator(const BodyReference& reference, const Mounting& defaults,
                                const PoseCalibrationOptions& options, const BodyJointsInPose& body_joints)
     : reference_(reference), defaults_(defaults), options_(options), body_joints_(body_joints) {
-  if (std::string e = validate(options_); !e.empty()) throw std::invalid_argument("PoseCalibrationOptions: " + e);
+  BODYD_REQUIRE(validate(options_).empty(), "PoseCalibrationOptions: " + validate(options_));  // as above
   // Up to 1000 samples a second per role (headsets report 72 to 120 Hz; more are thinned).
   for (auto& w : window_) w.reserve(static_cast<std::size_t>(options_.still_s * 1000.0) + 4);
 }

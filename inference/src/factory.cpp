@@ -44,9 +44,6 @@ std::unique_ptr<Reconstructor> make_reconstructor_of(std::string_view method,
       return std::make_unique<IkReconstructor>(*skeleton_hint);
     } catch (const UserError& e) {
       throw ReconstructorError(e.problem().under("method 'ik'"));
-    } catch (const std::invalid_argument& e) {
-      // standing_reference() still throws this (daemon.cpp catches it by that name).
-      throw ReconstructorError("method 'ik'", e.what());
     }
   }
   if (method == "diffusion") {
@@ -69,10 +66,6 @@ std::unique_ptr<Reconstructor> make_reconstructor_of(std::string_view method,
       return std::make_unique<DiffusionReconstructor>(std::move(model), d);
     } catch (const UserError& e) {
       throw ReconstructorError(e.problem().under("method 'diffusion'"));
-    } catch (const std::invalid_argument& e) {
-      // standing_head_height_m() (standing_reference()) still throws this (daemon.cpp catches it
-      // by that name).
-      throw ReconstructorError("method 'diffusion'", e.what());
     }
   }
   throw ReconstructorError("", fmt::format("unknown reconstruction method '{}'", method),

@@ -52,8 +52,8 @@ constexpr double kStandingToesHeightM = 0.045;
 int require(const Skeleton& skeleton, std::string_view name, std::string_view what) {
   const int j = skeleton.find(name);
   if (j < 0)
-    throw std::invalid_argument(std::string(what) + ": the skeleton has no joint '" + std::string(name) +
-                                "' (expected the joints of the bundled motion data, docs/evaluation.md)");
+    throw UserError(std::string(what), "the skeleton has no joint '" + std::string(name) + "'",
+                    "expected the joints of the bundled motion data (docs/evaluation.md)");
   return j;
 }
 
@@ -61,7 +61,7 @@ int require(const Skeleton& skeleton, std::string_view name, std::string_view wh
 
 StandingReference standing_reference(const Skeleton& skeleton) {
   if (const std::string err = skeleton.validate(); !err.empty())
-    throw std::invalid_argument("standing reference: invalid skeleton: " + err);
+    throw UserError("standing reference", "invalid skeleton: " + err, kUseTheBodydSkeleton);
   StandingReference ref;
   ref.pose = rest_pose(skeleton);
   for (int j = 0; j < skeleton.size(); ++j) {
@@ -70,9 +70,10 @@ StandingReference standing_reference(const Skeleton& skeleton) {
     for (const JointRotation& r : kStandingFrame)
       if (r.name == name) found = &r;
     if (found == nullptr)
-      throw std::invalid_argument("standing reference: joint '" + name +
-                                  "' is not a joint of the bundled motion data's skeleton; the reference "
-                                  "standing pose only knows that skeleton");
+      throw UserError("standing reference",
+                      "joint '" + name + "' is not a joint of the bundled motion data's skeleton; the reference "
+                      "standing pose only knows that skeleton",
+                      kUseTheBodydSkeleton);
     ref.pose.local_rotations[static_cast<size_t>(j)] = Quat(found->w, found->x, found->y, found->z).normalized();
   }
   const auto hips = static_cast<size_t>(require(skeleton, "Hips", "standing reference"));
@@ -82,7 +83,7 @@ StandingReference standing_reference(const Skeleton& skeleton) {
   const auto toes_l = static_cast<size_t>(require(skeleton, "Toes_L", "standing reference"));
   const auto toes_r = static_cast<size_t>(require(skeleton, "Toes_R", "standing reference"));
   if (skeleton.parents[hips] > 0)
-    throw std::invalid_argument("standing reference: 'Hips' must be the root or a child of the root");
+    throw UserError("standing reference", "'Hips' must be the root or a child of the root", kUseTheBodydSkeleton);
   // The root (joint_Root) stays at the origin; the hips carry the world position.
   if (hips != 0) {
     ref.pose.local_rotations[0] = Quat::Identity();

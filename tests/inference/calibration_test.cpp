@@ -125,7 +125,14 @@ TEST(StandingHeight, AnySampleRateWithoutAllocatingAndBadOptionsRefused) {
   bad = {};
   bad.fallback_percentile = 120.0;
   EXPECT_NE(validate(bad).find("fallback_percentile"), std::string::npos);
-  EXPECT_THROW(StandingHeightDetector{bad}, std::invalid_argument);
+}
+
+// The detector's options come from code, never a user: a bad one is a bug (issue 45 item 5).
+TEST(StandingHeightDeathTest, BadOptionsAreABug) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  StandingHeightOptions bad;
+  bad.fallback_percentile = 120.0;
+  EXPECT_DEATH(StandingHeightDetector{bad}, "bug: StandingHeightOptions: fallback_percentile");
 }
 
 TEST(StandingHeight, CalibrationAppliesPlausibleHeightsOnly) {

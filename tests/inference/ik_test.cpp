@@ -99,10 +99,10 @@ TEST(StandingReference, UnknownSkeletonIsAClearError) {
   try {
     (void)standing_reference(s);
     FAIL() << "no error";
-  } catch (const std::invalid_argument& e) {
+  } catch (const UserError& e) {
     EXPECT_NE(std::string(e.what()).find("LeftPaw"), std::string::npos) << e.what();
   }
-  EXPECT_THROW(IkReconstructor{s}, std::invalid_argument);
+  EXPECT_THROW(IkReconstructor{s}, UserError);
   EXPECT_THROW((void)make_reconstructor("ik", {}, &s), ReconstructorError);
 }
 

@@ -181,9 +181,10 @@ struct EvalReport {
 };
 
 // Evaluates every clip with every method. Throws BvhError for an unreadable clip,
-// ReconstructorError for a method that cannot be made, and std::runtime_error naming the clip
+// ReconstructorError for a method that cannot be made, and a UserError whose where is the clip
 // for anything else (a skeleton that differs from the first clip's or lacks a body joint, a
-// method that never produced a pose on the clip, a tracker source that failed).
+// method that never produced a pose on the clip, a tracker source that failed). No methods or a
+// body scale <= 0 is a bug (BODYD_REQUIRE): the caller checks its options.
 [[nodiscard]] EvalReport evaluate(std::span<const std::filesystem::path> clips, const EvalOptions& options,
                                   const TrackerSource& source);
 

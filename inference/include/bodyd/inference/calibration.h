@@ -139,7 +139,7 @@ struct BodyJointsInPose {
   std::array<Vec3, kRoleCount> from_head{};    // (joint - Head joint) / standing head height
   std::array<Quat, kRoleCount> in_facing{};
 };
-// Throws std::invalid_argument when the skeleton lacks a joint of the standing reference.
+// Throws UserError when the skeleton lacks a joint of the standing reference.
 [[nodiscard]] BodyJointsInPose body_joints_in_pose(const Skeleton& skeleton);
 
 // A body tracker further than this from its joint in the calibration pose is not where its role

@@ -40,7 +40,7 @@ struct StandingReference {
 };
 
 // The reference standing pose on `skeleton` (any bone lengths; joint names of the bundled data).
-// Throws std::invalid_argument naming the first joint the reference does not know.
+// Throws UserError naming the first joint the reference does not know.
 [[nodiscard]] StandingReference standing_reference(const Skeleton& skeleton);
 
 // The skeleton's standing head height (Head joint, metres): the "model height" of user-height
@@ -59,8 +59,8 @@ struct IkOptions {
 
 class IkReconstructor final : public Reconstructor {
  public:
-  // Throws std::invalid_argument (standing_reference's) if the skeleton is invalid or lacks a
-  // joint of the reference, UserError if it lacks an arm chain or its Head is not below its Hips.
+  // Throws UserError if the skeleton is invalid, lacks a joint of the reference (standing_reference's)
+  // or an arm chain, or its Head is not below its Hips.
   explicit IkReconstructor(const Skeleton& skeleton, const IkOptions& options = {});
 
   [[nodiscard]] std::string_view name() const override { return "ik"; }
