@@ -13,6 +13,7 @@
 // Exit codes: 0 done; 1 bodyd answered with an error; 2 bad command line; 3 no answer.
 #include "bodyd/client/client.h"
 #include "bodyd/client/curve_keys.h"
+#include "bodyd/motion/tracker.h"
 #include "bodyd/paths/data_files.h"
 
 #include <CLI/CLI.hpp>
@@ -185,8 +186,8 @@ std::string mounting_text(const json& m) {
   if (!m.is_object() || !m.contains("roles")) return "none";
   std::string s;
   // The headset and controllers, then the body trackers bodyd lists (those measured).
-  for (const char* role : {"head", "left_hand", "right_hand", "hips", "chest", "left_foot", "right_foot", "left_knee",
-                           "right_knee", "left_elbow", "right_elbow"}) {
+  for (const bodyd::Role each : bodyd::kRoles) {
+    const std::string role(bodyd::role_name(each));
     if (!m["roles"].contains(role)) continue;
     const json& r = m["roles"][role];
     const std::string origin = r.value("origin", std::string("?"));
@@ -271,8 +272,8 @@ void print_status(const json& r) {
   // Every role with its state, source and rate (issue 44).
   if (const json trackers = r.value("trackers", json::object()); trackers.is_object() && !trackers.empty()) {
     std::string line;
-    for (const char* role : {"head", "left_hand", "right_hand", "hips", "chest", "left_foot", "right_foot", "left_knee",
-                             "right_knee", "left_elbow", "right_elbow"}) {
+    for (const bodyd::Role each : bodyd::kRoles) {
+      const std::string role(bodyd::role_name(each));
       if (!trackers.contains(role)) continue;
       const json& t = trackers[role];
       std::string name = role;
