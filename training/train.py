@@ -114,6 +114,10 @@ def parse_args():
                    help="per sample and extra role: probability that the role is tracked")
     p.add_argument("--extra-rot-only-prob", type=float, default=0.3,
                    help="of the tracked extra roles: probability that only the rotation is observed (an IMU tracker)")
+    p.add_argument("--extra-none-prob", type=float, default=0.0,
+                   help="per sample: probability that no extra role is observed at all (the user with a headset and "
+                        "controllers only); otherwise each role is drawn with --extra-role-prob. 0 (default): the "
+                        "per-role draws alone, which leave 0.7^8 = 6%% of the samples with head and hands only")
     p.add_argument("--extra-drop-prob", type=float, default=0.15,
                    help="per tracked extra role: probability of a tracking-loss span (as --hand-drop-prob)")
     p.add_argument("--extra-mount-cm", type=float, default=2.0,
@@ -168,6 +172,8 @@ def parse_args():
     a = p.parse_args()
     if not 0.0 <= a.observed_weight <= 1.0:
         p.error(f"--observed-weight must be in [0, 1], got {a.observed_weight}")
+    if not 0.0 <= a.extra_none_prob < 1.0:
+        p.error(f"--extra-none-prob must be in [0, 1) (1 would never observe an extra role), got {a.extra_none_prob}")
     for flag, v in (("--minutes", a.minutes), ("--session-minutes", a.session_minutes)):
         if not (math.isfinite(v) and v >= 0):
             p.error(f"{flag} takes minutes, a finite number >= 0 (0 = no limit), got {v}")
@@ -262,8 +268,14 @@ class Masker:
         """Per extra role: (B, W) position visibility and (B, W) rotation visibility."""
         a, dev = self.args, self.device
         out = []
+        # Drawn only when asked for, so that without it the draws (and a run's masks) are the old ones.
+        some = None
+        if a.extra_none_prob > 0:
+            some = (torch.rand(B, generator=gen, device=dev) >= a.extra_none_prob).float().view(B, 1)
         for _ in self.extra:
             tracked = (torch.rand(B, generator=gen, device=dev) < a.extra_role_prob).float().view(B, 1)
+            if some is not None:
+                tracked = tracked * some
             rot_only = (torch.rand(B, generator=gen, device=dev) < a.extra_rot_only_prob).float().view(B, 1)
             vis = self.span_visible(B, gen, a.extra_drop_prob) * tracked
             out.append((vis * (1 - rot_only), vis))
