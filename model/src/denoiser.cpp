@@ -8,6 +8,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <array>
 
 namespace bodyd::inference {
@@ -24,9 +25,8 @@ constexpr std::array kArchitectures = {
 std::span<const Architecture> architectures() { return kArchitectures; }
 
 const Architecture* find_architecture(std::string_view name) {
-  for (const Architecture& a : kArchitectures)
-    if (a.name == name) return &a;
-  return nullptr;
+  const auto a = std::ranges::find(kArchitectures, name, &Architecture::name);
+  return a == kArchitectures.end() ? nullptr : &*a;
 }
 
 std::string architecture_names() {

@@ -4,6 +4,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 
@@ -56,9 +57,8 @@ const std::array<SimOptionKey, 11> kRows{{
 std::span<const SimOptionKey> sim_option_keys() { return kRows; }
 
 const SimOptionKey* find_sim_option_key(std::string_view key) {
-  for (const SimOptionKey& row : kRows)
-    if (row.key == key) return &row;
-  return nullptr;
+  const auto row = std::ranges::find(kRows, key, &SimOptionKey::key);
+  return row == kRows.end() ? nullptr : &*row;
 }
 
 std::string SimOptions::validate() const {
