@@ -33,6 +33,7 @@ upstream schema), with Debian's python3-protobuf and the test's own .proto
       Sends one kind of bad input and writes to OUT whether bodyd closed the connection and
       whether a fresh connection is served afterwards (it gets the TrackerAdded announcements).
 """
+import argparse
 import json
 import os
 import select
@@ -184,24 +185,9 @@ def read_frames(path):
     return frames
 
 
-def play(args):
-    path, poses, out_path = args[0], args[1], args[2]
-    rate = 90.0
-    reconnect_after = -1
-    hands = True
-    repeat = 1
-    i = 3
-    while i < len(args):
-        if args[i] == "--rate":
-            rate = float(args[i + 1]); i += 2
-        elif args[i] == "--reconnect-after":
-            reconnect_after = int(args[i + 1]); i += 2
-        elif args[i] == "--no-hands":
-            hands = False; i += 1
-        elif args[i] == "--repeat":
-            repeat = int(args[i + 1]); i += 2
-        else:
-            raise SystemExit("unknown option " + args[i])
+def play(a):
+    path, poses, out_path = a.socket, a.poses, a.out
+    rate, reconnect_after, hands, repeat = a.rate, a.reconnect_after, a.hands, a.repeat
     roles = ["head", "left_hand", "right_hand"] if hands else ["head"]
     frames = read_frames(poses) * repeat
     with open(out_path, "w") as out:
@@ -255,27 +241,10 @@ def read_timed(path):
     return out
 
 
-def driver(args):
-    path, poses, out_path = args[0], args[1], args[2]
-    seconds, generic = 10.0, 0
-    imu, lost = None, None
-    generic_off, reconnect_at = None, None
-    i = 3
-    while i < len(args):
-        if args[i] == "--seconds":
-            seconds = float(args[i + 1]); i += 2
-        elif args[i] == "--generic":
-            generic = int(args[i + 1]); i += 2
-        elif args[i] == "--imu-head":
-            imu = (float(args[i + 1]), float(args[i + 2])); i += 3
-        elif args[i] == "--lost-head":
-            lost = (float(args[i + 1]), float(args[i + 2])); i += 3
-        elif args[i] == "--generic-off":
-            generic_off = float(args[i + 1]); i += 2
-        elif args[i] == "--reconnect-at":
-            reconnect_at = float(args[i + 1]); i += 2
-        else:
-            raise SystemExit("unknown option " + args[i])
+def driver(a):
+    path, poses, out_path = a.socket, a.poses, a.out
+    seconds, generic, imu, lost = a.seconds, a.generic, a.imu_head, a.lost_head
+    generic_off, reconnect_at = a.generic_off, a.reconnect_at
     roles = ["head", "left_hand", "right_hand"] + GENERIC[:generic]
     timed = read_timed(poses)
     clip_s = timed[-1][0] + 1.0 / 90.0
@@ -360,8 +329,8 @@ def driver(args):
         out.write(json.dumps(counts) + "\n")
 
 
-def bad(args):
-    path, kind, out_path = args[0], args[1], args[2]
+def bad(a):
+    path, kind, out_path = a.socket, a.kind, a.out
     s = connect(path)
     result = {"kind": kind}
     if kind == "too_long":
@@ -435,13 +404,33 @@ def bad(args):
         out.write(json.dumps(result) + "\n")
 
 
+def parse_args(argv):
+    """The command line of the module's docstring."""
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("pb_dir")
+    modes = p.add_subparsers(dest="mode", required=True)
+    pl = modes.add_parser("play")
+    dr = modes.add_parser("driver")
+    for m in (pl, dr):
+        m.add_argument("socket")
+        m.add_argument("poses")
+        m.add_argument("out")
+    pl.add_argument("--rate", type=float, default=90.0)
+    pl.add_argument("--reconnect-after", type=int, default=-1)
+    pl.add_argument("--no-hands", dest="hands", action="store_false")
+    pl.add_argument("--repeat", type=int, default=1)
+    dr.add_argument("--seconds", type=float, default=10.0)
+    dr.add_argument("--generic", type=int, default=0)
+    dr.add_argument("--imu-head", type=float, nargs=2, metavar=("T0", "T1"))
+    dr.add_argument("--lost-head", type=float, nargs=2, metavar=("T0", "T1"))
+    dr.add_argument("--generic-off", type=float)
+    dr.add_argument("--reconnect-at", type=float)
+    bd = modes.add_parser("bad")
+    for name in ("socket", "kind", "out"):
+        bd.add_argument(name)
+    return p.parse_args(argv)
+
+
 if __name__ == "__main__":
-    mode = sys.argv[2]
-    if mode == "play":
-        play(sys.argv[3:])
-    elif mode == "driver":
-        driver(sys.argv[3:])
-    elif mode == "bad":
-        bad(sys.argv[3:])
-    else:
-        raise SystemExit("usage: driver_client.py PB_DIR play|driver|bad ...")
+    args = parse_args(sys.argv[1:])
+    {"play": play, "driver": driver, "bad": bad}[args.mode](args)
