@@ -89,6 +89,11 @@ inline std::vector<ResidualBlock> load_residual_blocks(const Model& model, int L
   }
   return blocks;
 }
+// The trunk's blocks, out_norm, out, dec1 (split after E rows) and dec2.
+inline MlpTrunkLayers load_mlp_trunk_layers(const Model& model, int L, Eigen::Index E) {
+  return MlpTrunkLayers{load_residual_blocks(model, L), load_layer_norm(model, "out_norm"), load_linear(model, "out"),
+                        load_split_linear(model, "dec1", E), load_linear(model, "dec2")};
+}
 
 // h += fc2(SiLU(fc1(LayerNorm(h)))) for each block, on h's columns (one per window); n and a are
 // buffers of h's size. `product(b, layer, x, y, accumulate)` computes y = W x (or y += W x) with

@@ -70,11 +70,7 @@ MlpWin::MlpWin(const Model& model) : EigenDenoiser(model) {
   const MlpWinConfig& c = config_;
   enc_ = detail::load_split_linear(model, "enc", c.D);
   inp_ = load_linear(model, "inp");
-  blocks_ = load_residual_blocks(model, c.L);
-  out_norm_ = load_layer_norm(model, "out_norm");
-  out_ = load_linear(model, "out");
-  dec1_ = detail::load_split_linear(model, "dec1", c.E);
-  dec2_ = load_linear(model, "dec2");
+  trunk_ = detail::load_mlp_trunk_layers(model, c.L, c.E);
 
   // The time MLP depends on t alone: evaluate it once per step here (in double, then rounded),
   // with inp.bias folded in.
@@ -124,16 +120,16 @@ void MlpWin::forward(std::span<const float> x, std::span<const float> m, int t, 
   h.colwise() += time_table_.col(t);
 
   // 4. Residual blocks: h += fc2(SiLU(fc1(LayerNorm(h)))).
-  residual_blocks(blocks_, h, n, a);
+  residual_blocks(trunk_.blocks, h, n, a);
 
   // 5. z = out(SiLU(LayerNorm_out(h))).
   auto z = s.z_.leftCols(batch);
-  trunk_out(out_norm_, out_, h, n, z);
+  trunk_out(trunk_.out_norm, trunk_.out, h, n, z);
 
   // 6. y_w = dec2(SiLU(dec1 [z_w; e_w])); z viewed as E x (W * batch), frame-major like e.
   Eigen::Map<const Eigen::MatrixXf> Z(s.z_.data(), c.E, frames);
-  detail::split_linear_silu(dec1_, Z, e, d);
-  detail::linear(dec2_, d, Y);
+  detail::split_linear_silu(trunk_.dec1, Z, e, d);
+  detail::linear(trunk_.dec2, d, Y);
 }
 
 }  // namespace bodyd::inference

@@ -72,11 +72,7 @@ TcnMlp::TcnMlp(const Model& model, Weights weights)
   enc_ = load_split_linear(model, "enc", c.D);
   const Linear inp = load_linear(model, "inp");
   inp_ = inp.weight;
-  blocks_ = load_residual_blocks(model, c.L);
-  out_norm_ = load_layer_norm(model, "out_norm");
-  out_ = load_linear(model, "out");
-  dec1_ = load_split_linear(model, "dec1", c.E);
-  dec2_ = load_linear(model, "dec2");
+  trunk_ = load_mlp_trunk_layers(model, c.L, c.E);
   // The time MLP depends on t alone: evaluated once per step here, with inp.bias and ctx.bias folded in.
   const Eigen::VectorXf biases = inp.bias + ctx.bias;
   time_table_ = time_table(load_linear(model, "time1"), load_linear(model, "time2"), c.TE, c.T, &biases);
@@ -84,7 +80,7 @@ TcnMlp::TcnMlp(const Model& model, Weights weights)
     const Eigen::Index past = static_cast<Eigen::Index>(c.N - 1) * c.E;
     if (past > 0) inp_past_bf16_ = detail::Bf16Matrix(inp_.leftCols(past));
     inp_newest_bf16_ = detail::Bf16Matrix(inp_.rightCols(c.E));
-    for (const detail::ResidualBlock& b : blocks_)
+    for (const detail::ResidualBlock& b : trunk_.blocks)
       blocks_bf16_.push_back({detail::Bf16Matrix(b.fc1.weight), detail::Bf16Matrix(b.fc2.weight)});
   }
 }
@@ -167,18 +163,18 @@ void TcnMlp::forward(std::span<const float> x, std::span<const float> m, int t, 
     h.col(b).noalias() += ctx_ * cn.col(b * W + W - 1);
   }
   h.colwise() += time_table_.col(t);
-  residual_blocks(blocks_, h, n, a);
+  residual_blocks(trunk_.blocks, h, n, a);
   auto z = s.z_.leftCols(batch);
-  trunk_out(out_norm_, out_, h, n, z);
+  trunk_out(trunk_.out_norm, trunk_.out, h, n, z);
 
   // y_w = dec2(SiLU(dec1 [z_w; e_w])) for the newest N frames.
   const Eigen::Map<const Eigen::MatrixXf> Z(s.z_.data(), c.E, N * batch);
   auto e = s.e_.leftCols(N * batch);
   auto d = s.d_.leftCols(N * batch);
-  split_linear_silu(dec1_, Z, e, d);
+  split_linear_silu(trunk_.dec1, Z, e, d);
   for (Eigen::Index b = 0; b < batch; ++b) {
     auto y = Y.middleCols(b * W + W - N, N);
-    linear(dec2_, d.middleCols(b * N, N), y);
+    linear(trunk_.dec2, d.middleCols(b * N, N), y);
   }
 }
 
@@ -256,22 +252,23 @@ void TcnMlp::forward_newest(std::span<const float> x, std::span<const float> m, 
   if (weights_ == Weights::bf16) {
     // h, n, a: one contiguous column each.
     inp_newest_bf16_.multiply(e.data(), h.data(), true);
-    residual_blocks_by(blocks_, h, n, a, [this](std::size_t b, int layer, const auto& x, auto& y, bool accumulate) {
-      blocks_bf16_[b][static_cast<std::size_t>(layer)].multiply(x.data(), y.data(), accumulate);
-    });
+    residual_blocks_by(trunk_.blocks, h, n, a,
+                       [this](std::size_t b, int layer, const auto& x, auto& y, bool accumulate) {
+                         blocks_bf16_[b][static_cast<std::size_t>(layer)].multiply(x.data(), y.data(), accumulate);
+                       });
   } else {
     h.noalias() += inp_.rightCols(c.E) * e;
-    residual_blocks(blocks_, h, n, a);
+    residual_blocks(trunk_.blocks, h, n, a);
   }
-  layer_norm(h, out_norm_.weight, out_norm_.bias, n);
+  layer_norm(h, trunk_.out_norm.weight, trunk_.out_norm.bias, n);
   silu_inplace(n);
   // Only the newest frame's rows of out.
   auto z = s.z_.col(0).head(c.E);
-  z.noalias() = out_.weight.bottomRows(c.E) * n;
-  z += out_.bias.tail(c.E);
+  z.noalias() = trunk_.out.weight.bottomRows(c.E) * n;
+  z += trunk_.out.bias.tail(c.E);
   auto d = s.d_.col(0);
-  split_linear_silu(dec1_, z, e, d);
-  linear(dec2_, d, Y);
+  split_linear_silu(trunk_.dec1, z, e, d);
+  linear(trunk_.dec2, d, Y);
 }
 
 }  // namespace bodyd::inference

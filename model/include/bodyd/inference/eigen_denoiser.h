@@ -42,6 +42,17 @@ struct ResidualBlock {
   Linear fc1, fc2;
 };
 
+// The MLP trunk after its input and time embedding, mlpwin-v1's and tcnmlp-v1's alike: the
+// residual blocks (blocks.*), out_norm and out, and the per-frame decoder dec1 (its weight's
+// columns for z_w and for e_w) and dec2.
+struct MlpTrunkLayers {
+  std::vector<ResidualBlock> blocks;
+  LayerNorm out_norm;
+  Linear out;
+  SplitLinear dec1;
+  Linear dec2;
+};
+
 // The per-session buffers' base: the config they were sized for and the most windows per call.
 template <typename Config>
 class EigenScratch : public DenoiserScratch {

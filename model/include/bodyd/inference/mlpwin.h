@@ -85,11 +85,7 @@ class MlpWin final : public detail::EigenDenoiser<MlpWinConfig, MlpWin, MlpWinSc
   Linear inp_;
   // Column t: time2(SiLU(time1(sinusoid(t)))) + inp.bias (depends on t only), H x T.
   Eigen::MatrixXf time_table_;
-  std::vector<detail::ResidualBlock> blocks_;
-  LayerNorm out_norm_;
-  Linear out_;
-  detail::SplitLinear dec1_;  // dec1.weight's columns for z_w and for e_w
-  Linear dec2_;
+  detail::MlpTrunkLayers trunk_;
 };
 
 // Per-session buffers for MlpWin::forward, for up to max_batch windows per call.

@@ -117,11 +117,7 @@ class TcnMlp final : public detail::EigenDenoiser<TcnMlpConfig, TcnMlp, TcnMlpSc
   detail::RowMatrix inp_;  // inp.weight (its bias is folded into time_table_)
   // Column t: time2(SiLU(time1(sinusoid(t)))) + inp.bias + ctx.bias, H x T.
   Eigen::MatrixXf time_table_;
-  std::vector<detail::ResidualBlock> blocks_;
-  LayerNorm out_norm_;
-  Linear out_;
-  detail::SplitLinear dec1_;  // dec1.weight's columns for z_w and for e_w
-  Linear dec2_;
+  detail::MlpTrunkLayers trunk_;
   std::uint64_t id_;  // this network's, unique in the process: whose cached past a scratch holds
   // Weights::bf16: forward_newest()'s copies of inp (its columns for the N - 1 earlier frames and
   // for the newest) and of each residual block's fc1 and fc2.
