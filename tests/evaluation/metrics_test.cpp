@@ -21,6 +21,21 @@ const Motion& walk() {
 
 GlobalPose frame(int f) { return forward_kinematics(walk().skeleton, walk().frames[static_cast<size_t>(f)]); }
 
+// One clip of the walk at 30 fps, predicted by `predict(f)`: its metrics.
+AccuracyMetrics walk_clip(MetricsAccumulator& acc, const std::function<GlobalPose(int)>& predict) {
+  acc.begin_clip(30.0);
+  for (int f = 0; f < walk().frame_count(); ++f) acc.add_frame(predict(f), frame(f));
+  return acc.end_clip();
+}
+
+// `pred` with the head's and hands' positions of `from` (the tracked joints).
+GlobalPose with_tracked_of(GlobalPose pred, const GlobalPose& from) {
+  const JointSets sets = joint_sets(walk().skeleton);
+  for (int j : {sets.head, sets.hands[0], sets.hands[1]})
+    pred.positions[static_cast<size_t>(j)] = from.positions[static_cast<size_t>(j)];
+  return pred;
+}
+
 // A pose with every joint at `p` (identity rotations).
 GlobalPose all_at(const Vec3& p) {
   GlobalPose g;
@@ -248,30 +263,20 @@ TEST(Metrics, HeadErrorHandMaximumAndTheGapMetrics) {
 // frames; a clip too short for the search has none.
 TEST(Metrics, LagOfADelayedCopyOfTheTruth) {
   MetricsAccumulator acc(walk().skeleton);
-  const JointSets sets = joint_sets(walk().skeleton);
-  acc.begin_clip(30.0);
-  for (int f = 0; f < walk().frame_count(); ++f) {
-    const GlobalPose truth = frame(f);
-    GlobalPose pred = frame(std::max(0, f - 3));
-    for (int j : {sets.head, sets.hands[0], sets.hands[1]}) pred.positions[static_cast<size_t>(j)] = truth.positions[static_cast<size_t>(j)];
-    acc.add_frame(pred, truth);
-  }
-  const AccuracyMetrics delayed = acc.end_clip();
+  const AccuracyMetrics delayed =
+      walk_clip(acc, [](int f) { return with_tracked_of(frame(std::max(0, f - 3)), frame(f)); });
   EXPECT_NEAR(delayed.lag_ms, 100.0, 5.0);
   EXPECT_NEAR(delayed.tracked_lag_ms, 0.0, 1e-9);  // the tracked joints were on time
-  acc.begin_clip(30.0);
-  for (int f = 0; f < walk().frame_count(); ++f) acc.add_frame(frame(f), frame(f));
-  EXPECT_NEAR(acc.end_clip().lag_ms, 0.0, 1e-9);
+  EXPECT_NEAR(walk_clip(acc, frame).lag_ms, 0.0, 1e-9);
   // Two clips of 60 frames: the mean of 100 and 0.
   EXPECT_NEAR(acc.result().lag_ms, 50.0, 2.5);
   // A lead reads as a negative lag, within a frame.
-  acc.begin_clip(30.0);
-  for (int f = 0; f < walk().frame_count(); ++f) {
-    GlobalPose pred = frame(f), next = frame(std::min(f + 1, walk().frame_count() - 1));
-    for (size_t j = 0; j < pred.positions.size(); ++j) pred.positions[j] = 0.5 * (pred.positions[j] + next.positions[j]);
-    acc.add_frame(pred, frame(f));
-  }
-  const double lead = acc.end_clip().lag_ms;
+  const double lead = walk_clip(acc, [](int f) {
+                        GlobalPose pred = frame(f), next = frame(std::min(f + 1, walk().frame_count() - 1));
+                        for (size_t j = 0; j < pred.positions.size(); ++j)
+                          pred.positions[j] = 0.5 * (pred.positions[j] + next.positions[j]);
+                        return pred;
+                      }).lag_ms;
   EXPECT_LT(lead, -5.0);
   EXPECT_GT(lead, -33.4);
   acc.begin_clip(30.0);
@@ -285,16 +290,7 @@ TEST(Metrics, LagOfADelayedCopyOfTheTruth) {
 // trail by 66.7 ms while the rest of the body, on time, reads 0.
 TEST(Metrics, TrackedLagIsTheHeadAndHandsAlone) {
   MetricsAccumulator acc(walk().skeleton);
-  const JointSets sets = joint_sets(walk().skeleton);
-  acc.begin_clip(30.0);
-  for (int f = 0; f < walk().frame_count(); ++f) {
-    const GlobalPose truth = frame(f);
-    GlobalPose pred = truth;
-    const GlobalPose late = frame(std::max(0, f - 2));
-    for (int j : {sets.head, sets.hands[0], sets.hands[1]}) pred.positions[static_cast<size_t>(j)] = late.positions[static_cast<size_t>(j)];
-    acc.add_frame(pred, truth);
-  }
-  const AccuracyMetrics m = acc.end_clip();
+  const AccuracyMetrics m = walk_clip(acc, [](int f) { return with_tracked_of(frame(f), frame(std::max(0, f - 2))); });
   EXPECT_NEAR(m.tracked_lag_ms, 66.7, 4.0);
   EXPECT_NEAR(m.lag_ms, 0.0, 1e-9);
   EXPECT_NEAR(acc.result().tracked_lag_ms, m.tracked_lag_ms, 1e-9);

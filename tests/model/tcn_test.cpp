@@ -155,15 +155,11 @@ TEST(Tcn, NewestFrameAloneEqualsTheWindowsLastFrame) {
 
 TEST(Tcn, TheSamplerWithAnObservedPastComputesTheNewestFrameAloneToTheSameResult) {
   const auto net = default_shape_tcn(5);
-  const auto D = static_cast<std::size_t>(net->dim()), W = static_cast<std::size_t>(net->frames());
-  const std::size_t n = W * D;
-  std::mt19937 rng(21);
-  auto [obs, noise, mask] = random_online_case(rng, W, D);
-  inference::Sampler sampler(net, inference::SamplerOptions{3, 1.0f, 0.0f}, 1);
-  std::vector<float> out(n);
-  sampler.sample_from_noise(obs, mask, noise, out);
-  const auto reference = ddim_by_full_windows(*net, obs, mask, noise, 3);
-  EXPECT_LE(relative_error(out, reference), 1e-5);
+  SamplerOnlineRun run(net, 3);  // checks the first run against DDIM by whole windows
+  const std::size_t D = run.D, W = run.W, n = W * D;
+  auto& [obs, noise, mask] = run.c;
+  inference::Sampler& sampler = run.sampler;
+  std::vector<float>& out = run.out;
   // A past frame with one entry unobserved takes the whole-window path, and still matches.
   mask[5 * D + 7] = 0.0f;
   sampler.sample_from_noise(obs, mask, noise, out);

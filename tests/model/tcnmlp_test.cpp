@@ -145,14 +145,11 @@ TEST(TcnMlp, NewestFrameAloneEqualsTheWindowsLastFrameWhatTheCacheHolds) {
 
 TEST(TcnMlp, TheSamplerWithAnObservedPastComputesTheNewestFrameAloneToTheSameResult) {
   const auto net = default_shape(5);
-  const auto D = static_cast<std::size_t>(net->dim()), W = static_cast<std::size_t>(net->frames());
-  const std::size_t n = W * D;
-  std::mt19937 rng(21);
-  const auto [obs, noise, mask] = random_online_case(rng, W, D);
-  inference::Sampler sampler(net, inference::SamplerOptions{4, 1.0f, 0.0f}, 1);
-  std::vector<float> out(n);
-  sampler.sample_from_noise(obs, mask, noise, out);
-  EXPECT_LE(relative_error(out, ddim_by_full_windows(*net, obs, mask, noise, 4)), 1e-5);
+  SamplerOnlineRun run(net, 4);  // checks the first run against DDIM by whole windows
+  const std::size_t D = run.D;
+  const auto& [obs, noise, mask] = run.c;
+  inference::Sampler& sampler = run.sampler;
+  std::vector<float>& out = run.out;
   // The next frame: the window moves on by one frame; the cache must not serve the old past.
   std::vector<float> next(obs.begin() + static_cast<std::ptrdiff_t>(D), obs.end());
   next.insert(next.end(), obs.begin(), obs.begin() + static_cast<std::ptrdiff_t>(D));

@@ -150,6 +150,32 @@ inline std::vector<float> ddim_by_full_windows(const inference::Denoiser& net, s
   return x0;
 }
 
+// The sampler (K DDIM steps, one window) on a random online case (seed 21) of `net`, the case's
+// noise sampled once: its output equals DDIM over whole windows (checked here). The case, the
+// sampler and the window's sizes stay for the test's own checks.
+struct SamplerOnlineRun {
+  std::size_t D, W;
+  OnlineCase c;
+  inference::Sampler sampler;
+  std::vector<float> out;
+
+  SamplerOnlineRun(const std::shared_ptr<const inference::Denoiser>& net, int K)
+      : D(static_cast<std::size_t>(net->dim())),
+        W(static_cast<std::size_t>(net->frames())),
+        c(random_case(W, D)),
+        sampler(net, inference::SamplerOptions{K, 1.0f, 0.0f}, 1),
+        out(W * D) {
+    sampler.sample_from_noise(c.obs, c.mask, c.noise, out);
+    EXPECT_LE(relative_error(out, ddim_by_full_windows(*net, c.obs, c.mask, c.noise, K)), 1e-5);
+  }
+
+ private:
+  static OnlineCase random_case(std::size_t W, std::size_t D) {
+    std::mt19937 rng(21);
+    return random_online_case(rng, W, D);
+  }
+};
+
 // Two windows in one forward() (a `Scratch` for two, the networks' own kind) give what each gives
 // alone, at step `t`; a scratch for two also runs a single window.
 template <class Scratch, class Net>
