@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 namespace bodyd {
@@ -17,27 +18,34 @@ double alpha(double cutoff_hz, double dt_s) {
 }
 }  // namespace
 
+namespace {
+// The single-number options and their rule: > 0, or >= 0 where 0 means off (checked in this order).
+struct NumberRule {
+  std::string_view name;
+  double OneEuroOptions::*member;
+  bool zero_allowed;
+};
+constexpr std::array<NumberRule, 10> kNumberRules{{
+    {"min_cutoff_hz", &OneEuroOptions::min_cutoff_hz, false},
+    {"rot_min_cutoff_hz", &OneEuroOptions::rot_min_cutoff_hz, false},
+    {"d_cutoff_hz", &OneEuroOptions::d_cutoff_hz, false},
+    {"beta_per_m_s", &OneEuroOptions::beta_per_m_s, true},
+    {"rot_beta_per_rad_s", &OneEuroOptions::rot_beta_per_rad_s, true},
+    {"head_correction_cutoff_hz", &OneEuroOptions::head_correction_cutoff_hz, false},
+    {"hand_reach_slack_m", &OneEuroOptions::hand_reach_slack_m, true},
+    {"anchor_cutoff_hz", &OneEuroOptions::anchor_cutoff_hz, true},
+    {"arm_soft_zone_m", &OneEuroOptions::arm_soft_zone_m, true},
+    {"restart_after_s", &OneEuroOptions::restart_after_s, false},
+}};
+}  // namespace
+
 std::string validate(const OneEuroOptions& o, std::string_view group) {
-  const auto positive = [](double v) { return std::isfinite(v) && v > 0.0; };
   const auto non_negative = [](double v) { return std::isfinite(v) && v >= 0.0; };
-  if (!positive(o.min_cutoff_hz)) return fmt::format("{} min_cutoff_hz must be > 0, not {}", group, o.min_cutoff_hz);
-  if (!positive(o.rot_min_cutoff_hz))
-    return fmt::format("{} rot_min_cutoff_hz must be > 0, not {}", group, o.rot_min_cutoff_hz);
-  if (!positive(o.d_cutoff_hz)) return fmt::format("{} d_cutoff_hz must be > 0, not {}", group, o.d_cutoff_hz);
-  if (!non_negative(o.beta_per_m_s))
-    return fmt::format("{} beta_per_m_s must be >= 0, not {}", group, o.beta_per_m_s);
-  if (!non_negative(o.rot_beta_per_rad_s))
-    return fmt::format("{} rot_beta_per_rad_s must be >= 0, not {}", group, o.rot_beta_per_rad_s);
-  if (!positive(o.head_correction_cutoff_hz))
-    return fmt::format("{} head_correction_cutoff_hz must be > 0, not {}", group, o.head_correction_cutoff_hz);
-  if (!non_negative(o.hand_reach_slack_m))
-    return fmt::format("{} hand_reach_slack_m must be >= 0, not {}", group, o.hand_reach_slack_m);
-  if (!non_negative(o.anchor_cutoff_hz))
-    return fmt::format("{} anchor_cutoff_hz must be >= 0, not {}", group, o.anchor_cutoff_hz);
-  if (!non_negative(o.arm_soft_zone_m))
-    return fmt::format("{} arm_soft_zone_m must be >= 0, not {}", group, o.arm_soft_zone_m);
-  if (!positive(o.restart_after_s))
-    return fmt::format("{} restart_after_s must be > 0, not {}", group, o.restart_after_s);
+  for (const NumberRule& rule : kNumberRules) {
+    const double v = o.*rule.member;
+    if (!non_negative(v) || (v == 0.0 && !rule.zero_allowed))
+      return fmt::format("{} {} must be {} 0, not {}", group, rule.name, rule.zero_allowed ? ">=" : ">", v);
+  }
   if (!non_negative(o.noise_gate_low_mm) || !(std::isfinite(o.noise_gate_high_mm) && o.noise_gate_high_mm > o.noise_gate_low_mm))
     return fmt::format("{} noise gate must be 0 <= noise_gate_low_mm < noise_gate_high_mm, not {} and {}", group,
                        o.noise_gate_low_mm, o.noise_gate_high_mm);

@@ -102,11 +102,6 @@ void Tcn::forward(std::span<const float> x, std::span<const float> m, int t, std
 }
 
 void Tcn::forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
-                         DenoiserScratch& scratch) const {
-  forward_newest(x, m, t, out, own_scratch(scratch));
-}
-
-void Tcn::forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                          TcnScratch& s) const {
   const TcnConfig& c = config_;
   BODYD_REQUIRE(s.config_.W == c.W && s.config_.D == c.D && s.config_.C == c.C, "TcnScratch was made for another network");

@@ -179,11 +179,6 @@ void TcnMlp::forward(std::span<const float> x, std::span<const float> m, int t, 
 }
 
 void TcnMlp::forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
-                            DenoiserScratch& scratch) const {
-  forward_newest(x, m, t, out, own_scratch(scratch));
-}
-
-void TcnMlp::forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                             TcnMlpScratch& s) const {
   const TcnMlpConfig& c = config_;
   require_own_scratch(s);

@@ -71,6 +71,7 @@ class EigenScratch : public DenoiserScratch {
 
 // `Config` has the fields W (frames), D (features per frame), T (steps) and from(ModelConfig);
 // `Net` derives from EigenDenoiser<Config, Net, Scratch>, has Net(const Model&), forward(..., Scratch&)
+// (and, where it has a newest-frame pass, forward_newest(..., Scratch&))
 // and kWrongScratch (the message when forward() is given another scratch); `Scratch` has
 // Scratch(const Net&, int max_batch).
 template <typename Config, typename Net, typename Scratch>
@@ -104,6 +105,17 @@ class EigenDenoiser : public Denoiser {
                DenoiserScratch& scratch) const override {
     static_cast<const Net&>(*this).forward(x, m, t, out, own_scratch(scratch));
   }
+  // A Net with forward_newest(..., Scratch&) has the newest-frame pass (Denoiser::forward_newest);
+  // this entry point takes its Scratch as forward() does.
+  [[nodiscard]] bool computes_newest_alone() const override { return has_newest(); }
+  void forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+                      DenoiserScratch& scratch) const override {
+    if constexpr (has_newest()) {
+      static_cast<const Net&>(*this).forward_newest(x, m, t, out, own_scratch(scratch));
+    } else {
+      Denoiser::forward_newest(x, m, t, out, scratch);
+    }
+  }
 
  protected:
   // `scratch` as this network's Scratch (a bug otherwise: abort).
@@ -120,6 +132,14 @@ class EigenDenoiser : public Denoiser {
 
   Config config_;
   std::vector<float> alpha_bar_, norm_mean_, norm_std_;
+
+ private:
+  // A function, not a constant: evaluated where it is used, when Net is complete.
+  static constexpr bool has_newest() {
+    // Net's own overload for its Scratch (the DenoiserScratch one below would take a Scratch too).
+    using Newest = void (Net::*)(std::span<const float>, std::span<const float>, int, std::span<float>, Scratch&) const;
+    return requires { static_cast<Newest>(&Net::forward_newest); };
+  }
 };
 
 }  // namespace bodyd::inference::detail

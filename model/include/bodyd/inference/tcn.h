@@ -76,9 +76,7 @@ class Tcn final : public detail::EigenDenoiser<TcnConfig, Tcn, TcnScratch> {
   // A TcnStream at step t.
   [[nodiscard]] std::unique_ptr<DenoiserStream> make_stream(int t) const override;
   // The newest frame's output alone (Denoiser::forward_newest), which takes a TcnScratch.
-  [[nodiscard]] bool computes_newest_alone() const override { return true; }
-  void forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
-                      DenoiserScratch& scratch) const override;
+  using EigenDenoiser::forward_newest;
   // One window's newest output frame, equal to forward()'s last frame: every layer is evaluated
   // only at the frames that output depends on (newest_frames() for the encoder, fewer in each
   // block above: with W = 64, K = 3 and dilations 1..16, 63 encoder frames and 31 + 15 + 7 + 3 + 1

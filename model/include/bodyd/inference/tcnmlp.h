@@ -87,9 +87,7 @@ class TcnMlp final : public detail::EigenDenoiser<TcnMlpConfig, TcnMlp, TcnMlpSc
   // not aliasing x or m, a scratch made by this network. Does not allocate.
   void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                TcnMlpScratch& scratch) const;
-  [[nodiscard]] bool computes_newest_alone() const override { return true; }
-  void forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
-                      DenoiserScratch& scratch) const override;
+  using EigenDenoiser::forward_newest;
   // One window's newest output frame, equal to forward()'s last frame (with bf16 weights: up to
   // their rounding). What does not depend on the
   // newest frame's noisy entries (the context at the newest frame, the trunk's encoding of the
