@@ -76,6 +76,13 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from model_net import MlpWin, TcnMlp, add_architecture_args, cosine_alpha_bars, ddim_sample, load_model, make_net, write_model  # noqa: E402
 
 
+def add_mount_error_args(p, who, cm, deg, cm_help, deg_help):
+    """--WHO-mount-cm and --WHO-mount-deg: a tracker's constant mounting error per sample, as a
+    position offset (cm) and a rotation offset (degrees)."""
+    p.add_argument(f"--{who}-mount-cm", type=float, default=cm, help=cm_help)
+    p.add_argument(f"--{who}-mount-deg", type=float, default=deg, help=deg_help)
+
+
 def parse_args():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
                                 allow_abbrev=False)  # whole names: --threads is read before argparse runs
@@ -120,27 +127,25 @@ def parse_args():
                         "per-role draws alone, which leave 0.7^8 = 6%% of the samples with head and hands only")
     p.add_argument("--extra-drop-prob", type=float, default=0.15,
                    help="per tracked extra role: probability of a tracking-loss span (as --hand-drop-prob)")
-    p.add_argument("--extra-mount-cm", type=float, default=2.0,
-                   help="strapping error of an extra tracker: a constant position offset per sample, this many cm "
-                        "(standard deviation per axis)")
-    p.add_argument("--extra-mount-deg", type=float, default=5.0,
-                   help="strapping error of an extra tracker: a constant rotation offset per sample, about this many "
-                        "degrees (standard deviation per axis of the rotation vector)")
+    add_mount_error_args(p, "extra", 2.0, 5.0,
+                         "strapping error of an extra tracker: a constant position offset per sample, this many cm "
+                         "(standard deviation per axis)",
+                         "strapping error of an extra tracker: a constant rotation offset per sample, about this many "
+                         "degrees (standard deviation per axis of the rotation vector)")
     p.add_argument("--xr-mount-prob", type=float, default=0.0,
                    help="per sample: probability that the headset and controllers are seen through a wrong mounting "
                         "(a user on the default mounting, issue 44: --device-frames xr costs 1.55x joint frames); "
                         "0 (default): never, as before")
-    p.add_argument("--head-mount-cm", type=float, default=1.5,
-                   help="with --xr-mount-prob: the Head joint's constant position error, cm (standard deviation per "
-                        "axis); bodyd-eval --device-frames xr measures the default mounting 2.2 cm off at the eyes, 5.3 "
-                        "degrees turned (about 1.2 cm at the joint)")
-    p.add_argument("--head-mount-deg", type=float, default=3.0,
-                   help="with --xr-mount-prob: the Head joint's constant rotation error, degrees per axis")
-    p.add_argument("--hand-mount-cm", type=float, default=1.1,
-                   help="with --xr-mount-prob: each wrist's constant position error, cm per axis (grip offset 1.2 cm, "
-                        "14 degrees about a 6 cm lever)")
-    p.add_argument("--hand-mount-deg", type=float, default=8.0,
-                   help="with --xr-mount-prob: each wrist's constant rotation error, degrees per axis (grips 14 degrees)")
+    add_mount_error_args(p, "head", 1.5, 3.0,
+                         "with --xr-mount-prob: the Head joint's constant position error, cm (standard deviation per "
+                         "axis); bodyd-eval --device-frames xr measures the default mounting 2.2 cm off at the eyes, "
+                         "5.3 degrees turned (about 1.2 cm at the joint)",
+                         "with --xr-mount-prob: the Head joint's constant rotation error, degrees per axis")
+    add_mount_error_args(p, "hand", 1.1, 8.0,
+                         "with --xr-mount-prob: each wrist's constant position error, cm per axis (grip offset 1.2 cm, "
+                         "14 degrees about a 6 cm lever)",
+                         "with --xr-mount-prob: each wrist's constant rotation error, degrees per axis (grips 14 "
+                         "degrees)")
     p.add_argument("--holdout-every", type=int, default=20, help="every Nth training clip is held out for monitoring")
     p.add_argument("--exclude-split", action="append", default=[], metavar="FILE",
                    help="never train on (nor monitor with) the clips this file lists: '#' comments, then one path per "

@@ -1,6 +1,7 @@
 #include "bodyd/simulators/tracker_sim.h"
 
 #include "../test_paths.h"
+#include "bodyd/test/tracker_sample.h"
 
 #include <gtest/gtest.h>
 
@@ -9,6 +10,7 @@
 #include <map>
 
 using namespace bodyd;
+using bodyd::test::same_samples;
 
 namespace {
 
@@ -176,14 +178,7 @@ TEST(TrackerSim, SameSeedSameOutputOtherSeedDifferent) {
   opt.seed = 42;
   const auto a = simulate_trackers(walk(), opt);
   const auto b = simulate_trackers(walk(), opt);
-  ASSERT_EQ(a.size(), b.size());
-  for (size_t i = 0; i < a.size(); ++i) {
-    ASSERT_EQ(a[i].t_ns, b[i].t_ns);
-    ASSERT_EQ(a[i].role, b[i].role);
-    ASSERT_EQ(a[i].valid, b[i].valid);
-    ASSERT_EQ(a[i].position_m, b[i].position_m);
-    ASSERT_EQ(a[i].rotation.coeffs(), b[i].rotation.coeffs());
-  }
+  ASSERT_TRUE(same_samples(a, b));
   opt.seed = 43;
   const auto c = simulate_trackers(walk(), opt);
   ASSERT_EQ(a.size(), c.size());
