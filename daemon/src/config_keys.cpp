@@ -3,6 +3,7 @@
 #include "bodyd/daemon/config_keys.h"
 
 #include "bodyd/io/open_source.h"
+#include "bodyd/io/output.h"
 #include "bodyd/motion/limits.h"
 #include "config_readers.h"
 
@@ -22,6 +23,14 @@ constexpr std::string_view kBodyFilter = "Body filter";
 constexpr KeyRange kHeightRange{limits::kMinUserHeightM, limits::kMaxUserHeightM, false, true,
                                 "{key} must be 0 (the model's size) or a height in metres between {min} and {max} "
                                 "(e.g. 1.75), not {value}"};
+
+// --output's help: the spec's form and one line per registered output kind (io/outputs.cpp).
+std::string outputs_help() {
+  std::string help = "another output, SCHEME:TARGET[?KEY=VALUE&...], e.g. vrchat:127.0.0.1:9000?slots=hip,feet "
+                     "(docs/outputs.md); repeatable. The kinds:";
+  for (const OutputKind& kind : output_kinds()) help += "\n  " + std::string(kind.help);
+  return help;
+}
 
 std::vector<ConfigKey> make_rows() {
   std::vector<ConfigKey> rows;
@@ -51,8 +60,7 @@ std::vector<ConfigKey> make_rows() {
   add({.name = "pub", .field = &at<&DaemonConfig::pub_endpoint>, .flag = "--pub",
        .help = "pose stream endpoint (PUB), e.g. tcp://127.0.0.1:5570"});
   add({.name = "outputs", .field = &at<&DaemonConfig::outputs>, .flag = "--output",
-       .help = "another output, SCHEME:TARGET[?KEY=VALUE&...], e.g. vrchat:127.0.0.1:9000?slots=hip,feet "
-               "(docs/outputs.md); repeatable",
+       .help = outputs_help(),
        .read = read_outputs});
   add({.name = "control", .field = &at<&DaemonConfig::control_endpoint>, .flag = "--control",
        .help = "control endpoint (REP, JSON), or \"none\""});

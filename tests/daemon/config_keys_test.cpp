@@ -4,6 +4,7 @@
 // and the docs do not, fails here.
 #include "bodyd/daemon/config.h"
 #include "bodyd/daemon/config_keys.h"
+#include "bodyd/io/output.h"
 #include "../test_paths.h"
 
 #include "bodyd/test/files.h"
@@ -342,6 +343,19 @@ TEST(ConfigKeys, HelpAndDocsHaveTheSameFlags) {
     for (std::sregex_iterator it(code.begin(), code.end(), kDocFlag), end; it != end; ++it) doc_flags.insert(it->str());
   for (const std::string& flag : help_flags)
     EXPECT_TRUE(doc_flags.count(flag)) << flag << " (in --help) is not in docs/daemon.md, \"Command line\"";
+}
+
+// --output's help lists every registered output kind by its help line (io/outputs.cpp).
+TEST(ConfigKeys, HelpListsEveryOutputKind) {
+  DaemonConfig c;
+  const char* argv[] = {"bodyd", "--help"};
+  testing::internal::CaptureStdout();
+  const CliResult r = parse_command_line(2, argv, c);
+  const std::string help = testing::internal::GetCapturedStdout();
+  ASSERT_EQ(r.action, CliResult::Action::Exit);
+  ASSERT_FALSE(output_kinds().empty());
+  for (const OutputKind& kind : output_kinds())
+    EXPECT_NE(help.find(std::string(kind.help)), std::string::npos) << kind.scheme << "'s line is not in --help";
 }
 
 // The fuzz seed with every key (tests/fuzz/config/full.json) has every key of the table.
