@@ -322,16 +322,22 @@ TEST(ConfigKeys, DocsListExactlyTheKeys) {
   EXPECT_EQ(apply_config_json(example, "docs/daemon.md", c), "");
 }
 
-// Every flag --help shows is in docs/daemon.md's "Command line" section, and every key's flag
-// is in --help.
-TEST(ConfigKeys, HelpAndDocsHaveTheSameFlags) {
-  const std::string command_line = doc_section(text_of(test::source_dir() / "docs" / "daemon.md"), "Command line");
+// What bodyd --help prints (parse_command_line prints it and asks to exit).
+std::string help_text() {
   DaemonConfig c;
   const char* argv[] = {"bodyd", "--help"};
   testing::internal::CaptureStdout();
   const CliResult r = parse_command_line(2, argv, c);
-  const std::string help = testing::internal::GetCapturedStdout();
-  ASSERT_EQ(r.action, CliResult::Action::Exit);
+  std::string help = testing::internal::GetCapturedStdout();
+  EXPECT_EQ(r.action, CliResult::Action::Exit);
+  return help;
+}
+
+// Every flag --help shows is in docs/daemon.md's "Command line" section, and every key's flag
+// is in --help.
+TEST(ConfigKeys, HelpAndDocsHaveTheSameFlags) {
+  const std::string command_line = doc_section(text_of(test::source_dir() / "docs" / "daemon.md"), "Command line");
+  const std::string help = help_text();
   std::set<std::string> help_flags;
   static const std::regex kFlag("(^|[\\s,])(--[a-z][a-z-]*)");
   for (std::sregex_iterator it(help.begin(), help.end(), kFlag), end; it != end; ++it) help_flags.insert((*it)[2]);
@@ -347,12 +353,7 @@ TEST(ConfigKeys, HelpAndDocsHaveTheSameFlags) {
 
 // --output's help lists every registered output kind by its help line (io/outputs.cpp).
 TEST(ConfigKeys, HelpListsEveryOutputKind) {
-  DaemonConfig c;
-  const char* argv[] = {"bodyd", "--help"};
-  testing::internal::CaptureStdout();
-  const CliResult r = parse_command_line(2, argv, c);
-  const std::string help = testing::internal::GetCapturedStdout();
-  ASSERT_EQ(r.action, CliResult::Action::Exit);
+  const std::string help = help_text();
   ASSERT_FALSE(output_kinds().empty());
   for (const OutputKind& kind : output_kinds())
     EXPECT_NE(help.find(std::string(kind.help)), std::string::npos) << kind.scheme << "'s line is not in --help";
