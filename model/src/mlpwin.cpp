@@ -7,6 +7,7 @@
 // MlpWinScratch; products are written with noalias() into those buffers so nothing allocates.
 #include "bodyd/inference/mlpwin.h"
 
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -66,7 +67,12 @@ TensorShapes MlpWin::tensors(const ModelConfig& config) {
   return v;
 }
 
-MlpWin::MlpWin(const Model& model) : EigenDenoiser(model) {
+namespace {
+std::atomic<std::uint64_t> next_mlpwin_id{1};
+}  // namespace
+
+MlpWin::MlpWin(const Model& model, Weights weights)
+    : EigenDenoiser(model), id_(next_mlpwin_id.fetch_add(1)), weights_(weights) {
   const MlpWinConfig& c = config_;
   enc_ = detail::load_split_linear(model, "enc", c.D);
   inp_ = load_linear(model, "inp");
@@ -75,6 +81,13 @@ MlpWin::MlpWin(const Model& model) : EigenDenoiser(model) {
   // The time MLP depends on t alone: evaluate it once per step here (in double, then rounded),
   // with inp.bias folded in.
   time_table_ = detail::time_table(load_linear(model, "time1"), load_linear(model, "time2"), c.TE, c.T, &inp_.bias);
+  if (weights_ == Weights::bf16) {
+    const Eigen::Index past = static_cast<Eigen::Index>(c.W - 1) * c.E;
+    if (past > 0) inp_past_bf16_ = detail::Bf16Matrix(inp_.weight.leftCols(past));
+    inp_newest_bf16_ = detail::Bf16Matrix(inp_.weight.rightCols(c.E));
+    for (const detail::ResidualBlock& b : trunk_.blocks)
+      blocks_bf16_.push_back({detail::Bf16Matrix(b.fc1.weight), detail::Bf16Matrix(b.fc2.weight)});
+  }
 }
 
 MlpWinScratch::MlpWinScratch(const MlpWin& network, int max_batch)
@@ -86,13 +99,22 @@ MlpWinScratch::MlpWinScratch(const MlpWin& network, int max_batch)
   a_.resize(c.H, max_batch);
   z_.resize(c.W * c.E, max_batch);
   d_.resize(c.E, c.W * max_batch);
+  past_x_.resize(c.D, c.W - 1);
+  past_m_.resize(c.D, c.W - 1);
+  e_past_.resize(c.E, c.W - 1);
+  h_past_.resize(c.H);
+}
+
+void MlpWin::require_own_scratch(const MlpWinScratch& s) const {
+  const MlpWinConfig& c = config_;
+  BODYD_REQUIRE(s.config_.W == c.W && s.config_.D == c.D && s.config_.E == c.E && s.config_.H == c.H,
+                "MlpWinScratch was made for another network");
 }
 
 void MlpWin::forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                      MlpWinScratch& s) const {
   const MlpWinConfig& c = config_;
-  BODYD_REQUIRE(s.config_.W == c.W && s.config_.D == c.D && s.config_.E == c.E && s.config_.H == c.H,
-                    "MlpWinScratch was made for another network");
+  require_own_scratch(s);
   const Eigen::Index batch = detail::checked_batch(x, m, t, out, c.W, c.D, c.T, s.max_batch_);
 
   const Eigen::Index frames = c.W * batch;
@@ -130,6 +152,66 @@ void MlpWin::forward(std::span<const float> x, std::span<const float> m, int t, 
   Eigen::Map<const Eigen::MatrixXf> Z(s.z_.data(), c.E, frames);
   detail::split_linear_silu(trunk_.dec1, Z, e, d);
   detail::linear(trunk_.dec2, d, Y);
+}
+
+void MlpWin::forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+                            MlpWinScratch& s) const {
+  const MlpWinConfig& c = config_;
+  require_own_scratch(s);
+  check_newest(x, m, t, out, c.W, c.D, c.T);
+
+  const Eigen::Index W = c.W, past = W - 1;
+  const Eigen::Map<const Eigen::MatrixXf> X(x.data(), c.D, W);
+  const Eigen::Map<const Eigen::MatrixXf> M(m.data(), c.D, W);
+  Eigen::Map<Eigen::VectorXf> Y(out.data(), c.D);
+
+  // The past frames' part of the trunk's input, reused while they are the last call's.
+  const bool reuse = s.owner_ == id_ && X.leftCols(past) == s.past_x_ && M.leftCols(past) == s.past_m_;
+  if (!reuse) {
+    s.owner_ = 0;
+    s.past_x_ = X.leftCols(past);
+    s.past_m_ = M.leftCols(past);
+    if (past > 0) {
+      split_linear_silu(enc_, X.leftCols(past), M.leftCols(past), s.e_past_);
+      const Eigen::Map<const Eigen::VectorXf> e_cat(s.e_past_.data(), past * c.E);
+      if (weights_ == Weights::bf16) {
+        inp_past_bf16_.multiply(e_cat.data(), s.h_past_.data(), false);
+      } else {
+        s.h_past_.noalias() = inp_.weight.leftCols(past * c.E) * e_cat;
+      }
+    } else {
+      s.h_past_.setZero();
+    }
+    s.owner_ = id_;
+  }
+
+  // The newest frame: e = SiLU(enc [x; m]); h = inp's part of it + the past's + temb(t) + inp.bias.
+  auto e = s.e_.col(0);
+  split_linear_silu(enc_, X.col(W - 1), M.col(W - 1), e);
+  auto h = s.h_.col(0);
+  auto n = s.n_.col(0);
+  auto a = s.a_.col(0);
+  h = s.h_past_ + time_table_.col(t);
+  if (weights_ == Weights::bf16) {
+    // h, n, a: one contiguous column each.
+    inp_newest_bf16_.multiply(e.data(), h.data(), true);
+    residual_blocks_by(trunk_.blocks, h, n, a,
+                       [this](std::size_t b, int layer, const auto& v, auto& y, bool accumulate) {
+                         blocks_bf16_[b][static_cast<std::size_t>(layer)].multiply(v.data(), y.data(), accumulate);
+                       });
+  } else {
+    h.noalias() += inp_.weight.rightCols(c.E) * e;
+    residual_blocks(trunk_.blocks, h, n, a);
+  }
+  layer_norm(h, trunk_.out_norm.weight, trunk_.out_norm.bias, n);
+  silu_inplace(n);
+  // Only the newest frame's rows of out, then its decoder.
+  auto z = s.z_.col(0).head(c.E);
+  z.noalias() = trunk_.out.weight.bottomRows(c.E) * n;
+  z += trunk_.out.bias.tail(c.E);
+  auto d = s.d_.col(0);
+  split_linear_silu(trunk_.dec1, z, e, d);
+  linear(trunk_.dec2, d, Y);
 }
 
 }  // namespace bodyd::inference

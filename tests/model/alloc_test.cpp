@@ -59,5 +59,29 @@ TEST(Allocation, ForwardAndSampleDoNotAllocate) {
   EXPECT_EQ(allocations.count(), 0);
 }
 
+TEST(Allocation, NewestFrameAndOnlineSampleDoNotAllocateWithEitherWeights) {
+  if (!AllocationCounter::counts_malloc()) GTEST_SKIP() << "sanitizer build: malloc is not ours to count";
+  const auto tiny = inference::load_model(tiny_model_path());
+  const auto model = random_model(inference::MlpWinConfig{20, 191, 64, 512, 2, 64, 100}.to_model_config(), 1, *tiny);
+  for (const inference::Weights weights : {inference::Weights::f32, inference::Weights::bf16}) {
+    SCOPED_TRACE(std::string(inference::weights_name(weights)));
+    const auto net = std::make_shared<const MlpWin>(model, weights);
+    const std::size_t n = static_cast<std::size_t>(net->window_size()), D = 191;
+    // The online mask: the past observed whole, the newest frame in part.
+    std::vector<float> x(n, 0.3f), m(n, 1.0f), out(n), frame(D);
+    for (std::size_t d = n - D; d < n; d += 2) m[d] = 0.0f;
+    MlpWinScratch scratch(*net);
+    Sampler sampler(net, SamplerOptions{2, 1.0f, 0.0f}, 1);
+    AllocationCounter allocations;
+    for (int i = 0; i < 3; ++i) {
+      net->forward_newest(x, m, 50, frame, scratch);  // computes the past
+      net->forward_newest(x, m, 20, frame, scratch);  // reuses it
+      sampler.sample(x, m, out);
+      x[0] += 1.0f;  // the next frame's past
+    }
+    EXPECT_EQ(allocations.count(), 0);
+  }
+}
+
 }  // namespace
 }  // namespace bodyd::test

@@ -5,6 +5,7 @@
 // bodyd-eval (docs/model.md, "Weights in bf16").
 #include "bodyd/inference/bf16_matrix.h"
 #include "bodyd/inference/denoiser.h"
+#include "bodyd/inference/mlpwin.h"
 #include "bodyd/inference/sampler.h"
 #include "bodyd/inference/tcnmlp.h"
 #include "test_util.h"
@@ -117,8 +118,15 @@ inference::Model default_shape_model(std::uint32_t seed) {
                       *tiny);
 }
 
-TEST(Bf16, TcnMlpNewestFrameWithBf16WeightsMatchesFloat32WithinRounding) {
-  const auto model = default_shape_model(3);
+// train.py's mlpwin-v1 defaults on 20-frame windows, random weights of the trained scale.
+inference::Model default_shape_mlpwin(std::uint32_t seed) {
+  const auto tiny = inference::load_model(tiny_model_path());
+  return random_model(inference::MlpWinConfig{20, 191, 64, 512, 2, 64, 100}.to_model_config(), seed, *tiny);
+}
+
+// `model`'s newest-frame pass with bf16 weights is float32's within bfloat16's rounding, uses the
+// copies, and leaves forward() in float32; its cached past is the bf16 one.
+void expect_newest_frame_within_rounding(const inference::Model& model, const char* name) {
   const auto f32 = inference::make_denoiser(model, Weights::f32);
   const auto bf16 = inference::make_denoiser(model, Weights::bf16);
   EXPECT_EQ(f32->weights(), Weights::f32);
@@ -133,26 +141,33 @@ TEST(Bf16, TcnMlpNewestFrameWithBf16WeightsMatchesFloat32WithinRounding) {
     f32->forward_newest(x, m, t, a, *sa);
     bf16->forward_newest(x, m, t, b, *sb);
     const double err = relative_error(b, a);
-    std::printf("tcnmlp newest frame t=%d: bf16 against float32, relative error %.3g\n", t, err);
-    EXPECT_LE(err, 5e-3) << "t " << t;
-    EXPECT_GT(err, 1e-7) << "t " << t << ": the bf16 copies were not used";
+    std::printf("%s newest frame t=%d: bf16 against float32, relative error %.3g\n", name, t, err);
+    EXPECT_LE(err, 5e-3) << name << " t " << t;
+    EXPECT_GT(err, 1e-7) << name << " t " << t << ": the bf16 copies were not used";
     // forward() stays float32 whatever the weights.
     bf16->forward(x, m, t, full, *sb);
-    EXPECT_LE(relative_error(std::span(full).last(D), a), 1e-5) << "t " << t;
+    EXPECT_LE(relative_error(std::span(full).last(D), a), 1e-5) << name << " t " << t;
     // The cached past is the bf16 one: the same call again gives the same frame.
     std::vector<float> again(D);
     bf16->forward_newest(x, m, t, again, *sb);
-    EXPECT_EQ(again, b);
+    EXPECT_EQ(again, b) << name;
   }
+}
+
+TEST(Bf16, TcnMlpNewestFrameWithBf16WeightsMatchesFloat32WithinRounding) {
+  expect_newest_frame_within_rounding(default_shape_model(3), "tcnmlp");
   // An architecture without a bf16 path runs float32 and says so.
   const auto tcn = inference::make_denoiser(*inference::load_model(tiny_tcn_path()), Weights::bf16);
   EXPECT_EQ(tcn->weights(), Weights::f32);
-  const auto mlp = inference::make_denoiser(*inference::load_model(tiny_model_path()), Weights::bf16);
-  EXPECT_EQ(mlp->weights(), Weights::f32);
 }
 
-TEST(Bf16, TcnMlpOnlineSampleWithBf16WeightsStaysCloseToFloat32) {
-  const auto model = default_shape_model(5);
+TEST(Bf16, MlpWinNewestFrameWithBf16WeightsMatchesFloat32WithinRounding) {
+  expect_newest_frame_within_rounding(default_shape_mlpwin(3), "mlpwin");
+}
+
+// An online K = 2 sample of `model` with bf16 weights stays within rounding of float32's, and the
+// observed past comes back as observed.
+void expect_online_sample_within_rounding(const inference::Model& model, const char* name) {
   const auto f32 = inference::make_denoiser(model, Weights::f32);
   const auto bf16 = inference::make_denoiser(model, Weights::bf16);
   const auto D = static_cast<std::size_t>(f32->dim()), W = static_cast<std::size_t>(f32->frames());
@@ -165,13 +180,21 @@ TEST(Bf16, TcnMlpOnlineSampleWithBf16WeightsStaysCloseToFloat32) {
   sa.sample_from_noise(obs, mask, noise, a);
   sb.sample_from_noise(obs, mask, noise, b);
   const auto newest_a = std::span(a).last(D), newest_b = std::span(b).last(D);
-  std::printf("tcnmlp online 2-step sample: bf16 against float32, relative error %.3g\n",
+  std::printf("%s online 2-step sample: bf16 against float32, relative error %.3g\n", name,
               relative_error(newest_b, newest_a));
-  EXPECT_LE(relative_error(newest_b, newest_a), 5e-3);
-  EXPECT_GT(relative_error(newest_b, newest_a), 1e-7);
-  // The observed past is returned as observed, whatever the weights.
+  EXPECT_LE(relative_error(newest_b, newest_a), 5e-3) << name;
+  EXPECT_GT(relative_error(newest_b, newest_a), 1e-7) << name;
   EXPECT_EQ(std::vector<float>(b.begin(), b.end() - static_cast<std::ptrdiff_t>(D)),
-            std::vector<float>(a.begin(), a.end() - static_cast<std::ptrdiff_t>(D)));
+            std::vector<float>(a.begin(), a.end() - static_cast<std::ptrdiff_t>(D)))
+      << name;
+}
+
+TEST(Bf16, TcnMlpOnlineSampleWithBf16WeightsStaysCloseToFloat32) {
+  expect_online_sample_within_rounding(default_shape_model(5), "tcnmlp");
+}
+
+TEST(Bf16, MlpWinOnlineSampleWithBf16WeightsStaysCloseToFloat32) {
+  expect_online_sample_within_rounding(default_shape_mlpwin(5), "mlpwin");
 }
 
 }  // namespace

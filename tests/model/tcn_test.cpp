@@ -193,12 +193,6 @@ TEST(TcnDeathTest, BrokenPreconditionsAbort) {
   EXPECT_DEATH(net->forward_newest(x2, m2, 0, one, s), "one window");
   EXPECT_DEATH(net->forward_newest(x, m, -1, one, s), "t must be in");
   EXPECT_DEATH(net->forward_newest(x, m, 0, std::span(x).first(191), s), "alias");
-  // An architecture without a newest-frame pass refuses it.
-  const auto mlp = inference::make_denoiser(*inference::load_model(tiny_model_path()));
-  EXPECT_FALSE(mlp->computes_newest_alone());
-  const auto mlp_scratch = mlp->make_scratch(1);
-  std::vector<float> xw(static_cast<std::size_t>(mlp->window_size())), yw(static_cast<std::size_t>(mlp->dim()));
-  EXPECT_DEATH(mlp->forward_newest(xw, xw, 0, yw, *mlp_scratch), "no newest-frame pass");
 }
 
 }  // namespace

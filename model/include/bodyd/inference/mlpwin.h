@@ -8,10 +8,12 @@
 //
 // Model apart from state: an MlpWin holds only weights (immutable after construction, share it
 // between sessions as std::shared_ptr<const MlpWin>); every buffer a forward pass needs lives in an
-// MlpWinScratch owned by one session and sized when it is constructed. forward() does not
-// allocate. Windows are frame-major: element (w, d) of a window is at index w * D + d.
+// MlpWinScratch owned by one session and sized when it is constructed. forward() and
+// forward_newest() do not allocate. Windows are frame-major: element (w, d) of a window is at
+// index w * D + d.
 #pragma once
 
+#include "bodyd/inference/bf16_matrix.h"
 #include "bodyd/inference/denoiser.h"
 #include "bodyd/inference/eigen_denoiser.h"
 #include "bodyd/inference/model_file.h"
@@ -19,6 +21,7 @@
 #include <Eigen/Core>
 
 #include <array>
+#include <cstdint>
 #include <memory>
 #include <span>
 #include <vector>
@@ -48,7 +51,9 @@ class MlpWinScratch;
 class MlpWin final : public detail::EigenDenoiser<MlpWinConfig, MlpWin, MlpWinScratch> {
  public:
   // Copies the weights out of a checked model and precomputes the time embedding of every step.
-  explicit MlpWin(const Model& model);
+  // With Weights::bf16, forward_newest() multiplies by bfloat16 copies of inp, fc1 and fc2 (float32
+  // accumulation; nearly all the weights it reads per frame); forward() stays float32.
+  explicit MlpWin(const Model& model, Weights weights = Weights::f32);
 
   // The architecture table's row (denoiser.h): config fields, tensors, factory.
   static constexpr std::array<ConfigField, 7> kConfigFields = {{
@@ -67,7 +72,9 @@ class MlpWin final : public detail::EigenDenoiser<MlpWinConfig, MlpWin, MlpWinSc
   // make(), config(), frames(), dim(), steps(), alpha_bar(), norm_mean(), norm_std(), make_scratch()
   // and forward(..., DenoiserScratch&), which takes an MlpWinScratch: EigenDenoiser.
   [[nodiscard]] std::string_view architecture() const override { return kArchitectureMlpWin; }
+  [[nodiscard]] Weights weights() const override { return weights_; }
   using EigenDenoiser::forward;
+  using EigenDenoiser::forward_newest;
 
   // Evaluates `batch` windows at the same step t. x, m: batch * W * D floats (window after
   // window, each frame-major); out: the same size (may not alias x or m). Requirements (a bug
@@ -77,7 +84,17 @@ class MlpWin final : public detail::EigenDenoiser<MlpWinConfig, MlpWin, MlpWinSc
   void forward(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
                MlpWinScratch& scratch) const;
 
+  // One window's newest output frame, equal to forward()'s last frame (with bf16 weights: up to
+  // bfloat16's rounding), for the online sample, whose other frames are observed and replaced by
+  // the observations. x, m, t as forward() with batch 1; out: D floats. The past frames'
+  // embeddings and their part of inp are reused while the past frames' x and m equal the last
+  // call's, as in the steps of one online sample. Does not allocate.
+  void forward_newest(std::span<const float> x, std::span<const float> m, int t, std::span<float> out,
+                      MlpWinScratch& scratch) const;
+
  private:
+  // A bug check: `s` was made for this network's shape.
+  void require_own_scratch(const MlpWinScratch& s) const;
   using Linear = detail::Linear;
   using LayerNorm = detail::LayerNorm;
 
@@ -86,6 +103,12 @@ class MlpWin final : public detail::EigenDenoiser<MlpWinConfig, MlpWin, MlpWinSc
   // Column t: time2(SiLU(time1(sinusoid(t)))) + inp.bias (depends on t only), H x T.
   Eigen::MatrixXf time_table_;
   detail::MlpTrunkLayers trunk_;
+  std::uint64_t id_;  // this network's, unique in the process: whose cached past a scratch holds
+  // Weights::bf16: forward_newest()'s copies of inp (its columns for the W - 1 earlier frames and
+  // for the newest) and of each residual block's fc1 and fc2.
+  Weights weights_;
+  detail::Bf16Matrix inp_past_bf16_, inp_newest_bf16_;
+  std::vector<std::array<detail::Bf16Matrix, 2>> blocks_bf16_;
 };
 
 // Per-session buffers for MlpWin::forward, for up to max_batch windows per call.
@@ -101,6 +124,12 @@ class MlpWinScratch final : public detail::EigenScratch<MlpWinConfig> {
   Eigen::MatrixXf a_;      // H x batch: block hidden activation
   Eigen::MatrixXf z_;      // (W * E) x batch: trunk output, frame-major per window
   Eigen::MatrixXf d_;      // E x (W * batch): decoder hidden activation
+  // forward_newest()'s cache: the past frames' x and m it was computed for, and what it computed:
+  // their embeddings (E x (W-1)) and inp's part of them (H), valid for the network whose id is owner_.
+  Eigen::MatrixXf past_x_, past_m_;
+  Eigen::MatrixXf e_past_;
+  Eigen::VectorXf h_past_;
+  std::uint64_t owner_ = 0;
 };
 
 // The sinusoidal time embedding of docs/model-file.md in double precision (dim even):
