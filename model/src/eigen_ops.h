@@ -5,11 +5,13 @@
 #pragma once
 
 #include "bodyd/base/require.h"
+#include "bodyd/inference/bf16_matrix.h"
 #include "bodyd/inference/eigen_denoiser.h"
 #include "bodyd/inference/model_file.h"
 
 #include <Eigen/Core>
 
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <span>
@@ -141,6 +143,43 @@ void trunk_out(const LayerNorm& norm, const Linear& out, const Eigen::MatrixBase
   silu_inplace(n);
   for (Eigen::Index c = 0; c < h.cols(); ++c) z.col(c).noalias() = out.weight * n.col(c);
   z.colwise() += out.bias;
+}
+
+// The bfloat16 copies of the trunk's weights that the newest-frame pass multiplies by
+// (bf16_matrix.h): inp's columns of the newest frame and each residual block's fc1 and fc2.
+struct TrunkBf16 {
+  const Bf16Matrix& inp_newest;
+  const std::vector<std::array<Bf16Matrix, 2>>& blocks;
+};
+
+// The trunk on the newest frame alone, after its past (the forward_newest of mlpwin-v1 and
+// tcnmlp-v1). On entry h holds the past's part of inp, the step's embedding and inp's bias; this
+// adds inp's newest columns times e (the newest frame's encoding), runs the residual blocks, then
+// computes only the newest frame's rows of out and that frame's decoder, into y. The products use
+// `bf16`'s copies when given, else the float32 weights (`inp_newest`: inp's last E columns).
+// e, h, n, a, d: one contiguous column each; z: E floats.
+template <typename InpNewest, typename Ev, typename Hv, typename Nv, typename Av, typename Zv, typename Dv,
+          typename Yv>
+void trunk_newest(const MlpTrunkLayers& trunk, const Eigen::MatrixBase<InpNewest>& inp_newest, const TrunkBf16* bf16,
+                  Eigen::MatrixBase<Ev>& e, Eigen::MatrixBase<Hv>& h, Eigen::MatrixBase<Nv>& n,
+                  Eigen::MatrixBase<Av>& a, Eigen::MatrixBase<Zv>& z, Eigen::MatrixBase<Dv>& d,
+                  Eigen::MatrixBase<Yv>& y) {
+  if (bf16 != nullptr) {
+    bf16->inp_newest.multiply(e.derived().data(), h.derived().data(), true);
+    residual_blocks_by(trunk.blocks, h, n, a, [bf16](std::size_t b, int layer, const auto& v, auto& out, bool accumulate) {
+      bf16->blocks[b][static_cast<std::size_t>(layer)].multiply(v.data(), out.data(), accumulate);
+    });
+  } else {
+    h.noalias() += inp_newest * e;
+    residual_blocks(trunk.blocks, h, n, a);
+  }
+  layer_norm(h, trunk.out_norm.weight, trunk.out_norm.bias, n);
+  silu_inplace(n);
+  const Eigen::Index E = z.size();
+  z.noalias() = trunk.out.weight.bottomRows(E) * n;
+  z += trunk.out.bias.tail(E);
+  split_linear_silu(trunk.dec1, z, e, d);
+  linear(trunk.dec2, d, y);
 }
 
 // mlpwin-v1's tensors over a window of W frames (tcnmlp-v1's trunk: W = N), in PyTorch's order.

@@ -192,26 +192,10 @@ void MlpWin::forward_newest(std::span<const float> x, std::span<const float> m, 
   auto n = s.n_.col(0);
   auto a = s.a_.col(0);
   h = s.h_past_ + time_table_.col(t);
-  if (weights_ == Weights::bf16) {
-    // h, n, a: one contiguous column each.
-    inp_newest_bf16_.multiply(e.data(), h.data(), true);
-    residual_blocks_by(trunk_.blocks, h, n, a,
-                       [this](std::size_t b, int layer, const auto& v, auto& y, bool accumulate) {
-                         blocks_bf16_[b][static_cast<std::size_t>(layer)].multiply(v.data(), y.data(), accumulate);
-                       });
-  } else {
-    h.noalias() += inp_.weight.rightCols(c.E) * e;
-    residual_blocks(trunk_.blocks, h, n, a);
-  }
-  layer_norm(h, trunk_.out_norm.weight, trunk_.out_norm.bias, n);
-  silu_inplace(n);
-  // Only the newest frame's rows of out, then its decoder.
   auto z = s.z_.col(0).head(c.E);
-  z.noalias() = trunk_.out.weight.bottomRows(c.E) * n;
-  z += trunk_.out.bias.tail(c.E);
   auto d = s.d_.col(0);
-  split_linear_silu(trunk_.dec1, z, e, d);
-  linear(trunk_.dec2, d, Y);
+  const TrunkBf16 bf16{inp_newest_bf16_, blocks_bf16_};
+  trunk_newest(trunk_, inp_.weight.rightCols(c.E), weights_ == Weights::bf16 ? &bf16 : nullptr, e, h, n, a, z, d, Y);
 }
 
 }  // namespace bodyd::inference

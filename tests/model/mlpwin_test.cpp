@@ -85,35 +85,12 @@ TEST(MlpWin, NewestFrameAloneEqualsTheWindowsLastFrameWhatTheCacheHolds) {
   std::mt19937 rng(12);
   for (const auto& net : {std::make_shared<const MlpWin>(*inference::load_model(tiny_model_path())), default_shape(3)}) {
     EXPECT_TRUE(net->computes_newest_alone());
-    MlpWinScratch s(*net);
-    const auto D = static_cast<std::size_t>(net->dim()), W = static_cast<std::size_t>(net->frames());
-    const std::size_t n = W * D;
-    auto x = random_window(rng, n, false);
-    auto m = random_window(rng, n, true);
-    std::vector<float> full(n), newest(D);
-    const auto expect_equal = [&](int t, const char* what) {
-      net->forward(x, m, t, full, s);
-      net->forward_newest(x, m, t, newest, s);
-      EXPECT_LE(relative_error(newest, std::span(full).last(D)), 1e-5) << "W " << W << " t " << t << ": " << what;
-    };
-    // The steps of one sample: the same past, the newest frame's noisy entries changing.
-    for (int t : {net->steps() - 1, net->steps() / 2, 0}) {
-      for (std::size_t d = 0; d < D; ++d)
-        if (m[n - D + d] == 0.0f) x[n - D + d] = static_cast<float>(t) * 0.01f - 0.3f;
-      expect_equal(t, "steps of one sample");
-    }
-    // A past frame changes (the next sample): recomputed.
-    x[(W - 2) * D + 1] += 1.0f;
-    expect_equal(1, "a past frame changed");
-    // A past frame's mask changes: recomputed.
-    m[1] = 1.0f - m[1];
-    expect_equal(1, "a past mask changed");
-    // The same through the Denoiser interface, from a fresh scratch.
-    const inference::Denoiser& base = *net;
-    const auto scratch = base.make_scratch(1);
-    std::vector<float> via_base(D);
-    base.forward_newest(x, m, 1, via_base, *scratch);
-    EXPECT_LE(relative_error(via_base, newest), 1e-6);
+    expect_newest_frame_equals_the_windows_last<MlpWinScratch>(
+        *net, rng, [](std::vector<float>&, std::vector<float>& m, const auto& expect_equal) {
+          // A past frame's mask changes: recomputed.
+          m[1] = 1.0f - m[1];
+          expect_equal(1, "a past mask changed");
+        });
   }
   // Two networks of one shape sharing a scratch: each computes its own past.
   expect_a_shared_scratch_keeps_each_networks_past<MlpWinScratch>(*default_shape(3), *default_shape(4), rng);
@@ -122,13 +99,7 @@ TEST(MlpWin, NewestFrameAloneEqualsTheWindowsLastFrameWhatTheCacheHolds) {
 TEST(MlpWin, TheSamplerWithAnObservedPastComputesTheNewestFrameAloneToTheSameResult) {
   const auto net = default_shape(5);
   SamplerOnlineRun run(net, 4);  // checks the first run against DDIM by whole windows
-  const std::size_t D = run.D;
-  const auto& [obs, noise, mask] = run.c;
-  // The next frame: the window moves on by one frame; the cache must not serve the old past.
-  std::vector<float> next(obs.begin() + static_cast<std::ptrdiff_t>(D), obs.end());
-  next.insert(next.end(), obs.begin(), obs.begin() + static_cast<std::ptrdiff_t>(D));
-  run.sampler.sample_from_noise(next, mask, noise, run.out);
-  EXPECT_LE(relative_error(run.out, ddim_by_full_windows(*net, next, mask, noise, 4)), 1e-5);
+  run.expect_the_next_window_computed_anew(*net, 4);
 }
 
 TEST(MlpWin, OutputDependsOnMaskAndStep) {

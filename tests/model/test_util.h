@@ -169,6 +169,15 @@ struct SamplerOnlineRun {
     EXPECT_LE(relative_error(out, ddim_by_full_windows(*net, c.obs, c.mask, c.noise, K)), 1e-5);
   }
 
+  // The next frame: the window moved on by one frame (its oldest frame wrapped round to the
+  // newest) gives DDIM by whole windows again, so a cache must not serve the old past.
+  void expect_the_next_window_computed_anew(const inference::Denoiser& net, int K) {
+    std::vector<float> next(c.obs.begin() + static_cast<std::ptrdiff_t>(D), c.obs.end());
+    next.insert(next.end(), c.obs.begin(), c.obs.begin() + static_cast<std::ptrdiff_t>(D));
+    sampler.sample_from_noise(next, c.mask, c.noise, out);
+    EXPECT_LE(relative_error(out, ddim_by_full_windows(net, next, c.mask, c.noise, K)), 1e-5);
+  }
+
  private:
   static OnlineCase random_case(std::size_t W, std::size_t D) {
     std::mt19937 rng(21);
@@ -194,6 +203,38 @@ void expect_a_batch_of_two_equals_two_singles(const Net& net, std::uint32_t seed
   std::vector<float> a2(n);
   net.forward(std::span(x).first(n), std::span(m).first(n), t, a2, pair);
   EXPECT_LE(relative_error(a2, a), 1e-6);
+}
+
+// forward_newest() against forward()'s last frame on one random window, in a `Scratch` of the
+// network's kind, as the sampler calls it: the steps of one sample (the same past, the newest
+// frame's noisy entries changing), a changed past frame, then `also(x, m, expect_equal)` for what
+// else the network's cache is keyed on, then through the Denoiser interface from a fresh scratch.
+template <class Scratch, class Net, class Also>
+void expect_newest_frame_equals_the_windows_last(const Net& net, std::mt19937& rng, const Also& also) {
+  Scratch s(net);
+  const auto D = static_cast<std::size_t>(net.dim()), W = static_cast<std::size_t>(net.frames());
+  const std::size_t n = W * D;
+  auto x = random_window(rng, n, false);
+  auto m = random_window(rng, n, true);
+  std::vector<float> full(n), newest(D);
+  const auto expect_equal = [&](int t, const char* what) {
+    net.forward(x, m, t, full, s);
+    net.forward_newest(x, m, t, newest, s);
+    EXPECT_LE(relative_error(newest, std::span(full).last(D)), 1e-5) << "W " << W << " t " << t << ": " << what;
+  };
+  for (int t : {net.steps() - 1, net.steps() / 2, 0}) {
+    for (std::size_t d = 0; d < D; ++d)
+      if (m[n - D + d] == 0.0f) x[n - D + d] = static_cast<float>(t) * 0.01f - 0.3f;
+    expect_equal(t, "steps of one sample");
+  }
+  x[(W - 2) * D + 1] += 1.0f;
+  expect_equal(1, "a past frame changed");
+  also(x, m, expect_equal);
+  const inference::Denoiser& base = net;
+  const auto scratch = base.make_scratch(1);
+  std::vector<float> via_base(D);
+  base.forward_newest(x, m, 1, via_base, *scratch);
+  EXPECT_LE(relative_error(via_base, newest), 1e-6);
 }
 
 // A temporal network's scratch keeps the encoded past for the network that made it: `b`, of `a`'s
