@@ -154,10 +154,8 @@ void DiffusionReconstructor::reset() {
   emitted_head_ = emitted_count_ = 0;
   emitted_dropped_ = false;
   have_last_ = false;
-  hand_was_valid_ = {};
-  hand_ever_valid_ = {};
-  hand_offset_ = {Vec3::Zero(), Vec3::Zero()};
-  hand_rot_offset_ = {Quat::Identity(), Quat::Identity()};
+  hand_ease_ = {};
+  foot_ease_ = {};
   foot_locked_ = {};
   foot_release_offset_ = {Vec3::Zero(), Vec3::Zero()};
   lost_head_ = {};
@@ -262,7 +260,8 @@ bool DiffusionReconstructor::observed_at(Role role, std::int64_t t_ns, std::int6
   return true;
 }
 
-void DiffusionReconstructor::lock_feet(const std::array<bool, 2>& contact, double dt_s) {
+void DiffusionReconstructor::lock_feet(const std::array<bool, 2>& contact, const std::array<bool, 2>& placed,
+                                       double dt_s) {
   // A foot the model says is planted may not slide: its toe follows the prediction horizontally
   // at most at foot_contact_speed_m_s (below what reads as skating), starting from where it was
   // emitted last; the leg swings about the hip to put it there. When the foot
@@ -273,6 +272,13 @@ void DiffusionReconstructor::lock_feet(const std::array<bool, 2>& contact, doubl
   for (size_t s = 0; s < 2; ++s) {
     if (!legs_[s]) continue;
     const Vec3 toe = out_global_.positions[static_cast<size_t>(toes[s])];
+    if (placed[s]) {
+      // On its tracker (fit_tracked_legs): not moved; the lock starts from here when the tracker goes.
+      foot_locked_[s] = contact[s];
+      foot_lock_toe_[s] = toe;
+      foot_release_offset_[s] = Vec3::Zero();
+      continue;
+    }
     Vec3 correction = Vec3::Zero();
     if (contact[s] && foot_locked_[s] && dt_s > 0) {
       // Horizontal move from the last emitted toe toward the prediction, speed-limited.
@@ -347,7 +353,8 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
   TrackedTargets targets;
   const HandGoals hands = hand_goals(t_ns, frame_dt_s, trackers, targets);
   fit_tracked_joints(t_ns, head, targets);
-  if (options_.foot_lock) lock_feet(contact, frame_dt_s);
+  const std::array<bool, 2> feet_placed = fit_tracked_legs(t_ns, frame_dt_s, trackers);
+  if (options_.foot_lock) lock_feet(contact, feet_placed, frame_dt_s);
   fit_arms(canon, hands);
 
   // A non-finite pose (from inputs within limits this would be a network bug) is dropped, never
@@ -355,7 +362,8 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
   // state it may have touched starts over.
   if (!finite(out_global_)) {
     ++refused_outputs_;
-    hand_was_valid_ = {};
+    for (JointEase& e : hand_ease_) e.source = JointSource::model;
+    for (JointEase& e : foot_ease_) e.source = JointSource::model;
     foot_locked_ = {};
     foot_release_offset_ = {Vec3::Zero(), Vec3::Zero()};
     body_filter_.reset();
@@ -439,6 +447,7 @@ void DiffusionReconstructor::build_window(std::int64_t t_ns, const HeadNow& head
                                                           : observed_at(role, tw, t_ns, p, q, has_position);
       if (w == W_ - 1) {
         trackers.valid[static_cast<size_t>(role)] = ok;
+        trackers.has_position[static_cast<size_t>(role)] = ok && has_position;
         trackers.p[static_cast<size_t>(role)] = p;
         trackers.q[static_cast<size_t>(role)] = q;
       }
@@ -496,12 +505,56 @@ void DiffusionReconstructor::filter_body(std::int64_t t_ns) {
   forward_kinematics(skeleton_, scratch_pose_, out_global_);
 }
 
+DiffusionReconstructor::JointGoal DiffusionReconstructor::eased_goal(JointEase& ease, JointSource source,
+                                                                     const Vec3& base_p, const Quat& base_q, int joint,
+                                                                     std::int64_t t_ns, double frame_dt_s) {
+  // When a joint's source changes (its tracker is lost or comes back), its goal starts where the
+  // joint was last emitted and eases to the new source (offset halving every hand_*_half_life_s,
+  // shrinking at most hand_blend_max_speed_m_s), so the joint never jumps (docs/model.md,
+  // "Tracked joints").
+  const bool tracked = source != JointSource::model;
+  const auto j = static_cast<size_t>(joint);
+  if (tracked && !ease.ever_tracked) {
+    // The joint's first sample since the start: it is where the tracker is from this pose on
+    // (easing in from the model's guess made the hands slide in from up to 0.9 m at start-up).
+    ease.offset = Vec3::Zero();
+    ease.rot_offset = Quat::Identity();
+  } else if (source != ease.source && have_last_ && emitted_count_ > 0) {
+    // The ease starts where the joint would be now had it kept its last velocity (the last two
+    // emitted frames), not where it was: a joint frozen for a frame while the body moves (a run
+    // carries it 10-20 cm a frame) is itself a jump.
+    const Emitted& last = emitted(emitted_count_ - 1);
+    Vec3 start = last.global.positions[j];
+    if (emitted_count_ > 1) {
+      const Emitted& prev = emitted(emitted_count_ - 2);
+      const std::int64_t step_ns = last.t_ns - prev.t_ns;
+      if (step_ns > 0 && step_ns <= 2 * frame_dt_ns_ && t_ns - last.t_ns <= 2 * frame_dt_ns_)
+        start += (last.global.positions[j] - prev.global.positions[j]) *
+                 (static_cast<double>(t_ns - last.t_ns) / static_cast<double>(step_ns));
+    }
+    ease.offset = start - base_p;
+    ease.rot_offset = (last.global.rotations[j] * base_q.conjugate()).normalized();
+  } else {
+    const double half_life = tracked ? options_.hand_return_half_life_s : options_.hand_loss_half_life_s;
+    const double decay = std::exp2(-frame_dt_s / std::max(1e-6, half_life));
+    const double n = ease.offset.norm();
+    const double shrink = std::min((1.0 - decay) * n, options_.hand_blend_max_speed_m_s * frame_dt_s);
+    ease.offset *= n > 0.0 ? (n - shrink) / n : 0.0;
+    ease.rot_offset = slerp(Quat::Identity(), ease.rot_offset, decay);
+  }
+  ease.source = source;
+  ease.ever_tracked = ease.ever_tracked || tracked;
+  JointGoal goal;
+  goal.valid = tracked || ease.offset.squaredNorm() > 1e-10;
+  goal.p = base_p + ease.offset;
+  goal.q = (ease.rot_offset * base_q).normalized();
+  return goal;
+}
+
 DiffusionReconstructor::HandGoals DiffusionReconstructor::hand_goals(std::int64_t t_ns, double frame_dt_s,
                                                                      const TrackersNow& trackers, TrackedTargets& targets) {
-  // Hand goals: the (filtered) tracker where valid, the model's hand where lost. When a hand is lost or
-  // comes back, its goal starts where the hand was last emitted and eases to the new source
-  // (offset halving every hand_*_half_life_s, shrinking at most hand_blend_max_speed_m_s), so the
-  // hand never jumps (docs/model.md, "Tracked joints").
+  // Hand goals: the (filtered) tracker where valid, the model's hand where lost, eased after a
+  // loss or a return (eased_goal).
   HandGoals goals;
   for (int side = 0; side < 2; ++side) {
     const Role role = side == 0 ? Role::LeftHand : Role::RightHand;
@@ -510,45 +563,13 @@ DiffusionReconstructor::HandGoals DiffusionReconstructor::hand_goals(std::int64_
     if (!arms_[side]) continue;
     const auto hand = static_cast<size_t>(arms_[side]->end);
     const bool valid = trackers.valid[r];
-    Vec3 base_p = out_global_.positions[hand];
-    Quat base_q = out_global_.rotations[hand];
-    if (valid) {
-      base_p = trackers.p[r];
-      base_q = trackers.q[r];
-    }
-    if (valid && !hand_ever_valid_[s]) {
-      // The hand's first sample since the start: it is where the tracker is from this pose on
-      // (easing in from the model's guess made the hands slide in from up to 0.9 m at start-up).
-      hand_offset_[s] = Vec3::Zero();
-      hand_rot_offset_[s] = Quat::Identity();
-    } else if (valid != hand_was_valid_[s] && have_last_ && emitted_count_ > 0) {
-      // The ease starts where the hand would be now had it kept its last velocity (the last two
-      // emitted frames), not where it was: a hand frozen for a frame while the body moves (a run
-      // carries it 10-20 cm a frame) is itself a jump.
-      const Emitted& last = emitted(emitted_count_ - 1);
-      Vec3 start = last.global.positions[hand];
-      if (emitted_count_ > 1) {
-        const Emitted& prev = emitted(emitted_count_ - 2);
-        const std::int64_t step_ns = last.t_ns - prev.t_ns;
-        if (step_ns > 0 && step_ns <= 2 * frame_dt_ns_ && t_ns - last.t_ns <= 2 * frame_dt_ns_)
-          start += (last.global.positions[hand] - prev.global.positions[hand]) *
-                   (static_cast<double>(t_ns - last.t_ns) / static_cast<double>(step_ns));
-      }
-      hand_offset_[s] = start - base_p;
-      hand_rot_offset_[s] = (last.global.rotations[hand] * base_q.conjugate()).normalized();
-    } else {
-      const double half_life = valid ? options_.hand_return_half_life_s : options_.hand_loss_half_life_s;
-      const double decay = std::exp2(-frame_dt_s / std::max(1e-6, half_life));
-      const double n = hand_offset_[s].norm();
-      const double shrink = std::min((1.0 - decay) * n, options_.hand_blend_max_speed_m_s * frame_dt_s);
-      hand_offset_[s] *= n > 0.0 ? (n - shrink) / n : 0.0;
-      hand_rot_offset_[s] = slerp(Quat::Identity(), hand_rot_offset_[s], decay);
-    }
-    hand_was_valid_[s] = valid;
-    hand_ever_valid_[s] = hand_ever_valid_[s] || valid;
-    goals.valid[s] = valid || hand_offset_[s].squaredNorm() > 1e-10;
-    goals.p[s] = base_p + hand_offset_[s];
-    goals.q[s] = (hand_rot_offset_[s] * base_q).normalized();
+    const JointGoal goal = eased_goal(hand_ease_[s], valid ? JointSource::tracker : JointSource::model,
+                                      valid ? trackers.p[r] : out_global_.positions[hand],
+                                      valid ? trackers.q[r] : out_global_.rotations[hand], arms_[side]->end, t_ns,
+                                      frame_dt_s);
+    goals.valid[s] = goal.valid;
+    goals.p[s] = goal.p;
+    goals.q[s] = goal.q;
     targets.hand_valid[s] = valid && options_.exact_tracked_joints;
     targets.hand_m[s] = goals.p[s];
   }
@@ -588,6 +609,41 @@ void DiffusionReconstructor::fit_tracked_joints(std::int64_t t_ns, const HeadNow
     targets.hand_slack_m[s] = options_.filter.hand_reach_slack_m *
                               filter_.of(s == 0 ? Role::LeftHand : Role::RightHand).position_gain();
   (void)solve_tracked_body(skeleton_, *upper_body_, options_.body, targets, scratch_pose_, out_global_);
+}
+
+std::array<bool, 2> DiffusionReconstructor::fit_tracked_legs(std::int64_t t_ns, double frame_dt_s,
+                                                              const TrackersNow& trackers) {
+  // A tracked foot is not a guess: the leg reaches it by two-bone IK (the foot turned to the
+  // tracker's rotation), and the foot lock leaves it alone. A foot tracked by rotation only keeps
+  // the model's ankle and takes the tracker's rotation; the foot lock then holds its toe as
+  // usual. A tracked knee is the pole the leg bends toward. Losses and returns ease as a hand's
+  // do (eased_goal).
+  std::array<bool, 2> placed{};
+  if (!options_.exact_tracked_joints) return placed;
+  for (int side = 0; side < 2; ++side) {
+    const auto s = static_cast<size_t>(side);
+    if (!legs_[s]) continue;
+    const TwoBoneChain& leg = *legs_[s];
+    const auto foot = static_cast<size_t>(leg.end);
+    const auto f = static_cast<size_t>(side == 0 ? Role::LeftFoot : Role::RightFoot);
+    const auto k = static_cast<size_t>(side == 0 ? Role::LeftKnee : Role::RightKnee);
+    const JointSource source = !trackers.valid[f]       ? JointSource::model
+                               : trackers.has_position[f] ? JointSource::tracker
+                                                          : JointSource::rotation;
+    const JointGoal goal =
+        eased_goal(foot_ease_[s], source, source == JointSource::tracker ? trackers.p[f] : out_global_.positions[foot],
+                   source != JointSource::model ? trackers.q[f] : out_global_.rotations[foot], leg.end, t_ns,
+                   frame_dt_s);
+    const bool knee = trackers.valid[k] && trackers.has_position[k];
+    if (!goal.valid && !knee) continue;
+    TwoBoneTarget target;
+    target.position_m = goal.valid ? goal.p : out_global_.positions[foot];
+    target.rotation = goal.valid ? goal.q : out_global_.rotations[foot];
+    if (knee) target.pole_m = trackers.p[k];
+    (void)solve_two_bone_ik(skeleton_, leg, target, scratch_pose_, out_global_);
+    placed[s] = goal.valid && source != JointSource::rotation;
+  }
+  return placed;
 }
 
 void DiffusionReconstructor::fit_arms(const features::Canonical& canon, const HandGoals& hands) {

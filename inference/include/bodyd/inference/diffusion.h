@@ -40,6 +40,7 @@ struct DiffusionOptions {
   bool fixed_noise = true;     // reuse one noise draw for every frame: identical inputs give identical
                                // outputs and frame-to-frame jitter from sampling disappears
   double elbow_pole_bias_m = 0.3;  // the elbow pole is pushed this far outward/down/back (see .cpp)
+  // The hands' eases, which a tracked foot's follow too (fit_tracked_legs):
   double hand_return_half_life_s = 0.08;  // a hand that comes back eases from where the body had it
   double hand_loss_half_life_s = 0.15;    // a hand that is lost eases from its last place to the model's
   double hand_blend_max_speed_m_s = 0.6;  // ... and those eases move the hand at most this much faster
@@ -126,9 +127,11 @@ class DiffusionReconstructor final : public Reconstructor {
     Quat q = Quat::Identity();
     bool valid = false;
   };
-  // Each role's tracker at the window's newest frame (model scale); p and q only where valid.
+  // Each role's tracker at the window's newest frame (model scale); p and q only where valid, p
+  // only where has_position too (a body tracker may have a rotation only).
   struct TrackersNow {
     std::array<bool, kRoleCount> valid{};
+    std::array<bool, kRoleCount> has_position{};
     std::array<Vec3, kRoleCount> p;
     std::array<Quat, kRoleCount> q;
   };
@@ -138,6 +141,25 @@ class DiffusionReconstructor final : public Reconstructor {
     std::array<Vec3, 2> p{Vec3::Zero(), Vec3::Zero()};
     std::array<Quat, 2> q{Quat::Identity(), Quat::Identity()};
   };
+  // A tracked joint's goal (a hand, a foot) and its easing: when the joint's source changes (its
+  // tracker is lost or comes back, or turns rotation only), the goal starts where the joint was
+  // last emitted and eases to the new source (an offset, model scale, decaying to zero).
+  enum class JointSource { model, rotation, tracker };  // the model's joint; the tracker's rotation only; the tracker
+  struct JointEase {
+    JointSource source = JointSource::model;
+    bool ever_tracked = false;  // a tracker sample of the joint since reset()
+    Vec3 offset = Vec3::Zero();
+    Quat rot_offset = Quat::Identity();
+  };
+  struct JointGoal {
+    bool valid = false;  // tracked now, or still easing
+    Vec3 p = Vec3::Zero();
+    Quat q = Quat::Identity();
+  };
+  // The goal of `joint` this frame: `base_p`/`base_q` (the tracker's, or the model's joint where the
+  // tracker has no position or none at all) plus the ease's offset.
+  JointGoal eased_goal(JointEase& ease, JointSource source, const Vec3& base_p, const Quat& base_q, int joint,
+                       std::int64_t t_ns, double frame_dt_s);
   // reconstruct()'s stages, in order (diffusion.cpp). False: no valid head sample yet.
   bool head_now(std::int64_t t_ns, HeadNow& head);
   // The window's canonical frame: the head's, or on a noisy head the smoothed anchor's.
@@ -154,6 +176,10 @@ class DiffusionReconstructor final : public Reconstructor {
   // The Head joint on the head tracker (through the head correction when it is noisy), the
   // shoulders toward out-of-reach hands (body_solver.h).
   void fit_tracked_joints(std::int64_t t_ns, const HeadNow& head, TrackedTargets& targets);
+  // The legs by two-bone IK onto tracked feet (eased after a loss or a return), bending toward
+  // tracked knees; a foot tracked by rotation only turns the foot (docs/model.md, "Tracked joints").
+  // True for a foot placed on its tracker (or easing to or from it), which the foot lock then leaves.
+  std::array<bool, 2> fit_tracked_legs(std::int64_t t_ns, double frame_dt_s, const TrackersNow& trackers);
   // The arms by two-bone IK onto the hand goals.
   void fit_arms(const features::Canonical& canon, const HandGoals& hands);
   // Keeps the emitted frame (model scale) for the next windows.
@@ -198,7 +224,7 @@ class DiffusionReconstructor final : public Reconstructor {
   std::optional<TwoBoneChain> arms_[2];
   std::array<std::optional<TwoBoneChain>, 2> legs_;
  // UpperLeg, LowerLeg, Foot
-  void lock_feet(const std::array<bool, 2>& contact, double dt_s);
+  void lock_feet(const std::array<bool, 2>& contact, const std::array<bool, 2>& placed, double dt_s);
 
   std::vector<Emitted> emitted_;
   int emitted_head_ = 0, emitted_count_ = 0;
@@ -207,11 +233,9 @@ class DiffusionReconstructor final : public Reconstructor {
   bool have_last_ = false;
   std::int64_t refused_outputs_ = 0;
 
-  // Hand easing after a tracking loss: offset (model scale) decaying to zero.
-  std::array<bool, 2> hand_was_valid_{};
-  std::array<bool, 2> hand_ever_valid_{};  // a valid sample of the hand since reset()
-  std::array<Vec3, 2> hand_offset_{Vec3::Zero(), Vec3::Zero()};
-  std::array<Quat, 2> hand_rot_offset_{Quat::Identity(), Quat::Identity()};
+  // Hand and foot easing after a tracking loss or return (left, right).
+  std::array<JointEase, 2> hand_ease_{};
+  std::array<JointEase, 2> foot_ease_{};
 
   // Foot locking state (model scale, world).
   std::array<bool, 2> foot_locked_{};
