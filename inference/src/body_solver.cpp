@@ -160,8 +160,14 @@ BodySolverResult solve_tracked_body(const Skeleton& skeleton, const UpperBody& b
     }
   };
 
+  // Stage 0: a tracked Hips goes onto its tracker (its rotation stays the network's: turning it
+  // to the tracker's as well made the body jerkier on unseen styles, docs/models.md).
+  if (t.hips_valid) {
+    translate_hips(skeleton, b.hips, t.hips_m - P(b.hips), global, pose);
+    forward_kinematics(skeleton, pose, global);
+  }
   // Stage 1: the body carries the head to head_body_m and the shoulders within reach.
-  set_cost(kHipsT, o.hips_cost_per_m);
+  set_cost(kHipsT, t.hips_valid ? o.tracked_hips_cost_per_m : o.hips_cost_per_m);
   set_cost(kSpineR, o.spine_cost_per_rad);
   set_cost(kChestR, o.spine_cost_per_rad);
   set_cost(kNeckR, o.neck_cost_per_rad);

@@ -156,6 +156,7 @@ void DiffusionReconstructor::reset() {
   have_last_ = false;
   hand_ease_ = {};
   foot_ease_ = {};
+  hips_ease_ = {};
   foot_locked_ = {};
   foot_release_offset_ = {Vec3::Zero(), Vec3::Zero()};
   lost_head_ = {};
@@ -352,7 +353,7 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
   const double frame_dt_s = have_last_ ? static_cast<double>(t_ns - last_t_ns_) / kNsPerS : 0.0;
   TrackedTargets targets;
   const HandGoals hands = hand_goals(t_ns, frame_dt_s, trackers, targets);
-  fit_tracked_joints(t_ns, head, targets);
+  fit_tracked_joints(t_ns, frame_dt_s, head, trackers, targets);
   const std::array<bool, 2> feet_placed = fit_tracked_legs(t_ns, frame_dt_s, trackers);
   if (options_.foot_lock) lock_feet(contact, feet_placed, frame_dt_s);
   fit_arms(canon, hands);
@@ -364,6 +365,7 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
     ++refused_outputs_;
     for (JointEase& e : hand_ease_) e.source = JointSource::model;
     for (JointEase& e : foot_ease_) e.source = JointSource::model;
+    hips_ease_.source = JointSource::model;
     foot_locked_ = {};
     foot_release_offset_ = {Vec3::Zero(), Vec3::Zero()};
     body_filter_.reset();
@@ -576,7 +578,8 @@ DiffusionReconstructor::HandGoals DiffusionReconstructor::hand_goals(std::int64_
   return goals;
 }
 
-void DiffusionReconstructor::fit_tracked_joints(std::int64_t t_ns, const HeadNow& head, TrackedTargets& targets) {
+void DiffusionReconstructor::fit_tracked_joints(std::int64_t t_ns, double frame_dt_s, const HeadNow& head,
+                                                const TrackersNow& trackers, TrackedTargets& targets) {
   // The Head joint on the head tracker, the shoulders moved where a hand is out of reach
   // (body_solver.h). The trackers are the filtered ones: the filter passes clean samples
   // unchanged (its noise gate, one_euro.h), and on noisy ones the body and the tracked joints
@@ -608,6 +611,19 @@ void DiffusionReconstructor::fit_tracked_joints(std::int64_t t_ns, const HeadNow
   for (size_t s = 0; s < 2; ++s)
     targets.hand_slack_m[s] = options_.filter.hand_reach_slack_m *
                               filter_.of(s == 0 ? Role::LeftHand : Role::RightHand).position_gain();
+  // A hips tracker is not a guess either: the Hips joint goes onto it, eased after a loss or a
+  // return as a hand is. Its rotation, and a rotation-only hips tracker, are the network's
+  // observations only (turning the Hips to them made the body jerkier or worse on unseen styles,
+  // docs/models.md, "The Hips on its tracker").
+  const auto h = static_cast<size_t>(Role::Hips);
+  const auto hips = static_cast<size_t>(upper_body_->hips);
+  const bool tracked = trackers.valid[h] && trackers.has_position[h];
+  const JointGoal goal =
+      eased_goal(hips_ease_, tracked ? JointSource::tracker : JointSource::model,
+                 tracked ? trackers.p[h] : out_global_.positions[hips], out_global_.rotations[hips], upper_body_->hips,
+                 t_ns, frame_dt_s);
+  targets.hips_valid = goal.valid;
+  targets.hips_m = goal.p;
   (void)solve_tracked_body(skeleton_, *upper_body_, options_.body, targets, scratch_pose_, out_global_);
 }
 

@@ -111,6 +111,40 @@ TEST(BodySolver, NoiseOnTheRawHeadIsTakenUpAboveTheHips) {
   EXPECT_LT((pos(g, "Hips") - hips).norm(), 1e-4);
 }
 
+TEST(BodySolver, ATrackedHipsStaysOnItsTrackerAndTheSpineCarriesTheHead) {
+  // Issue 44 item 6: a hips tracker 2 cm from the network's Hips and the headset 3 cm from its
+  // Head (both within what the spine can bend to): both joints land on their trackers, the legs
+  // keep their local rotations.
+  Pose pose = walk().frames[30];
+  GlobalPose g = forward_kinematics(sk(), pose);
+  const Pose before = pose;
+  TrackedTargets t;
+  t.hips_valid = true;
+  t.hips_m = pos(g, "Hips") + Vec3(0.015, -0.01, 0.01);
+  t.head_valid = true;
+  t.head_m = pos(g, "Head") + Vec3(-0.01, -0.015, 0.02);
+  t.head_body_m = t.head_m;
+  t.head_rotation = g.rotations[static_cast<size_t>(J("Head"))];
+  const BodySolverResult r = solve_tracked_body(sk(), *find_upper_body(sk()), {}, t, pose, g);
+  EXPECT_LT(r.head_error_m, 1e-6);
+  // The spine took the head's correction but for millimetres: what it cannot do at first order
+  // (shorten the torso for a head lower than the hips allow) goes to the Hips.
+  EXPECT_LT((pos(g, "Hips") - t.hips_m).norm(), 0.003);
+  for (const char* n : {"UpperLeg_L", "LowerLeg_R", "Foot_L"})
+    EXPECT_LT(geodesic_angle(pose.local_rotations[static_cast<size_t>(J(n))],
+                             before.local_rotations[static_cast<size_t>(J(n))]),
+              1e-12)
+        << n;
+  // Without the hips tracker the same head correction moves the Hips by centimetres.
+  Pose free_pose = before;
+  GlobalPose free_g = forward_kinematics(sk(), free_pose);
+  TrackedTargets head_only = t;
+  head_only.hips_valid = false;
+  (void)solve_tracked_body(sk(), *find_upper_body(sk()), {}, head_only, free_pose, free_g);
+  EXPECT_GT((pos(free_g, "Hips") - forward_kinematics(sk(), before).positions[static_cast<size_t>(J("Hips"))]).norm(),
+            0.01);
+}
+
 TEST(BodySolver, StretchedArmReachesItsTrackerAndTheHeadStaysOnItsOwn) {
   Pose pose = walk().frames[30];
   GlobalPose g = forward_kinematics(sk(), pose);

@@ -1,6 +1,6 @@
 // Puts the tracked joints exactly on their trackers after the network (docs/model.md, "Tracked
 // joints"): the Head joint on the head tracker (position and rotation) and each tracked hand on
-// its tracker, even at full reach.
+// its tracker, even at full reach; with a hips tracker the Hips joint on it first (TrackedTargets).
 //
 // The network's pose is only close to the trackers (2 cm for the head on average). Moving the
 // Head joint means moving its ancestors, so the correction is spread over the body by damped
@@ -48,6 +48,9 @@ struct BodySolverOptions {
   double max_step_rad = 0.35;         // a joint turns at most this far per step
   double reach_fraction = 0.995;      // bring the shoulder within this fraction of the arm's length
   double max_reach_deficit_m = 0.25;  // a hand further than this out of reach is not chased
+  // With a hips tracker (TrackedTargets::hips_valid) the Hips translation costs this instead: the
+  // spine and neck then carry the head, and the Hips leaves its tracker only by what they cannot.
+  double tracked_hips_cost_per_m = 50.0;
 };
 
 struct TrackedTargets {
@@ -61,6 +64,10 @@ struct TrackedTargets {
   // 0 for a clean tracker; a noisy one's slack keeps its noise from pulling the body near full
   // reach (OneEuroOptions::hand_reach_slack_m).
   std::array<double, 2> hand_slack_m{};
+  // A hips tracker (issue 44): the Hips joint is put on hips_m before the head is placed (then
+  // see BodySolverOptions::tracked_hips_cost_per_m).
+  bool hips_valid = false;
+  Vec3 hips_m = Vec3::Zero();
 };
 
 struct BodySolverResult {

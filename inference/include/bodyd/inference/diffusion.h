@@ -174,10 +174,13 @@ class DiffusionReconstructor final : public Reconstructor {
   // The hands' goals (and the easing state), and the hands in `targets`.
   HandGoals hand_goals(std::int64_t t_ns, double frame_dt_s, const TrackersNow& trackers, TrackedTargets& targets);
   // The Head joint on the head tracker (through the head correction when it is noisy), the
-  // shoulders toward out-of-reach hands (body_solver.h).
-  void fit_tracked_joints(std::int64_t t_ns, const HeadNow& head, TrackedTargets& targets);
+  // shoulders toward out-of-reach hands, the Hips on a hips tracker (eased after a loss or a
+  // return; body_solver.h).
+  void fit_tracked_joints(std::int64_t t_ns, double frame_dt_s, const HeadNow& head, const TrackersNow& trackers,
+                          TrackedTargets& targets);
   // The legs by two-bone IK onto tracked feet (eased after a loss or a return), bending toward
-  // tracked knees; a foot tracked by rotation only turns the foot (docs/model.md, "Tracked joints").
+  // tracked knees; a foot tracked by rotation only turns the foot (docs/model.md, "Tracked hips,
+  // feet and knees").
   // True for a foot placed on its tracker (or easing to or from it), which the foot lock then leaves.
   std::array<bool, 2> fit_tracked_legs(std::int64_t t_ns, double frame_dt_s, const TrackersNow& trackers);
   // The arms by two-bone IK onto the hand goals.
@@ -236,6 +239,7 @@ class DiffusionReconstructor final : public Reconstructor {
   // Hand and foot easing after a tracking loss or return (left, right).
   std::array<JointEase, 2> hand_ease_{};
   std::array<JointEase, 2> foot_ease_{};
+  JointEase hips_ease_{};
 
   // Foot locking state (model scale, world).
   std::array<bool, 2> foot_locked_{};
