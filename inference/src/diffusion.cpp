@@ -157,6 +157,7 @@ void DiffusionReconstructor::reset() {
   hand_ease_ = {};
   foot_ease_ = {};
   hips_ease_ = {};
+  elbow_ease_ = {};
   foot_locked_ = {};
   foot_release_offset_ = {Vec3::Zero(), Vec3::Zero()};
   lost_head_ = {};
@@ -356,7 +357,7 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
   fit_tracked_joints(t_ns, frame_dt_s, head, trackers, targets);
   const std::array<bool, 2> feet_placed = fit_tracked_legs(t_ns, frame_dt_s, trackers);
   if (options_.foot_lock) lock_feet(contact, feet_placed, frame_dt_s);
-  fit_arms(canon, hands);
+  fit_arms(t_ns, frame_dt_s, canon, hands, trackers);
 
   // A non-finite pose (from inputs within limits this would be a network bug) is dropped, never
   // remembered: fed back as an observation it would poison every later window. The per-frame
@@ -366,6 +367,7 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
     for (JointEase& e : hand_ease_) e.source = JointSource::model;
     for (JointEase& e : foot_ease_) e.source = JointSource::model;
     hips_ease_.source = JointSource::model;
+    for (JointEase& e : elbow_ease_) e.source = JointSource::model;
     foot_locked_ = {};
     foot_release_offset_ = {Vec3::Zero(), Vec3::Zero()};
     body_filter_.reset();
@@ -662,21 +664,33 @@ std::array<bool, 2> DiffusionReconstructor::fit_tracked_legs(std::int64_t t_ns, 
   return placed;
 }
 
-void DiffusionReconstructor::fit_arms(const features::Canonical& canon, const HandGoals& hands) {
+void DiffusionReconstructor::fit_arms(std::int64_t t_ns, double frame_dt_s, const features::Canonical& canon,
+                                      const HandGoals& hands, const TrackersNow& trackers) {
   // Arms by two-bone IK onto the hand goals.
   for (int side = 0; side < 2; ++side) {
     const auto s = static_cast<size_t>(side);
-    if (!arms_[side] || !hands.valid[s]) continue;
+    if (!arms_[side]) continue;
+    // An elbow tracker is the arm's pole (eased after a loss or a return, as a hand is): the arm
+    // bends in the plane through it.
+    const auto e = static_cast<size_t>(side == 0 ? Role::LeftElbow : Role::RightElbow);
+    const bool elbow_tracked = options_.exact_tracked_joints && trackers.valid[e] && trackers.has_position[e];
+    const auto elbow = static_cast<size_t>(arms_[side]->lower);
+    const JointGoal elbow_goal = eased_goal(elbow_ease_[s], elbow_tracked ? JointSource::tracker : JointSource::model,
+                                            elbow_tracked ? trackers.p[e] : out_global_.positions[elbow],
+                                            out_global_.rotations[elbow], arms_[side]->lower, t_ns, frame_dt_s);
+    if (!hands.valid[s] && !elbow_goal.valid) continue;
+    const auto hand = static_cast<size_t>(arms_[side]->end);
     TwoBoneTarget target;
-    target.position_m = hands.p[s];
-    if (options_.exact_tracked_joints) target.rotation = hands.q[s];
-    {
+    target.position_m = hands.valid[s] ? hands.p[s] : out_global_.positions[hand];
+    if (options_.exact_tracked_joints) target.rotation = hands.valid[s] ? hands.q[s] : out_global_.rotations[hand];
+    if (elbow_goal.valid) {
+      target.pole_m = elbow_goal.p;
+    } else {
       // Pole: the elbow as predicted, nudged outward, down and back in the body's frame. A bent
       // elbow keeps its plane; a nearly straight one (whose plane is undefined and would flip
       // between frames) bends the way elbows do.
       const double outward = side == 0 ? 1.0 : -1.0;  // canonical +X is the user's left
       const Vec3 hint = canon.R_world_canon * Vec3(0.5 * outward, -0.5, -1.0).normalized();
-      const auto elbow = static_cast<size_t>(arms_[side]->lower);
       target.pole_m = out_global_.positions[elbow] + options_.elbow_pole_bias_m * hint;
     }
     // The soft reach on a noisy hand (OneEuroOptions::arm_soft_zone_m): the zone grows with the

@@ -394,18 +394,18 @@ TEST_F(DefaultModel, BodyTrackersAreUsedAndRotationOnlyOnesDoNoHarm) {
 }
 
 // Issue 44 item 6: a tracked role is not replaced by a guess. A tracked hips and tracked feet sit
-// on their trackers (the body and the legs reach them), tracked knees bend the legs their way,
-// and a foot tracked by rotation only turns toward the tracker's rotation. Trackers at 90 Hz (the
+// on their trackers (the body and the legs reach them), tracked knees and elbows bend the legs
+// and arms their way, and a foot tracked by rotation only turns toward the tracker's rotation. Trackers at 90 Hz (the
 // clip's 30 fps frame times fall just before every third sample, so each frame is measured
 // against its tracker's newest sample).
-TEST_F(DefaultModel, TrackedHipsAndFeetSitOnTheirTrackersAndKneesBendTheLegs) {
+TEST_F(DefaultModel, TrackedHipsAndFeetSitOnTheirTrackersKneesAndElbowsBendTheLimbs) {
   if (!test::have_bandai()) GTEST_SKIP() << "no " << test::bandai();
   const Motion clip = read_bvh(test::bandai() / "dataset-2" / "dataset-2_walk_normal_002.bvh");
   const auto times = frame_times(clip);
   constexpr std::array<Role, 3> kPlaced{Role::Hips, Role::LeftFoot, Role::RightFoot};
   struct Errors {
     double off_tracker_max_cm = 0;     // hips and feet from their trackers' newest samples
-    double foot_deg = 0, knee_cm = 0;  // from the truth, means over both sides
+    double foot_deg = 0, knee_cm = 0, elbow_cm = 0;  // from the truth, means over both sides
   };
   const auto run_set = [&](const char* set_text) {
     std::string e;
@@ -440,11 +440,13 @@ TEST_F(DefaultModel, TrackedHipsAndFeetSitOnTheirTrackersAndKneesBendTheLegs) {
         const auto knee = static_cast<size_t>(features::tracker_joint(s == 0 ? Role::LeftKnee : Role::RightKnee));
         out.foot_deg += geodesic_angle(run.poses[f].global.rotations[foot], truth.rotations[foot]) * 90 / M_PI;
         out.knee_cm += 50 * (run.poses[f].global.positions[knee] - truth.positions[knee]).norm();
+        const auto elbow = static_cast<size_t>(features::tracker_joint(s == 0 ? Role::LeftElbow : Role::RightElbow));
+        out.elbow_cm += 50 * (run.poses[f].global.positions[elbow] - truth.positions[elbow]).norm();
       }
     }
-    out.foot_deg /= n, out.knee_cm /= n;
+    out.foot_deg /= n, out.knee_cm /= n, out.elbow_cm /= n;
     std::cout << set_text << ": hips and feet at most " << out.off_tracker_max_cm << " cm from their trackers; feet "
-              << out.foot_deg << " deg from the truth; knees " << out.knee_cm << " cm\n";
+              << out.foot_deg << " deg from the truth; knees " << out.knee_cm << " cm; elbows " << out.elbow_cm << " cm\n";
     return out;
   };
   const Errors guessed = run_set("head,hands");
@@ -452,6 +454,7 @@ TEST_F(DefaultModel, TrackedHipsAndFeetSitOnTheirTrackersAndKneesBendTheLegs) {
   const Errors feet = run_set("head,hands,feet");
   const Errors knees = run_set("head,hands,feet,knees");
   const Errors feet_rot = run_set("head,hands,feet:rot");
+  const Errors elbows = run_set("head,hands,elbows");
   // On the tracker but for the tracker filter's velocity prediction (it extrapolates a moving
   // tracker to the frame's time: up to about 5 mm here); the network's own hips and feet are
   // 1-4 cm off.
@@ -460,6 +463,7 @@ TEST_F(DefaultModel, TrackedHipsAndFeetSitOnTheirTrackersAndKneesBendTheLegs) {
   EXPECT_LT(knees.off_tracker_max_cm, 0.7);
   EXPECT_LT(knees.knee_cm, 0.9 * feet.knee_cm);  // a knee tracker is the pole: the plane the leg bends in
   EXPECT_LT(feet_rot.foot_deg, 0.7 * guessed.foot_deg);
+  EXPECT_LT(elbows.elbow_cm, 0.9 * guessed.elbow_cm);  // an elbow tracker is the arm's pole
 }
 
 // Issue 44 item 7: a body tracker lost mid-walk for 2 s and found again falls back to estimation
@@ -470,14 +474,14 @@ TEST_F(DefaultModel, ALostBodyTrackerFallsBackAndReturnsWithoutAJump) {
   const Motion clip = read_bvh(test::bandai() / "dataset-2" / "dataset-2_walk_normal_002.bvh");
   const auto times = frame_times(clip);
   std::string e;
-  const std::optional<TrackerSet> set = parse_tracker_set("head,hands,hips,feet", e);
+  const std::optional<TrackerSet> set = parse_tracker_set("head,hands,hips,feet,elbows", e);
   ASSERT_TRUE(set) << e;
   SimOptions o;
   o.rate_hz = 90.0;  // a tracker's rate, not the frames'
   o.roles = set->roles;
   std::vector<TrackerSample> samples = simulate_trackers(clip, o);
   constexpr std::int64_t kFrom = 3'000'000'000, kTo = 5'000'000'000;
-  for (Role lost : {Role::Hips, Role::LeftFoot}) {
+  for (Role lost : {Role::Hips, Role::LeftFoot, Role::LeftElbow}) {
     std::vector<TrackerSample> run_samples = samples;
     for (TrackerSample& s : run_samples)
       if (s.role == lost && s.t_ns >= kFrom && s.t_ns < kTo) {

@@ -183,8 +183,10 @@ class DiffusionReconstructor final : public Reconstructor {
   // feet and knees").
   // True for a foot placed on its tracker (or easing to or from it), which the foot lock then leaves.
   std::array<bool, 2> fit_tracked_legs(std::int64_t t_ns, double frame_dt_s, const TrackersNow& trackers);
-  // The arms by two-bone IK onto the hand goals.
-  void fit_arms(const features::Canonical& canon, const HandGoals& hands);
+  // The arms by two-bone IK onto the hand goals, bending toward tracked elbows (eased after a loss
+  // or a return).
+  void fit_arms(std::int64_t t_ns, double frame_dt_s, const features::Canonical& canon, const HandGoals& hands,
+                const TrackersNow& trackers);
   // Keeps the emitted frame (model scale) for the next windows.
   void remember_emitted(std::int64_t t_ns, const std::array<bool, 2>& contact);
   // The emitted frame at the user's size into `out`.
@@ -236,10 +238,11 @@ class DiffusionReconstructor final : public Reconstructor {
   bool have_last_ = false;
   std::int64_t refused_outputs_ = 0;
 
-  // Hand and foot easing after a tracking loss or return (left, right).
+  // Hand, foot, hips and elbow easing after a tracking loss or return (left, right).
   std::array<JointEase, 2> hand_ease_{};
   std::array<JointEase, 2> foot_ease_{};
   JointEase hips_ease_{};
+  std::array<JointEase, 2> elbow_ease_{};
 
   // Foot locking state (model scale, world).
   std::array<bool, 2> foot_locked_{};
