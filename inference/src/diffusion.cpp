@@ -158,6 +158,7 @@ void DiffusionReconstructor::reset() {
   foot_ease_ = {};
   hips_ease_ = {};
   elbow_ease_ = {};
+  knee_ease_ = {};
   foot_locked_ = {};
   foot_release_offset_ = {Vec3::Zero(), Vec3::Zero()};
   lost_head_ = {};
@@ -368,6 +369,7 @@ bool DiffusionReconstructor::reconstruct(std::int64_t t_ns, BodyPose& out) {
     for (JointEase& e : foot_ease_) e.source = JointSource::model;
     hips_ease_.source = JointSource::model;
     for (JointEase& e : elbow_ease_) e.source = JointSource::model;
+    for (JointEase& e : knee_ease_) e.source = JointSource::model;
     foot_locked_ = {};
     foot_release_offset_ = {Vec3::Zero(), Vec3::Zero()};
     body_filter_.reset();
@@ -635,7 +637,7 @@ std::array<bool, 2> DiffusionReconstructor::fit_tracked_legs(std::int64_t t_ns, 
   // tracker's rotation), and the foot lock leaves it alone. A foot tracked by rotation only keeps
   // the model's ankle and takes the tracker's rotation; the foot lock then holds its toe as
   // usual. A tracked knee is the pole the leg bends toward. Losses and returns ease as a hand's
-  // do (eased_goal).
+  // do (eased_goal), the knee's too.
   std::array<bool, 2> placed{};
   if (!options_.exact_tracked_joints) return placed;
   for (int side = 0; side < 2; ++side) {
@@ -652,12 +654,16 @@ std::array<bool, 2> DiffusionReconstructor::fit_tracked_legs(std::int64_t t_ns, 
         eased_goal(foot_ease_[s], source, source == JointSource::tracker ? trackers.p[f] : out_global_.positions[foot],
                    source != JointSource::model ? trackers.q[f] : out_global_.rotations[foot], leg.end, t_ns,
                    frame_dt_s);
-    const bool knee = trackers.valid[k] && trackers.has_position[k];
-    if (!goal.valid && !knee) continue;
+    const bool knee_tracked = trackers.valid[k] && trackers.has_position[k];
+    const auto knee = static_cast<size_t>(leg.lower);
+    const JointGoal knee_goal = eased_goal(knee_ease_[s], knee_tracked ? JointSource::tracker : JointSource::model,
+                                           knee_tracked ? trackers.p[k] : out_global_.positions[knee],
+                                           out_global_.rotations[knee], leg.lower, t_ns, frame_dt_s);
+    if (!goal.valid && !knee_goal.valid) continue;
     TwoBoneTarget target;
     target.position_m = goal.valid ? goal.p : out_global_.positions[foot];
     target.rotation = goal.valid ? goal.q : out_global_.rotations[foot];
-    if (knee) target.pole_m = trackers.p[k];
+    if (knee_goal.valid) target.pole_m = knee_goal.p;
     (void)solve_two_bone_ik(skeleton_, leg, target, scratch_pose_, out_global_);
     placed[s] = goal.valid && source != JointSource::rotation;
   }

@@ -474,14 +474,14 @@ TEST_F(DefaultModel, ALostBodyTrackerFallsBackAndReturnsWithoutAJump) {
   const Motion clip = read_bvh(test::bandai() / "dataset-2" / "dataset-2_walk_normal_002.bvh");
   const auto times = frame_times(clip);
   std::string e;
-  const std::optional<TrackerSet> set = parse_tracker_set("head,hands,hips,feet,elbows", e);
+  const std::optional<TrackerSet> set = parse_tracker_set("head,hands,hips,feet,knees,elbows", e);
   ASSERT_TRUE(set) << e;
   SimOptions o;
   o.rate_hz = 90.0;  // a tracker's rate, not the frames'
   o.roles = set->roles;
   std::vector<TrackerSample> samples = simulate_trackers(clip, o);
   constexpr std::int64_t kFrom = 3'000'000'000, kTo = 5'000'000'000;
-  for (Role lost : {Role::Hips, Role::LeftFoot, Role::LeftElbow}) {
+  for (Role lost : {Role::Hips, Role::LeftFoot, Role::LeftKnee, Role::LeftElbow}) {
     std::vector<TrackerSample> run_samples = samples;
     for (TrackerSample& s : run_samples)
       if (s.role == lost && s.t_ns >= kFrom && s.t_ns < kTo) {

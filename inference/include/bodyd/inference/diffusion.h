@@ -238,11 +238,12 @@ class DiffusionReconstructor final : public Reconstructor {
   bool have_last_ = false;
   std::int64_t refused_outputs_ = 0;
 
-  // Hand, foot, hips and elbow easing after a tracking loss or return (left, right).
+  // Hand, foot, hips, elbow and knee easing after a tracking loss or return (left, right).
   std::array<JointEase, 2> hand_ease_{};
   std::array<JointEase, 2> foot_ease_{};
   JointEase hips_ease_{};
   std::array<JointEase, 2> elbow_ease_{};
+  std::array<JointEase, 2> knee_ease_{};
 
   // Foot locking state (model scale, world).
   std::array<bool, 2> foot_locked_{};
